@@ -1,0 +1,85 @@
+//! Which micro-kernel family runs: chosen once at runtime, overridable for tests.
+
+use std::sync::OnceLock;
+
+/// An instruction-set family with its own GEMM micro-kernel.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[non_exhaustive]
+pub enum Isa {
+    /// x86-64 AVX-512F: `avx512_sgemm_8x48`.
+    Avx512,
+    /// x86-64 AVX2 + FMA: `avx2_sgemm_6x16`.
+    Avx2Fma,
+    /// Plain Rust, auto-vectorised for the target's baseline: `portable_sgemm_4x16`.
+    Portable,
+}
+
+impl Isa {
+    /// Every family, fastest first.
+    pub const ALL: [Isa; 3] = [Isa::Avx512, Isa::Avx2Fma, Isa::Portable];
+
+    /// The fastest family this CPU supports (detected once). Setting the
+    /// environment variable `PICKER_ISA` to `avx512`, `avx2` or `portable`
+    /// caps it (never above what the CPU has).
+    pub fn best() -> Isa {
+        static BEST: OnceLock<Isa> = OnceLock::new();
+        *BEST.get_or_init(|| {
+            let cap = std::env::var("PICKER_ISA").ok().and_then(|s| Isa::parse(&s));
+            Isa::ALL
+                .into_iter()
+                .filter(|isa| isa.is_available())
+                .find(|isa| cap.is_none_or(|c| isa.rank() >= c.rank()))
+                .unwrap_or(Isa::Portable)
+        })
+    }
+
+    /// Parses `avx512`, `avx2` or `portable`.
+    pub fn parse(s: &str) -> Option<Isa> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "avx512" | "avx512f" => Some(Isa::Avx512),
+            "avx2" | "avx2fma" | "avx2+fma" => Some(Isa::Avx2Fma),
+            "portable" | "generic" => Some(Isa::Portable),
+            _ => None,
+        }
+    }
+
+    /// Higher is slower/more portable.
+    fn rank(self) -> u8 {
+        match self {
+            Isa::Avx512 => 0,
+            Isa::Avx2Fma => 1,
+            Isa::Portable => 2,
+        }
+    }
+
+    /// True when this CPU can run the family.
+    pub fn is_available(self) -> bool {
+        match self {
+            #[cfg(target_arch = "x86_64")]
+            Isa::Avx512 => std::arch::is_x86_feature_detected!("avx512f"),
+            #[cfg(target_arch = "x86_64")]
+            Isa::Avx2Fma => {
+                std::arch::is_x86_feature_detected!("avx2")
+                    && std::arch::is_x86_feature_detected!("fma")
+            }
+            #[cfg(not(target_arch = "x86_64"))]
+            Isa::Avx512 | Isa::Avx2Fma => false,
+            Isa::Portable => true,
+        }
+    }
+
+    /// Short name, as `PICKER_ISA` takes it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Isa::Avx512 => "avx512",
+            Isa::Avx2Fma => "avx2",
+            Isa::Portable => "portable",
+        }
+    }
+}
+
+impl std::fmt::Display for Isa {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}

@@ -1,0 +1,54 @@
+//! f32 NCHW tensors and the CPU kernels of Material Picker's networks.
+//!
+//! Every op exists twice: a fast path (packed GEMM with per-ISA micro-kernels,
+//! implicit im2col, rayon) and a plain version in [`reference`] that the tests
+//! hold the fast path to. The micro-kernel family is chosen once at runtime
+//! ([`Isa::best`]); layers can be built for a given family ([`Conv2d::with_isa`]).
+//!
+//! | op | fast path | reference |
+//! |---|---|---|
+//! | conv2d | packed GEMM, implicit im2col (1×1 as plain GEMM), fused bias/act/residual | [`reference::conv2d`] |
+//! | conv-transpose2d | packed GEMM into columns + parallel col2im | [`reference::conv_transpose2d`] |
+//! | BatchNorm (eval) | folded into the conv at load: [`fold_batchnorm`] | [`reference::batch_norm`] |
+//! | reflection pad | row copies, parallel per plane | [`reference::reflect_pad`] |
+//! | ReLU, Tanh, add | fused into conv epilogues; [`activate`], [`add_assign`] | [`reference::activate`], [`reference::add`] |
+//! | bilinear resize | separable taps, parallel per plane | [`reference::resize_bilinear`] |
+//!
+//! ```
+//! use picker_tensor::{Activation, Conv2d, ConvSpec, Rng};
+//! let mut rng = Rng::new(7);
+//! let spec = ConvSpec::square(3, 8, 3, 1, 1);
+//! let w = rng.normal_vec(spec.weight_len(), 0.1);
+//! let conv = Conv2d::new(spec, &w, None, Activation::Relu).unwrap();
+//! let y = conv.forward(&rng.tensor([1, 3, 5, 7])).unwrap();
+//! assert_eq!(y.shape(), [1, 8, 5, 7]);
+//! ```
+
+mod activation;
+mod aligned;
+mod bn;
+mod conv;
+mod elementwise;
+mod error;
+mod gemm;
+mod isa;
+mod microkernel;
+mod pad;
+pub mod params;
+pub mod reference;
+mod resize;
+mod rng;
+mod tensor;
+mod tolerance;
+
+pub use activation::Activation;
+pub use bn::{fold_batchnorm, BatchNorm, WeightLayout};
+pub use conv::{Conv2d, ConvSpec, ConvTranspose2d, ConvTransposeSpec};
+pub use elementwise::{activate, add_assign};
+pub use error::{Error, Result};
+pub use isa::Isa;
+pub use pad::{mirror_pad, reflect_index, reflect_pad, Pads};
+pub use resize::resize_bilinear;
+pub use rng::Rng;
+pub use tensor::Tensor;
+pub use tolerance::Tolerance;

@@ -1,0 +1,15 @@
+//! Block sizes of the packed GEMM, in one place (tuned on a 2-core Zen 5 with
+//! 48 KiB L1d and 1 MiB L2 per core; see `benches/kernels.rs`).
+
+/// Depth of one packed block: `KC × NR` floats of B stay in L1 while the
+/// micro-kernel streams the packed A panels from L2.
+pub const KC: usize = 256;
+
+/// Most NR-wide B panels one task packs for a K block (`KC × NR × this` floats, kept in L2).
+pub const MAX_PANELS_PER_TASK: usize = 8;
+
+/// Tasks per worker thread the GEMM driver aims for, so work stealing can even out the load.
+pub const TASKS_PER_THREAD: usize = 4;
+
+/// Alignment in bytes of packed buffers (one cache line, one zmm register).
+pub const ALIGN: usize = 64;

@@ -1,0 +1,192 @@
+//! The dense f32 NCHW tensor every kernel works on.
+
+use crate::error::{Error, Result};
+
+/// A dense, contiguous, row-major f32 tensor of rank 4 in NCHW order
+/// (batch, channels, height, width).
+#[derive(Clone, PartialEq)]
+pub struct Tensor {
+    shape: [usize; 4],
+    data: Vec<f32>,
+}
+
+impl std::fmt::Debug for Tensor {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Tensor{:?}", self.shape)
+    }
+}
+
+impl Tensor {
+    /// Wraps `data` as a tensor of `shape`; refuses a length mismatch.
+    pub fn new(shape: [usize; 4], data: Vec<f32>) -> Result<Self> {
+        let expected = shape.iter().product::<usize>();
+        if data.len() != expected {
+            return Err(Error::DataLength {
+                shape,
+                expected,
+                found: data.len(),
+            });
+        }
+        Ok(Self { shape, data })
+    }
+
+    /// A tensor of zeros.
+    pub fn zeros(shape: [usize; 4]) -> Self {
+        Self {
+            shape,
+            data: vec![0.0; shape.iter().product()],
+        }
+    }
+
+    /// A tensor filled by `f(n, c, y, x)`.
+    pub fn from_fn(shape: [usize; 4], mut f: impl FnMut(usize, usize, usize, usize) -> f32) -> Self {
+        let mut data = Vec::with_capacity(shape.iter().product());
+        for n in 0..shape[0] {
+            for c in 0..shape[1] {
+                for y in 0..shape[2] {
+                    for x in 0..shape[3] {
+                        data.push(f(n, c, y, x));
+                    }
+                }
+            }
+        }
+        Self { shape, data }
+    }
+
+    /// The shape `[n, c, h, w]`.
+    pub fn shape(&self) -> [usize; 4] {
+        self.shape
+    }
+    /// Batch size.
+    pub fn n(&self) -> usize {
+        self.shape[0]
+    }
+    /// Channels.
+    pub fn c(&self) -> usize {
+        self.shape[1]
+    }
+    /// Height.
+    pub fn h(&self) -> usize {
+        self.shape[2]
+    }
+    /// Width.
+    pub fn w(&self) -> usize {
+        self.shape[3]
+    }
+    /// Number of elements.
+    pub fn len(&self) -> usize {
+        self.data.len()
+    }
+    /// True when the tensor has no elements.
+    pub fn is_empty(&self) -> bool {
+        self.data.is_empty()
+    }
+    /// The elements in NCHW order.
+    pub fn data(&self) -> &[f32] {
+        &self.data
+    }
+    /// The elements in NCHW order, mutable.
+    pub fn data_mut(&mut self) -> &mut [f32] {
+        &mut self.data
+    }
+    /// Consumes the tensor, giving back its elements.
+    pub fn into_data(self) -> Vec<f32> {
+        self.data
+    }
+    /// Element at `(n, c, y, x)`; panics when out of range (indexing, like slices).
+    pub fn at(&self, n: usize, c: usize, y: usize, x: usize) -> f32 {
+        self.data[self.index(n, c, y, x)]
+    }
+    /// Flat index of `(n, c, y, x)`.
+    pub fn index(&self, n: usize, c: usize, y: usize, x: usize) -> usize {
+        let [_, cc, hh, ww] = self.shape;
+        debug_assert!(c < cc && y < hh && x < ww);
+        ((n * cc + c) * hh + y) * ww + x
+    }
+    /// The `h × w` plane of image `n`, channel `c`.
+    pub fn plane(&self, n: usize, c: usize) -> &[f32] {
+        let hw = self.shape[2] * self.shape[3];
+        let o = (n * self.shape[1] + c) * hw;
+        &self.data[o..o + hw]
+    }
+    /// The `c × h × w` block of image `n`.
+    pub fn image(&self, n: usize) -> &[f32] {
+        let chw = self.shape[1] * self.shape[2] * self.shape[3];
+        &self.data[n * chw..(n + 1) * chw]
+    }
+
+    /// The window `[y0, y0+h) × [x0, x0+w)` of every plane.
+    pub fn crop(&self, y0: usize, x0: usize, h: usize, w: usize) -> Result<Tensor> {
+        let [n, c, hh, ww] = self.shape;
+        if y0 + h > hh || x0 + w > ww {
+            return Err(crate::error::shape_err(
+                "crop",
+                "window",
+                format!("inside {hh}x{ww}"),
+                format!("rows {y0}..{} cols {x0}..{}", y0 + h, x0 + w),
+            ));
+        }
+        let mut out = Vec::with_capacity(n * c * h * w);
+        for p in 0..n * c {
+            let plane = &self.data[p * hh * ww..(p + 1) * hh * ww];
+            for y in y0..y0 + h {
+                out.extend_from_slice(&plane[y * ww + x0..y * ww + x0 + w]);
+            }
+        }
+        Tensor::new([n, c, h, w], out)
+    }
+
+    /// Channels `[c0, c0+len)` of every image.
+    pub fn channels(&self, c0: usize, len: usize) -> Result<Tensor> {
+        let [n, c, h, w] = self.shape;
+        if c0 + len > c {
+            return Err(crate::error::shape_err(
+                "channels",
+                "range",
+                format!("inside 0..{c}"),
+                format!("{c0}..{}", c0 + len),
+            ));
+        }
+        let hw = h * w;
+        let mut out = Vec::with_capacity(n * len * hw);
+        for b in 0..n {
+            let o = (b * c + c0) * hw;
+            out.extend_from_slice(&self.data[o..o + len * hw]);
+        }
+        Tensor::new([n, len, h, w], out)
+    }
+
+    /// A copy as an `ndarray` array.
+    pub fn to_ndarray(&self) -> ndarray::Array4<f32> {
+        ndarray::Array4::from_shape_vec(self.shape, self.data.clone())
+            .expect("shape and length agree by construction")
+    }
+
+    /// A tensor from any `ndarray` array of rank 4 (copied into NCHW order).
+    pub fn from_ndarray(a: ndarray::ArrayView4<'_, f32>) -> Self {
+        let d = a.dim();
+        let data = a.iter().copied().collect();
+        Self {
+            shape: [d.0, d.1, d.2, d.3],
+            data,
+        }
+    }
+
+    /// Largest absolute element-wise difference to `other` (shapes must agree).
+    pub fn max_abs_diff(&self, other: &Tensor) -> Result<f32> {
+        if self.shape != other.shape {
+            return Err(crate::error::shape_err(
+                "max_abs_diff",
+                "shape",
+                format!("{:?}", self.shape),
+                format!("{:?}", other.shape),
+            ));
+        }
+        Ok(self
+            .data
+            .iter()
+            .zip(&other.data)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f32::max))
+    }
+}

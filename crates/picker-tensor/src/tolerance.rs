@@ -1,0 +1,50 @@
+//! Named numeric tolerances and a readable comparison, shared by every test.
+
+/// `|found − expected| ≤ abs + rel·|expected|` element-wise.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Tolerance {
+    /// Absolute part.
+    pub abs: f32,
+    /// Relative part.
+    pub rel: f32,
+}
+
+impl Tolerance {
+    /// A fast f32 kernel against its f64-accumulating reference.
+    pub const KERNEL_F32: Tolerance = Tolerance { abs: 1e-4, rel: 1e-4 };
+    /// Pure data movement (padding, cropping): exact.
+    pub const EXACT: Tolerance = Tolerance { abs: 0.0, rel: 0.0 };
+    /// Whole networks against the PyTorch reference, on tanh outputs in [-1, 1].
+    pub const NET_E2E: Tolerance = Tolerance { abs: 1e-4, rel: 0.0 };
+    /// Intermediate activations of whole networks against the PyTorch reference.
+    pub const NET_ACTIVATION: Tolerance = Tolerance { abs: 1e-4, rel: 1e-4 };
+
+    /// `Ok` when every pair is within tolerance, else a message naming the
+    /// first mismatching index, the values and the largest error.
+    pub fn check(&self, found: &[f32], expected: &[f32]) -> Result<(), String> {
+        if found.len() != expected.len() {
+            return Err(format!(
+                "length mismatch: found {} expected {}",
+                found.len(),
+                expected.len()
+            ));
+        }
+        let mut first = None;
+        let mut worst = 0.0f32;
+        for (i, (&f, &e)) in found.iter().zip(expected).enumerate() {
+            let err = (f - e).abs();
+            let ok = err <= self.abs + self.rel * e.abs() && f.is_finite() == e.is_finite();
+            worst = if err.is_nan() { f32::INFINITY } else { worst.max(err) };
+            if !ok && first.is_none() {
+                first = Some((i, f, e));
+            }
+        }
+        match first {
+            None => Ok(()),
+            Some((i, f, e)) => Err(format!(
+                "first mismatch at index {i}: found {f}, expected {e} (|diff| {}); max |diff| {worst}; tolerance {self:?}",
+                (f - e).abs()
+            )),
+        }
+    }
+}
