@@ -1,1 +1,76 @@
-fn main() {}
+//! Criterion benchmarks of every layer shape of the three networks at 240×320
+//! (thesis widths), with throughput in FLOPs (2 × multiply-adds) so rates compare.
+//!
+//! `cargo bench -p picker-tensor --bench kernels` (set `PICKER_ISA=avx2|portable` to
+//! bench another micro-kernel family; `RAYON_NUM_THREADS` to set threads).
+
+use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
+use picker_tensor::{Activation, Conv2d, ConvSpec, ConvTranspose2d, ConvTransposeSpec, Rng};
+
+/// (id, input h, input w, spec) of the convolutions at 240×320.
+fn conv_layers() -> Vec<(&'static str, usize, usize, ConvSpec)> {
+    vec![
+        ("enc_in", 246, 326, ConvSpec::square(3, 64, 7, 1, 0)),
+        ("enc_down0", 240, 320, ConvSpec::square(64, 128, 3, 2, 1)),
+        ("enc_down1", 120, 160, ConvSpec::square(128, 256, 3, 2, 1)),
+        ("res", 62, 82, ConvSpec::square(256, 256, 3, 1, 0)),
+        ("dec_out", 246, 326, ConvSpec::square(64, 3, 7, 1, 0)),
+        ("env_in", 246, 326, ConvSpec::square(3, 64, 7, 2, 0)),
+        ("env_down0", 120, 160, ConvSpec::square(64, 128, 3, 2, 1)),
+        ("env_down1", 60, 80, ConvSpec::square(128, 256, 3, 2, 1)),
+        ("env_res", 32, 42, ConvSpec::square(256, 256, 3, 1, 0)),
+        ("env_tail0", 30, 40, ConvSpec::square(256, 256, 1, 2, 0)),
+        ("env_tail1", 15, 20, ConvSpec::square(256, 128, 3, 2, 1)),
+        ("env_tail2", 8, 10, ConvSpec::square(128, 3, 3, 2, 1)),
+    ]
+}
+
+fn conv_transpose_layers() -> Vec<(&'static str, usize, usize, ConvTransposeSpec)> {
+    vec![
+        (
+            "dec_up0",
+            60,
+            80,
+            ConvTransposeSpec::square(256, 128, 3, 2, 1, 1),
+        ),
+        (
+            "dec_up1",
+            120,
+            160,
+            ConvTransposeSpec::square(128, 64, 3, 2, 1, 1),
+        ),
+    ]
+}
+
+fn bench(c: &mut Criterion) {
+    let mut rng = Rng::new(1);
+    let mut g = c.benchmark_group("conv2d/f32");
+    g.sample_size(10);
+    for (name, h, w, s) in conv_layers() {
+        let wt = rng.normal_vec(s.weight_len(), 0.05);
+        let conv = Conv2d::new(s, &wt, Some(&vec![0.1; s.c_out]), Activation::Relu).unwrap();
+        let x = rng.tensor([1, s.c_in, h, w]);
+        g.throughput(Throughput::Elements(s.flops(h, w)));
+        let id = format!("{name}/{}x{}x{}_k{}s{}", s.c_in, h, w, s.kh, s.stride);
+        g.bench_function(BenchmarkId::from_parameter(id), |b| {
+            b.iter(|| conv.forward(&x).unwrap())
+        });
+    }
+    g.finish();
+    let mut g = c.benchmark_group("conv_transpose2d/f32");
+    g.sample_size(10);
+    for (name, h, w, s) in conv_transpose_layers() {
+        let wt = rng.normal_vec(s.weight_len(), 0.05);
+        let conv = ConvTranspose2d::new(s, &wt, None, Activation::Relu).unwrap();
+        let x = rng.tensor([1, s.c_in, h, w]);
+        g.throughput(Throughput::Elements(s.flops(h, w)));
+        let id = format!("{name}/{}x{}x{}_k{}s{}", s.c_in, h, w, s.kh, s.stride);
+        g.bench_function(BenchmarkId::from_parameter(id), |b| {
+            b.iter(|| conv.forward(&x).unwrap())
+        });
+    }
+    g.finish();
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);

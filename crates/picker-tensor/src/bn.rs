@@ -26,7 +26,11 @@ impl BatchNorm {
     /// Per-channel `(scale, shift)` with `bn(v) = scale·v + shift`, computed in f64.
     pub fn scale_shift(&self) -> Result<(Vec<f64>, Vec<f64>)> {
         let c = self.gamma.len();
-        for (name, v) in [("beta", &self.beta), ("mean", &self.mean), ("var", &self.var)] {
+        for (name, v) in [
+            ("beta", &self.beta),
+            ("mean", &self.mean),
+            ("var", &self.var),
+        ] {
             if v.len() != c {
                 return Err(shape_err("batch_norm", name, c, v.len()));
             }
@@ -67,7 +71,7 @@ pub fn fold_batchnorm(
         WeightLayout::Conv => c_out,
         WeightLayout::Transposed { kernel_area } => c_out * kernel_area,
     };
-    if c_out == 0 || block == 0 || weight.len() % block != 0 {
+    if c_out == 0 || block == 0 || !weight.len().is_multiple_of(block) {
         return Err(shape_err(
             "fold_batchnorm",
             "weight length",

@@ -4,6 +4,7 @@
 use rayon::prelude::*;
 
 use crate::activation::Activation;
+use crate::direct::{self, conv_direct, DirectProblem};
 use crate::error::{invalid, shape_err, Result};
 use crate::gemm::{gemm, BSource, DenseB, Epilogue, PackedA};
 use crate::isa::Isa;
@@ -62,7 +63,10 @@ impl ConvSpec {
                 format!("{hp}x{wp}"),
             ));
         }
-        Ok(((hp - self.kh) / self.stride + 1, (wp - self.kw) / self.stride + 1))
+        Ok((
+            (hp - self.kh) / self.stride + 1,
+            (wp - self.kw) / self.stride + 1,
+        ))
     }
 
     /// Length of the weight `[c_out, c_in, kh, kw]`.
@@ -191,7 +195,19 @@ pub struct Conv2d {
     spec: ConvSpec,
     act: Activation,
     bias: Option<Vec<f32>>,
-    packed: PackedA,
+    path: ConvPath,
+}
+
+/// How a [`Conv2d`] runs.
+#[derive(Clone)]
+enum ConvPath {
+    /// Packed GEMM over an implicit im2col with these `(dy, dx)` taps.
+    Gemm {
+        packed: PackedA,
+        taps: Vec<(isize, isize)>,
+    },
+    /// Direct convolution (stride 1, no padding, ≤ `direct::MAX_CO` outputs).
+    Direct { isa: Isa, weight: Vec<f32> },
 }
 
 impl std::fmt::Debug for Conv2d {
@@ -200,7 +216,8 @@ impl std::fmt::Debug for Conv2d {
             .field("spec", &self.spec)
             .field("act", &self.act)
             .field("bias", &self.bias.is_some())
-            .field("isa", &self.packed.kernel.isa)
+            .field("isa", &self.isa())
+            .field("direct", &matches!(self.path, ConvPath::Direct { .. }))
             .finish()
     }
 }
@@ -213,60 +230,99 @@ fn check_input(op: &'static str, x: &Tensor, c: usize) -> Result<()> {
     Ok(())
 }
 
-/// Implicit im2col over one image: row `k = (ci, ky, kx)`, column = output pixel.
-struct Im2col<'a> {
+/// Copies a short run (a panel row is at most a few dozen floats) without a
+/// libc call: 16-float blocks move as vectors, the rest one by one.
+#[inline(always)]
+fn copy_short(dst: &mut [f32], src: &[f32]) {
+    let mut d = dst.chunks_exact_mut(16);
+    let mut s = src.chunks_exact(16);
+    for (d, s) in (&mut d).zip(&mut s) {
+        let v: [f32; 16] = s.try_into().expect("16");
+        d.copy_from_slice(&v);
+    }
+    for (d, s) in d.into_remainder().iter_mut().zip(s.remainder()) {
+        *d = *s;
+    }
+}
+
+/// Zeroes a short run without a libc call.
+#[inline(always)]
+fn zero_short(dst: &mut [f32]) {
+    let mut d = dst.chunks_exact_mut(16);
+    for d in &mut d {
+        d.copy_from_slice(&[0.0; 16]);
+    }
+    for v in d.into_remainder() {
+        *v = 0.0;
+    }
+}
+
+/// Implicit im2col over one image, generalised to any list of taps: row
+/// `k = (ci, tap)` with `tap = (dy, dx)`, column `(oy, ox)` reads
+/// `x[ci][oy·stride + dy][ox·stride + dx]`, zero outside the image.
+struct Gather<'a> {
     x: &'a [f32],
     h: usize,
     w: usize,
-    spec: ConvSpec,
+    stride: usize,
+    taps: &'a [(isize, isize)],
     ow: usize,
 }
 
-impl BSource for Im2col<'_> {
+impl BSource for Gather<'_> {
     fn pack(&self, k0: usize, kc: usize, n0: usize, cols: usize, nr: usize, dst: &mut [f32]) {
-        let s = self.spec;
-        let khw = s.kh * s.kw;
-        let (h, w, ow) = (self.h as isize, self.w, self.ow);
+        let (h, w, ow, s) = (self.h as isize, self.w, self.ow, self.stride);
+        let panels = cols.div_ceil(nr);
+        // Split the columns into runs that stay inside one output row and one
+        // panel: `(offset in a panel-major k-row, oy, ox, len)`; the same for every k.
+        let mut runs = Vec::with_capacity(2 * panels + 2);
+        let (mut j, mut n) = (0, n0);
+        while j < cols {
+            let (oy, ox) = (n / ow, n % ow);
+            let run = (cols - j).min(ow - ox).min(nr - j % nr);
+            runs.push(((j / nr) * kc * nr + j % nr, oy, ox, run));
+            j += run;
+            n += run;
+        }
+        let tail = panels * nr - cols;
+        let nt = self.taps.len();
         for kk in 0..kc {
             let k = k0 + kk;
-            let (ci, ky, kx) = (k / khw, (k % khw) / s.kw, k % s.kw);
+            let (ci, (dy, dx)) = (k / nt, self.taps[k % nt]);
             let plane = &self.x[ci * self.h * w..(ci + 1) * self.h * w];
-            let row = &mut dst[kk * nr..(kk + 1) * nr];
-            row[cols..].fill(0.0);
-            let mut j = 0;
-            let mut n = n0;
-            while j < cols {
-                let (oy, ox) = (n / ow, n % ow);
-                let run = (cols - j).min(ow - ox);
-                let out = &mut row[j..j + run];
-                let iy = (oy * s.stride + ky) as isize - s.pad as isize;
+            let row_off = kk * nr;
+            if tail > 0 {
+                let last = (panels - 1) * kc * nr + row_off;
+                zero_short(&mut dst[last + nr - tail..last + nr]);
+            }
+            for &(off, oy, ox, run) in &runs {
+                let out = &mut dst[off + row_off..off + row_off + run];
+                let iy = (oy * s) as isize + dy;
                 if iy < 0 || iy >= h {
-                    out.fill(0.0);
+                    zero_short(out);
+                    continue;
+                }
+                let src = &plane[iy as usize * w..(iy as usize + 1) * w];
+                let ix0 = (ox * s) as isize + dx;
+                if s == 1 {
+                    let lo = (-ix0).clamp(0, run as isize) as usize;
+                    let hi = (w as isize - ix0).clamp(lo as isize, run as isize) as usize;
+                    zero_short(&mut out[..lo]);
+                    if hi > lo {
+                        let a = (ix0 + lo as isize) as usize;
+                        copy_short(&mut out[lo..hi], &src[a..a + (hi - lo)]);
+                    }
+                    zero_short(&mut out[hi..]);
                 } else {
-                    let src = &plane[iy as usize * w..(iy as usize + 1) * w];
-                    let ix0 = (ox * s.stride + kx) as isize - s.pad as isize;
-                    if s.stride == 1 {
-                        let lo = (-ix0).clamp(0, run as isize) as usize;
-                        let hi = (w as isize - ix0).clamp(lo as isize, run as isize) as usize;
-                        out[..lo].fill(0.0);
-                        if hi > lo {
-                            let a = (ix0 + lo as isize) as usize;
-                            out[lo..hi].copy_from_slice(&src[a..a + (hi - lo)]);
-                        }
-                        out[hi..].fill(0.0);
-                    } else {
-                        for (t, o) in out.iter_mut().enumerate() {
-                            let ix = ix0 + (t * s.stride) as isize;
-                            *o = if ix >= 0 && (ix as usize) < w {
-                                src[ix as usize]
-                            } else {
-                                0.0
-                            };
-                        }
+                    for (t, o) in out.iter_mut().enumerate() {
+                        let ix = ix0 + (t * s) as isize;
+                        *o = if ix >= 0 && (ix as usize) < w {
+                            src[ix as usize]
+                        } else {
+                            0.0
+                        };
                     }
                 }
-                j += run;
-                n += run;
             }
         }
     }
@@ -296,13 +352,27 @@ impl Conv2d {
         check_weight("conv2d", weight.len(), spec.weight_len())?;
         let bias = check_bias("conv2d", bias, spec.c_out)?;
         let kernel = kernel_for("conv2d", isa)?;
-        let k = spec.c_in * spec.kh * spec.kw;
-        let packed = PackedA::pack(kernel, spec.c_out, k, |r, c| weight[r * k + c]);
+        let path = if spec.stride == 1 && spec.pad == 0 && spec.c_out <= direct::MAX_CO {
+            ConvPath::Direct {
+                isa,
+                weight: weight.to_vec(),
+            }
+        } else {
+            let k = spec.c_in * spec.kh * spec.kw;
+            let p = spec.pad as isize;
+            let taps = (0..spec.kh as isize)
+                .flat_map(|ky| (0..spec.kw as isize).map(move |kx| (ky - p, kx - p)))
+                .collect();
+            ConvPath::Gemm {
+                packed: PackedA::pack(kernel, spec.c_out, k, |r, c| weight[r * k + c]),
+                taps,
+            }
+        };
         Ok(Self {
             spec,
             act,
             bias,
-            packed,
+            path,
         })
     }
 
@@ -316,7 +386,10 @@ impl Conv2d {
     }
     /// The kernel family the weights are packed for.
     pub fn isa(&self) -> Isa {
-        self.packed.kernel.isa
+        match &self.path {
+            ConvPath::Gemm { packed, .. } => packed.kernel.isa,
+            ConvPath::Direct { isa, .. } => *isa,
+        }
     }
 
     /// `act(conv(x) + b)`.
@@ -349,37 +422,77 @@ impl Conv2d {
         for b in 0..x.n() {
             let img = x.image(b);
             let c = &mut out.data_mut()[b * per_out..(b + 1) * per_out];
-            let epi = Epilogue {
-                bias: self.bias.as_deref(),
-                act: self.act,
-                residual: residual.map(|r| r.image(b)),
-            };
-            if s.kh == 1 && s.kw == 1 && s.stride == 1 && s.pad == 0 {
-                let src = DenseB { data: img, n: oh * ow };
-                gemm(&self.packed, &src, oh * ow, c, &epi);
-            } else {
-                let src = Im2col {
-                    x: img,
-                    h: x.h(),
-                    w: x.w(),
-                    spec: s,
-                    ow,
-                };
-                gemm(&self.packed, &src, oh * ow, c, &epi);
+            let residual = residual.map(|r| r.image(b));
+            match &self.path {
+                ConvPath::Direct { isa, weight } => {
+                    let p = DirectProblem {
+                        x: img,
+                        c_in: s.c_in,
+                        h: x.h(),
+                        w: x.w(),
+                        kh: s.kh,
+                        kw: s.kw,
+                        oh,
+                        ow,
+                    };
+                    conv_direct(*isa, &p, s.c_out, weight, self.bias.as_deref(), self.act, c);
+                    if let Some(r) = residual {
+                        c.iter_mut().zip(r).for_each(|(v, r)| *v += r);
+                    }
+                }
+                ConvPath::Gemm { packed, taps } => {
+                    let epi = Epilogue {
+                        bias: self.bias.as_deref(),
+                        act: self.act,
+                        residual,
+                    };
+                    if s.kh == 1 && s.kw == 1 && s.stride == 1 && s.pad == 0 {
+                        let src = DenseB {
+                            data: img,
+                            n: oh * ow,
+                        };
+                        gemm(packed, &src, oh * ow, c, &epi);
+                    } else {
+                        let src = Gather {
+                            x: img,
+                            h: x.h(),
+                            w: x.w(),
+                            stride: s.stride,
+                            taps,
+                            ow,
+                        };
+                        gemm(packed, &src, oh * ow, c, &epi);
+                    }
+                }
             }
         }
         Ok(out)
     }
 }
 
-/// A transposed convolution with packed weights: a GEMM into columns followed
-/// by a parallel col2im scatter, bias and activation.
+/// One output phase `(ry, rx)` of a transposed convolution: the outputs
+/// `(s·m + ry, s·n + rx)` are an ordinary stride-1 convolution of the input
+/// with the taps whose kernel index lines up with that phase.
+#[derive(Clone)]
+struct Phase {
+    ry: usize,
+    rx: usize,
+    /// `(dy, dx)` input offsets, one per tap, matching the packed columns.
+    taps: Vec<(isize, isize)>,
+    /// `None` when no tap reaches this phase (kernel smaller than the stride).
+    packed: Option<PackedA>,
+}
+
+/// A transposed convolution run as sub-pixel convolutions: one packed GEMM per
+/// output phase over a gather of the input (no zero insertion, no col2im), with
+/// bias and activation fused, interleaved into the output.
 #[derive(Clone)]
 pub struct ConvTranspose2d {
     spec: ConvTransposeSpec,
     act: Activation,
     bias: Option<Vec<f32>>,
-    packed: PackedA,
+    isa: Isa,
+    phases: Vec<Phase>,
 }
 
 impl std::fmt::Debug for ConvTranspose2d {
@@ -388,9 +501,20 @@ impl std::fmt::Debug for ConvTranspose2d {
             .field("spec", &self.spec)
             .field("act", &self.act)
             .field("bias", &self.bias.is_some())
-            .field("isa", &self.packed.kernel.isa)
+            .field("isa", &self.isa)
             .finish()
     }
+}
+
+/// Kernel indices reaching output phase `r` along one axis, with their input offsets:
+/// `o = i·s − p + k` and `o = s·m + r` give `i = m + (r + p − k)/s` when `s | (r + p − k)`.
+fn phase_taps(r: usize, k: usize, s: usize, p: usize) -> Vec<(usize, isize)> {
+    (0..k)
+        .filter_map(|kk| {
+            let num = r as isize + p as isize - kk as isize;
+            (num.rem_euclid(s as isize) == 0).then(|| (kk, num.div_euclid(s as isize)))
+        })
+        .collect()
 }
 
 impl ConvTranspose2d {
@@ -416,16 +540,41 @@ impl ConvTranspose2d {
         check_weight("conv_transpose2d", weight.len(), spec.weight_len())?;
         let bias = check_bias("conv_transpose2d", bias, spec.c_out)?;
         let kernel = kernel_for("conv_transpose2d", isa)?;
-        let khw = spec.kh * spec.kw;
-        // A[(co, ky, kx)][ci] = w[ci][co][ky][kx]
-        let packed = PackedA::pack(kernel, spec.c_out * khw, spec.c_in, |r, ci| {
-            weight[ci * spec.c_out * khw + r]
-        });
+        let s = spec.stride;
+        let mut phases = Vec::with_capacity(s * s);
+        for ry in 0..s {
+            let ty = phase_taps(ry, spec.kh, s, spec.pad);
+            for rx in 0..s {
+                let tx = phase_taps(rx, spec.kw, s, spec.pad);
+                let kidx: Vec<(usize, usize)> = ty
+                    .iter()
+                    .flat_map(|&(ky, _)| tx.iter().map(move |&(kx, _)| (ky, kx)))
+                    .collect();
+                let taps = ty
+                    .iter()
+                    .flat_map(|&(_, dy)| tx.iter().map(move |&(_, dx)| (dy, dx)))
+                    .collect();
+                let nt = kidx.len();
+                let packed = (nt > 0).then(|| {
+                    PackedA::pack(kernel, spec.c_out, spec.c_in * nt, |co, k| {
+                        let (ci, (ky, kx)) = (k / nt, kidx[k % nt]);
+                        weight[((ci * spec.c_out + co) * spec.kh + ky) * spec.kw + kx]
+                    })
+                });
+                phases.push(Phase {
+                    ry,
+                    rx,
+                    taps,
+                    packed,
+                });
+            }
+        }
         Ok(Self {
             spec,
             act,
             bias,
-            packed,
+            isa,
+            phases,
         })
     }
 
@@ -435,55 +584,89 @@ impl ConvTranspose2d {
     }
     /// The kernel family the weights are packed for.
     pub fn isa(&self) -> Isa {
-        self.packed.kernel.isa
+        self.isa
     }
 
     /// `act(conv_transpose(x) + b)`.
     pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
-        let s = self.spec;
-        check_input("conv_transpose2d", x, s.c_in)?;
-        let (oh, ow) = s.out_hw(x.h(), x.w())?;
-        let (h, w) = (x.h(), x.w());
-        let khw = s.kh * s.kw;
-        let mut out = Tensor::zeros([x.n(), s.c_out, oh, ow]);
-        let mut cols = vec![0.0f32; s.c_out * khw * h * w];
-        let no_epi = Epilogue {
-            bias: None,
-            act: Activation::None,
+        let sp = self.spec;
+        check_input("conv_transpose2d", x, sp.c_in)?;
+        let (oh, ow) = sp.out_hw(x.h(), x.w())?;
+        let s = sp.stride;
+        let per_out = sp.c_out * oh * ow;
+        let mut out = Tensor::zeros([x.n(), sp.c_out, oh, ow]);
+        // One buffer per x-phase of the current row phase, then one pass that
+        // writes whole output rows with the x-phases interleaved.
+        let mut tmps: Vec<Vec<f32>> = vec![Vec::new(); s];
+        let epi = Epilogue {
+            bias: self.bias.as_deref(),
+            act: self.act,
             residual: None,
         };
         for b in 0..x.n() {
-            let src = DenseB {
-                data: x.image(b),
-                n: h * w,
-            };
-            gemm(&self.packed, &src, h * w, &mut cols, &no_epi);
-            let per_out = s.c_out * oh * ow;
             let dst = &mut out.data_mut()[b * per_out..(b + 1) * per_out];
-            let cols = &cols;
-            dst.par_chunks_mut(oh * ow).enumerate().for_each(|(co, plane)| {
-                plane.fill(self.bias.as_ref().map_or(0.0, |bb| bb[co]));
-                for ky in 0..s.kh {
-                    for kx in 0..s.kw {
-                        let col = &cols[(co * khw + ky * s.kw + kx) * h * w..][..h * w];
-                        for iy in 0..h {
-                            let oy = (iy * s.stride + ky) as isize - s.pad as isize;
-                            if oy < 0 || oy >= oh as isize {
-                                continue;
-                            }
-                            let orow = &mut plane[oy as usize * ow..(oy as usize + 1) * ow];
-                            let crow = &col[iy * w..(iy + 1) * w];
-                            for (ix, v) in crow.iter().enumerate() {
-                                let ox = (ix * s.stride + kx) as isize - s.pad as isize;
-                                if ox >= 0 && (ox as usize) < ow {
-                                    orow[ox as usize] += v;
-                                }
+            for ry in 0..s {
+                let mh = oh.saturating_sub(ry).div_ceil(s);
+                if mh == 0 {
+                    continue;
+                }
+                let mut mws = vec![0; s];
+                for ph in self.phases.iter().filter(|p| p.ry == ry) {
+                    let mw = ow.saturating_sub(ph.rx).div_ceil(s);
+                    mws[ph.rx] = mw;
+                    let tmp = &mut tmps[ph.rx];
+                    tmp.clear();
+                    tmp.resize(sp.c_out * mh * mw, 0.0);
+                    if mw == 0 {
+                        continue;
+                    }
+                    match &ph.packed {
+                        Some(packed) => {
+                            let src = Gather {
+                                x: x.image(b),
+                                h: x.h(),
+                                w: x.w(),
+                                stride: 1,
+                                taps: &ph.taps,
+                                ow: mw,
+                            };
+                            gemm(packed, &src, mh * mw, tmp, &epi);
+                        }
+                        None => {
+                            for (co, plane) in tmp.chunks_mut(mh * mw).enumerate() {
+                                plane.fill(self.bias.as_ref().map_or(0.0, |bb| bb[co]));
+                                self.act.apply(plane);
                             }
                         }
                     }
                 }
-                self.act.apply(plane);
-            });
+                let (tmps, mws) = (&tmps, &mws);
+                dst.par_chunks_mut(oh * ow)
+                    .enumerate()
+                    .for_each(|(co, plane)| {
+                        for m in 0..mh {
+                            let orow = &mut plane[(s * m + ry) * ow..][..ow];
+                            let rows: Vec<&[f32]> = (0..s)
+                                .map(|rx| &tmps[rx][(co * mh + m) * mws[rx]..][..mws[rx]])
+                                .collect();
+                            if s == 2 {
+                                let (r0, r1) = (rows[0], rows[1]);
+                                for (n, pair) in orow.chunks_mut(2).enumerate() {
+                                    pair[0] = r0[n];
+                                    if let Some(o) = pair.get_mut(1) {
+                                        *o = r1[n];
+                                    }
+                                }
+                            } else {
+                                for (n, chunk) in orow.chunks_mut(s).enumerate() {
+                                    for (o, r) in chunk.iter_mut().zip(&rows) {
+                                        *o = r[n];
+                                    }
+                                }
+                            }
+                        }
+                    });
+            }
         }
         Ok(out)
     }

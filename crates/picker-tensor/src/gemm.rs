@@ -75,8 +75,9 @@ impl PackedA {
 
 /// Where B comes from: anything that can pack a block of its columns.
 pub(crate) trait BSource: Sync {
-    /// Writes rows `[k0, k0+kc)` × columns `[n0, n0+cols)` into `dst` as `kc`
-    /// rows of `nr` floats; columns `cols..nr` of each row must be zero.
+    /// Writes rows `[k0, k0+kc)` × columns `[n0, n0+cols)` into `dst` as
+    /// `ceil(cols/nr)` consecutive panels of `kc` rows of `nr` floats; the
+    /// columns of the last panel past `cols` must be zero.
     fn pack(&self, k0: usize, kc: usize, n0: usize, cols: usize, nr: usize, dst: &mut [f32]);
 }
 
@@ -88,12 +89,16 @@ pub(crate) struct DenseB<'a> {
 
 impl BSource for DenseB<'_> {
     fn pack(&self, k0: usize, kc: usize, n0: usize, cols: usize, nr: usize, dst: &mut [f32]) {
+        let panels = cols.div_ceil(nr);
         for kk in 0..kc {
             let src = &self.data[(k0 + kk) * self.n + n0..][..cols];
-            let row = &mut dst[kk * nr..(kk + 1) * nr];
-            row[..cols].copy_from_slice(src);
-            row[cols..].fill(0.0);
+            for (p, chunk) in src.chunks(nr).enumerate() {
+                let row = &mut dst[(p * kc + kk) * nr..(p * kc + kk + 1) * nr];
+                row[..chunk.len()].copy_from_slice(chunk);
+                row[chunk.len()..].fill(0.0);
+            }
         }
+        debug_assert!(panels * kc * nr <= dst.len());
     }
 }
 
@@ -134,7 +139,11 @@ pub(crate) fn gemm<B: BSource>(a: &PackedA, b: &B, n: usize, c: &mut [f32], epi:
     }
     let n_panels = n.div_ceil(nr);
     let threads = rayon::current_num_threads().max(1);
-    let target = if threads == 1 { 1 } else { threads * TASKS_PER_THREAD };
+    let target = if threads == 1 {
+        1
+    } else {
+        threads * TASKS_PER_THREAD
+    };
     let per_task = n_panels.div_ceil(target).clamp(1, MAX_PANELS_PER_TASK);
     let n_tasks = n_panels.div_ceil(per_task);
     let m_split = if n_tasks < target {
@@ -160,11 +169,8 @@ pub(crate) fn gemm<B: BSource>(a: &PackedA, b: &B, n: usize, c: &mut [f32], epi:
             let mut tmp = [0.0f32; 8 * 48];
             let last = a.kblocks.len() - 1;
             for (bi, &(k0, kc, aoff)) in a.kblocks.iter().enumerate() {
-                for (j, p) in (p0..p1).enumerate() {
-                    let col0 = p * nr;
-                    let cols = nr.min(n - col0);
-                    b.pack(k0, kc, col0, cols, nr, &mut bbuf[j * kc * nr..(j + 1) * kc * nr]);
-                }
+                let cols = (p1 * nr).min(n) - p0 * nr;
+                b.pack(k0, kc, p0 * nr, cols, nr, &mut bbuf[..(p1 - p0) * kc * nr]);
                 for (j, p) in (p0..p1).enumerate() {
                     let col0 = p * nr;
                     let cols = nr.min(n - col0);
@@ -231,7 +237,9 @@ fn apply_epilogue(
         }
         epi.act.apply(dst);
         if let Some(res) = epi.residual {
-            dst.iter_mut().zip(&res[o..o + cols]).for_each(|(v, r)| *v += r);
+            dst.iter_mut()
+                .zip(&res[o..o + cols])
+                .for_each(|(v, r)| *v += r);
         }
     }
 }

@@ -24,7 +24,9 @@ impl Isa {
     pub fn best() -> Isa {
         static BEST: OnceLock<Isa> = OnceLock::new();
         *BEST.get_or_init(|| {
-            let cap = std::env::var("PICKER_ISA").ok().and_then(|s| Isa::parse(&s));
+            let cap = std::env::var("PICKER_ISA")
+                .ok()
+                .and_then(|s| Isa::parse(&s));
             Isa::ALL
                 .into_iter()
                 .filter(|isa| isa.is_available())

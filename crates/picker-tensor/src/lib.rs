@@ -28,6 +28,7 @@ mod activation;
 mod aligned;
 mod bn;
 mod conv;
+mod direct;
 mod elementwise;
 mod error;
 mod gemm;

@@ -13,3 +13,6 @@ pub const TASKS_PER_THREAD: usize = 4;
 
 /// Alignment in bytes of packed buffers (one cache line, one zmm register).
 pub const ALIGN: usize = 64;
+
+/// Widest micro-kernel tile of any family (`NR` of the AVX-512 kernel).
+pub const MAX_NR: usize = 48;

@@ -15,7 +15,12 @@ pub fn conv2d(x: &Tensor, weight: &[f32], bias: Option<&[f32]>, s: ConvSpec) -> 
         return Err(shape_err("conv2d", "input channels", s.c_in, x.c()));
     }
     if weight.len() != s.weight_len() {
-        return Err(shape_err("conv2d", "weight length", s.weight_len(), weight.len()));
+        return Err(shape_err(
+            "conv2d",
+            "weight length",
+            s.weight_len(),
+            weight.len(),
+        ));
     }
     let mut out = Tensor::zeros([x.n(), s.c_out, oh, ow]);
     for n in 0..x.n() {
@@ -28,7 +33,8 @@ pub fn conv2d(x: &Tensor, weight: &[f32], bias: Option<&[f32]>, s: ConvSpec) -> 
                             for kx in 0..s.kw {
                                 let iy = (oy * s.stride + ky) as isize - s.pad as isize;
                                 let ix = (ox * s.stride + kx) as isize - s.pad as isize;
-                                if iy < 0 || ix < 0 || iy >= x.h() as isize || ix >= x.w() as isize {
+                                if iy < 0 || ix < 0 || iy >= x.h() as isize || ix >= x.w() as isize
+                                {
                                     continue;
                                 }
                                 let wv = weight[((co * s.c_in + ci) * s.kh + ky) * s.kw + kx];
@@ -54,7 +60,12 @@ pub fn conv_transpose2d(
 ) -> Result<Tensor> {
     let (oh, ow) = s.out_hw(x.h(), x.w())?;
     if x.c() != s.c_in {
-        return Err(shape_err("conv_transpose2d", "input channels", s.c_in, x.c()));
+        return Err(shape_err(
+            "conv_transpose2d",
+            "input channels",
+            s.c_in,
+            x.c(),
+        ));
     }
     if weight.len() != s.weight_len() {
         return Err(shape_err(
@@ -114,11 +125,14 @@ pub fn reflect_pad(x: &Tensor, pads: Pads) -> Result<Tensor> {
 /// Mirror extension element by element.
 pub fn mirror_pad(x: &Tensor, pads: Pads) -> Tensor {
     let [t, b, l, r] = pads;
-    Tensor::from_fn([x.n(), x.c(), x.h() + t + b, x.w() + l + r], |n, c, y, xx| {
-        let sy = reflect_index(y as isize - t as isize, x.h());
-        let sx = reflect_index(xx as isize - l as isize, x.w());
-        x.at(n, c, sy, sx)
-    })
+    Tensor::from_fn(
+        [x.n(), x.c(), x.h() + t + b, x.w() + l + r],
+        |n, c, y, xx| {
+            let sy = reflect_index(y as isize - t as isize, x.h());
+            let sx = reflect_index(xx as isize - l as isize, x.w());
+            x.at(n, c, sy, sx)
+        },
+    )
 }
 
 /// Applies an activation element by element.
@@ -161,7 +175,10 @@ pub fn batch_norm(x: &Tensor, bn: &BatchNorm) -> Result<Tensor> {
 /// Bilinear resize, `align_corners=False`, written from the definition.
 pub fn resize_bilinear(x: &Tensor, oh: usize, ow: usize) -> Result<Tensor> {
     if oh == 0 || ow == 0 || x.h() == 0 || x.w() == 0 {
-        return Err(crate::error::invalid("resize_bilinear", "sizes must be positive"));
+        return Err(crate::error::invalid(
+            "resize_bilinear",
+            "sizes must be positive",
+        ));
     }
     let src = |i: usize, inl: usize, outl: usize| -> (usize, usize, f64) {
         let s = ((i as f64 + 0.5) * inl as f64 / outl as f64 - 0.5).max(0.0);

@@ -39,7 +39,10 @@ impl Tensor {
     }
 
     /// A tensor filled by `f(n, c, y, x)`.
-    pub fn from_fn(shape: [usize; 4], mut f: impl FnMut(usize, usize, usize, usize) -> f32) -> Self {
+    pub fn from_fn(
+        shape: [usize; 4],
+        mut f: impl FnMut(usize, usize, usize, usize) -> f32,
+    ) -> Self {
         let mut data = Vec::with_capacity(shape.iter().product());
         for n in 0..shape[0] {
             for c in 0..shape[1] {

@@ -11,13 +11,22 @@ pub struct Tolerance {
 
 impl Tolerance {
     /// A fast f32 kernel against its f64-accumulating reference.
-    pub const KERNEL_F32: Tolerance = Tolerance { abs: 1e-4, rel: 1e-4 };
+    pub const KERNEL_F32: Tolerance = Tolerance {
+        abs: 1e-4,
+        rel: 1e-4,
+    };
     /// Pure data movement (padding, cropping): exact.
     pub const EXACT: Tolerance = Tolerance { abs: 0.0, rel: 0.0 };
     /// Whole networks against the PyTorch reference, on tanh outputs in [-1, 1].
-    pub const NET_E2E: Tolerance = Tolerance { abs: 1e-4, rel: 0.0 };
+    pub const NET_E2E: Tolerance = Tolerance {
+        abs: 1e-4,
+        rel: 0.0,
+    };
     /// Intermediate activations of whole networks against the PyTorch reference.
-    pub const NET_ACTIVATION: Tolerance = Tolerance { abs: 1e-4, rel: 1e-4 };
+    pub const NET_ACTIVATION: Tolerance = Tolerance {
+        abs: 1e-4,
+        rel: 1e-4,
+    };
 
     /// `Ok` when every pair is within tolerance, else a message naming the
     /// first mismatching index, the values and the largest error.
@@ -34,7 +43,11 @@ impl Tolerance {
         for (i, (&f, &e)) in found.iter().zip(expected).enumerate() {
             let err = (f - e).abs();
             let ok = err <= self.abs + self.rel * e.abs() && f.is_finite() == e.is_finite();
-            worst = if err.is_nan() { f32::INFINITY } else { worst.max(err) };
+            worst = if err.is_nan() {
+                f32::INFINITY
+            } else {
+                worst.max(err)
+            };
             if !ok && first.is_none() {
                 first = Some((i, f, e));
             }

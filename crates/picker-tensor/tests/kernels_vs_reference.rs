@@ -58,11 +58,27 @@ impl ConvProblem {
         } else {
             conv.forward(&x).unwrap()
         };
-        check(&format!("{isa} {self:?}"), &found, &expected, Tolerance::KERNEL_F32);
+        check(
+            &format!("{isa} {self:?}"),
+            &found,
+            &expected,
+            Tolerance::KERNEL_F32,
+        );
     }
 }
 
-fn conv(n: usize, h: usize, w: usize, ci: usize, co: usize, k: usize, s: usize, p: usize) -> ConvProblem {
+// One argument per dimension of the problem, in the order they are read in the table below.
+#[allow(clippy::too_many_arguments)]
+fn conv(
+    n: usize,
+    h: usize,
+    w: usize,
+    ci: usize,
+    co: usize,
+    k: usize,
+    s: usize,
+    p: usize,
+) -> ConvProblem {
     ConvProblem {
         n,
         h,
@@ -76,25 +92,38 @@ fn conv(n: usize, h: usize, w: usize, ci: usize, co: usize, k: usize, s: usize, 
 
 /// Named shapes: the awkward ones and scaled-down versions of the real layers.
 fn named_conv_problems() -> Vec<ConvProblem> {
-    let relu = |p: ConvProblem| ConvProblem { act: Activation::Relu, ..p };
-    let tanh = |p: ConvProblem| ConvProblem { act: Activation::Tanh, ..p };
-    let res = |p: ConvProblem| ConvProblem { residual: true, bias: false, ..p };
+    let relu = |p: ConvProblem| ConvProblem {
+        act: Activation::Relu,
+        ..p
+    };
+    let tanh = |p: ConvProblem| ConvProblem {
+        act: Activation::Tanh,
+        ..p
+    };
+    let res = |p: ConvProblem| ConvProblem {
+        residual: true,
+        bias: false,
+        ..p
+    };
     vec![
-        conv(1, 1, 1, 1, 1, 1, 1, 0),       // 1x1 image, 1x1 kernel
-        conv(1, 1, 1, 3, 5, 3, 1, 1),       // 1x1 image, 3x3 kernel, padding only
-        conv(1, 7, 9, 3, 8, 7, 1, 3),       // 7x7 with 3 input channels
+        conv(1, 1, 1, 1, 1, 1, 1, 0),          // 1x1 image, 1x1 kernel
+        conv(1, 1, 1, 3, 5, 3, 1, 1),          // 1x1 image, 3x3 kernel, padding only
+        conv(1, 7, 9, 3, 8, 7, 1, 3),          // 7x7 with 3 input channels
         relu(conv(1, 13, 11, 5, 17, 3, 2, 1)), // stride 2 on odd sizes, channels off the SIMD width
         relu(conv(2, 9, 14, 16, 12, 3, 2, 1)), // batch 2
-        conv(1, 6, 7, 33, 9, 1, 2, 0),      // 1x1 stride 2
-        conv(1, 10, 12, 20, 24, 1, 1, 0),   // 1x1 as plain GEMM
+        conv(1, 6, 7, 33, 9, 1, 2, 0),         // 1x1 stride 2
+        conv(1, 10, 12, 20, 24, 1, 1, 0),      // 1x1 as plain GEMM
         res(conv(1, 12, 10, 24, 24, 3, 1, 0)), // ResBlock conv after reflect pad
         res(conv(2, 7, 5, 9, 9, 3, 1, 1)),
         tanh(conv(1, 14, 18, 8, 3, 7, 1, 0)), // decoder output conv
-        conv(1, 5, 5, 2, 7, 5, 3, 2),       // stride 3, kernel 5
-        conv(1, 4, 6, 3, 4, 3, 1, 4),       // padding larger than the kernel
+        conv(1, 5, 5, 2, 7, 5, 3, 2),         // stride 3, kernel 5
+        conv(1, 4, 6, 3, 4, 3, 1, 4),         // padding larger than the kernel
         relu(conv(1, 20, 20, 70, 50, 3, 1, 1)), // K = 630: several K blocks
-        conv(1, 3, 97, 2, 2, 1, 1, 0),      // N not a multiple of any NR, tiny M
+        conv(1, 3, 97, 2, 2, 1, 1, 0),        // N not a multiple of any NR, tiny M
         relu(conv(1, 30, 40, 64, 64, 3, 1, 1)), // many tasks, real-ish sizes
+        tanh(conv(1, 11, 150, 6, 3, 7, 1, 0)), // direct path: full and partial row blocks
+        res(conv(2, 5, 70, 4, 4, 3, 1, 0)),   // direct path, 4 outputs, residual
+        conv(1, 4, 66, 3, 2, 1, 1, 0),        // direct path, 1x1
     ]
 }
 
@@ -145,9 +174,24 @@ fn conv2d_random_shapes() {
 #[test]
 fn conv2d_rectangular_kernel() {
     for isa in isas() {
-        let spec = ConvSpec { c_in: 4, c_out: 10, kh: 1, kw: 3, stride: 1, pad: 1 };
-        ConvProblem { n: 1, h: 5, w: 6, spec, bias: true, act: Activation::None, residual: false }
-            .run(isa, 9);
+        let spec = ConvSpec {
+            c_in: 4,
+            c_out: 10,
+            kh: 1,
+            kw: 3,
+            stride: 1,
+            pad: 1,
+        };
+        ConvProblem {
+            n: 1,
+            h: 5,
+            w: 6,
+            spec,
+            bias: true,
+            act: Activation::None,
+            residual: false,
+        }
+        .run(isa, 9);
     }
 }
 
@@ -174,7 +218,12 @@ impl ConvTProblem {
             &reference::conv_transpose2d(&x, &wt, b.as_deref(), s).unwrap(),
             self.act,
         );
-        check(&format!("{isa} {self:?}"), &conv.forward(&x).unwrap(), &expected, Tolerance::KERNEL_F32);
+        check(
+            &format!("{isa} {self:?}"),
+            &conv.forward(&x).unwrap(),
+            &expected,
+            Tolerance::KERNEL_F32,
+        );
     }
 }
 
@@ -204,7 +253,17 @@ fn conv_transpose2d_shapes() {
         let s = rng.range(1, 3);
         let p = rng.range(0, k - 1);
         let op = rng.range(0, s - 1);
-        let mut pr = t(rng.range(1, 2), rng.range(1, 9), rng.range(1, 9), rng.range(1, 30), rng.range(1, 30), k, s, p, op);
+        let mut pr = t(
+            rng.range(1, 2),
+            rng.range(1, 9),
+            rng.range(1, 9),
+            rng.range(1, 30),
+            rng.range(1, 30),
+            k,
+            s,
+            p,
+            op,
+        );
         pr.bias = rng.range(0, 1) == 1;
         pr.act = [Activation::None, Activation::Relu, Activation::Tanh][rng.range(0, 2)];
         if pr.spec.out_hw(pr.h, pr.w).is_ok() {
@@ -234,9 +293,14 @@ fn batchnorm_folding_matches_conv_then_bn() {
         let wt = rng.normal_vec(s.weight_len(), 0.3);
         let b = with_bias.then(|| rng.normal_vec(11, 0.3));
         let norm = bn(&mut rng, 11);
-        let expected = reference::batch_norm(&reference::conv2d(&x, &wt, b.as_deref(), s).unwrap(), &norm).unwrap();
+        let expected =
+            reference::batch_norm(&reference::conv2d(&x, &wt, b.as_deref(), s).unwrap(), &norm)
+                .unwrap();
         let (fw, fb) = fold_batchnorm(&wt, b.as_deref(), &norm, WeightLayout::Conv).unwrap();
-        let found = Conv2d::new(s, &fw, Some(&fb), Activation::None).unwrap().forward(&x).unwrap();
+        let found = Conv2d::new(s, &fw, Some(&fb), Activation::None)
+            .unwrap()
+            .forward(&x)
+            .unwrap();
         check("folded conv", &found, &expected, Tolerance::KERNEL_F32);
 
         let st = ConvTransposeSpec::square(5, 7, 3, 2, 1, 1);
@@ -244,10 +308,28 @@ fn batchnorm_folding_matches_conv_then_bn() {
         let wt = rng.normal_vec(st.weight_len(), 0.3);
         let b = with_bias.then(|| rng.normal_vec(7, 0.3));
         let norm = bn(&mut rng, 7);
-        let expected = reference::batch_norm(&reference::conv_transpose2d(&x, &wt, b.as_deref(), st).unwrap(), &norm).unwrap();
-        let (fw, fb) = fold_batchnorm(&wt, b.as_deref(), &norm, WeightLayout::Transposed { kernel_area: 9 }).unwrap();
-        let found = ConvTranspose2d::new(st, &fw, Some(&fb), Activation::None).unwrap().forward(&x).unwrap();
-        check("folded conv-transpose", &found, &expected, Tolerance::KERNEL_F32);
+        let expected = reference::batch_norm(
+            &reference::conv_transpose2d(&x, &wt, b.as_deref(), st).unwrap(),
+            &norm,
+        )
+        .unwrap();
+        let (fw, fb) = fold_batchnorm(
+            &wt,
+            b.as_deref(),
+            &norm,
+            WeightLayout::Transposed { kernel_area: 9 },
+        )
+        .unwrap();
+        let found = ConvTranspose2d::new(st, &fw, Some(&fb), Activation::None)
+            .unwrap()
+            .forward(&x)
+            .unwrap();
+        check(
+            "folded conv-transpose",
+            &found,
+            &expected,
+            Tolerance::KERNEL_F32,
+        );
     }
 }
 
@@ -262,14 +344,33 @@ fn padding_matches_reference() {
     ] {
         let x = rng.tensor([2, 3, h, w]);
         if pads.iter().all(|&p| p < h.min(w)) || pads == [0, 0, 0, 0] {
-            check("reflect_pad", &reflect_pad(&x, pads).unwrap(), &reference::reflect_pad(&x, pads).unwrap(), Tolerance::EXACT);
+            check(
+                "reflect_pad",
+                &reflect_pad(&x, pads).unwrap(),
+                &reference::reflect_pad(&x, pads).unwrap(),
+                Tolerance::EXACT,
+            );
         }
-        check("mirror_pad", &mirror_pad(&x, pads), &reference::mirror_pad(&x, pads), Tolerance::EXACT);
+        check(
+            "mirror_pad",
+            &mirror_pad(&x, pads),
+            &reference::mirror_pad(&x, pads),
+            Tolerance::EXACT,
+        );
     }
     // mirror extension far beyond the size, and of a single pixel
-    for (h, w, pads) in [(1, 1, [3, 4, 5, 6]), (2, 3, [7, 1, 9, 2]), (3, 1, [0, 5, 2, 2])] {
+    for (h, w, pads) in [
+        (1, 1, [3, 4, 5, 6]),
+        (2, 3, [7, 1, 9, 2]),
+        (3, 1, [0, 5, 2, 2]),
+    ] {
         let x = rng.tensor([1, 2, h, w]);
-        check("mirror_pad large", &mirror_pad(&x, pads), &reference::mirror_pad(&x, pads), Tolerance::EXACT);
+        check(
+            "mirror_pad large",
+            &mirror_pad(&x, pads),
+            &reference::mirror_pad(&x, pads),
+            Tolerance::EXACT,
+        );
     }
     // PyTorch refuses reflection pads not smaller than the axis; so do we
     assert!(reflect_pad(&rng.tensor([1, 1, 3, 3]), [3, 0, 0, 0]).is_err());
@@ -280,19 +381,32 @@ fn padding_matches_reference() {
 fn mirror_pad_known_values() {
     let x = Tensor::new([1, 1, 1, 3], vec![0.0, 1.0, 2.0]).unwrap();
     let y = mirror_pad(&x, [0, 0, 4, 4]);
-    assert_eq!(y.data(), &[0.0, 1.0, 2.0, 1.0, 0.0, 1.0, 2.0, 1.0, 0.0, 1.0, 2.0]);
+    assert_eq!(
+        y.data(),
+        &[0.0, 1.0, 2.0, 1.0, 0.0, 1.0, 2.0, 1.0, 0.0, 1.0, 2.0]
+    );
 }
 
 #[test]
 fn resize_matches_reference() {
     let mut rng = Rng::new(5);
-    for (h, w, oh, ow) in [(1, 1, 3, 2), (4, 6, 8, 12), (30, 40, 3, 5), (7, 9, 7, 9), (5, 3, 2, 11), (2, 2, 1, 1)] {
+    for (h, w, oh, ow) in [
+        (1, 1, 3, 2),
+        (4, 6, 8, 12),
+        (30, 40, 3, 5),
+        (7, 9, 7, 9),
+        (5, 3, 2, 11),
+        (2, 2, 1, 1),
+    ] {
         let x = rng.tensor([2, 3, h, w]);
         check(
             &format!("resize {h}x{w}->{oh}x{ow}"),
             &resize_bilinear(&x, oh, ow).unwrap(),
             &reference::resize_bilinear(&x, oh, ow).unwrap(),
-            Tolerance { abs: 1e-6, rel: 1e-6 },
+            Tolerance {
+                abs: 1e-6,
+                rel: 1e-6,
+            },
         );
     }
     assert!(resize_bilinear(&rng.tensor([1, 1, 2, 2]), 0, 3).is_err());
@@ -303,7 +417,10 @@ fn resize_known_values() {
     // PyTorch: F.interpolate(tensor([[[[0., 1.]]]]), size=(1, 4), mode="bilinear", align_corners=False)
     // gives [0, 0.25, 0.75, 1].
     let x = Tensor::new([1, 1, 1, 2], vec![0.0, 1.0]).unwrap();
-    assert_eq!(resize_bilinear(&x, 1, 4).unwrap().data(), &[0.0, 0.25, 0.75, 1.0]);
+    assert_eq!(
+        resize_bilinear(&x, 1, 4).unwrap().data(),
+        &[0.0, 0.25, 0.75, 1.0]
+    );
 }
 
 #[test]
@@ -314,25 +431,69 @@ fn elementwise_matches_reference() {
     for act in [Activation::None, Activation::Relu, Activation::Tanh] {
         let mut f = x.clone();
         activate(&mut f, act);
-        check("activate", &f, &reference::activate(&x, act), Tolerance { abs: 1e-6, rel: 0.0 });
+        check(
+            "activate",
+            &f,
+            &reference::activate(&x, act),
+            Tolerance {
+                abs: 1e-6,
+                rel: 0.0,
+            },
+        );
     }
     let mut s = x.clone();
     add_assign(&mut s, &y).unwrap();
-    check("add", &s, &reference::add(&x, &y).unwrap(), Tolerance::EXACT);
+    check(
+        "add",
+        &s,
+        &reference::add(&x, &y).unwrap(),
+        Tolerance::EXACT,
+    );
     assert!(add_assign(&mut s, &rng.tensor([1, 3, 33, 17])).is_err());
 }
 
 #[test]
 fn bad_parameters_are_refused() {
     let w = vec![0.0; 27];
-    assert!(Conv2d::new(ConvSpec::square(3, 1, 3, 0, 1), &w, None, Activation::None).is_err(), "stride 0");
-    assert!(Conv2d::new(ConvSpec::square(3, 1, 3, 1, 1), &w[..26], None, Activation::None).is_err(), "weight length");
-    assert!(Conv2d::new(ConvSpec::square(3, 1, 3, 1, 1), &w, Some(&[0.0, 1.0]), Activation::None).is_err(), "bias length");
+    assert!(
+        Conv2d::new(ConvSpec::square(3, 1, 3, 0, 1), &w, None, Activation::None).is_err(),
+        "stride 0"
+    );
+    assert!(
+        Conv2d::new(
+            ConvSpec::square(3, 1, 3, 1, 1),
+            &w[..26],
+            None,
+            Activation::None
+        )
+        .is_err(),
+        "weight length"
+    );
+    assert!(
+        Conv2d::new(
+            ConvSpec::square(3, 1, 3, 1, 1),
+            &w,
+            Some(&[0.0, 1.0]),
+            Activation::None
+        )
+        .is_err(),
+        "bias length"
+    );
     let c = Conv2d::new(ConvSpec::square(3, 1, 3, 1, 0), &w, None, Activation::None).unwrap();
     assert!(c.forward(&Tensor::zeros([1, 4, 5, 5])).is_err(), "channels");
-    assert!(c.forward(&Tensor::zeros([1, 3, 2, 5])).is_err(), "smaller than kernel");
-    assert!(c.forward_add(&Tensor::zeros([1, 3, 5, 5]), &Tensor::zeros([1, 1, 5, 5])).is_err(), "residual shape");
+    assert!(
+        c.forward(&Tensor::zeros([1, 3, 2, 5])).is_err(),
+        "smaller than kernel"
+    );
+    assert!(
+        c.forward_add(&Tensor::zeros([1, 3, 5, 5]), &Tensor::zeros([1, 1, 5, 5]))
+            .is_err(),
+        "residual shape"
+    );
     let t = ConvTransposeSpec::square(1, 1, 3, 2, 1, 2);
-    assert!(ConvTranspose2d::new(t, &[0.0; 9], None, Activation::None).is_err(), "output_padding >= stride");
+    assert!(
+        ConvTranspose2d::new(t, &[0.0; 9], None, Activation::None).is_err(),
+        "output_padding >= stride"
+    );
     assert!(Tensor::new([1, 2, 3, 4], vec![0.0; 23]).is_err());
 }
