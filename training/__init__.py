@@ -1,0 +1,1 @@
+"""PyTorch reference of the Material Picker networks, fixtures and conventions (see README.md)."""

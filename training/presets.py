@@ -1,0 +1,121 @@
+"""Network configurations of docs/contract.md, without any dependency on torch.
+
+A config is the plain dict stored as JSON in a weights file's ``__metadata__["config"]``. Its keys are
+exactly the contract's (unknown or missing keys are an error, as in the Rust loader). This module is
+imported both by :mod:`training.picker_nets` and by ``scripts/ort-anchor`` (which has no torch), so the
+presets and the parameter count live in one place.
+"""
+
+import copy
+import json
+
+NETS = ("irn", "msn", "envmap")
+
+IRN_HEADS = (
+    ("diffuse_albedo", 3),
+    ("specular_albedo", 3),
+    ("normals", 3),
+    ("glossiness", 1),
+    ("view_vector", 3),
+    ("uv", 3),
+)
+
+CONFIG_KEYS = {
+    "irn": ("widths", "blocks", "heads", "conv_bias", "bn_eps"),
+    "msn": ("widths", "blocks", "out_channels", "conv_bias", "bn_eps"),
+    "envmap": ("widths", "blocks", "tail_widths", "out_channels", "conv_bias", "bn_eps"),
+}
+
+
+def _heads():
+    return [{"name": name, "channels": c} for name, c in IRN_HEADS]
+
+
+PRESETS = {
+    "irn": {
+        "thesis": {"widths": [64, 128, 256], "blocks": 15, "heads": _heads(), "conv_bias": False,
+                   "bn_eps": 1e-5},
+        "tiny": {"widths": [8, 12, 16], "blocks": 2, "heads": _heads(), "conv_bias": True, "bn_eps": 1e-5},
+    },
+    "msn": {
+        "thesis": {"widths": [64, 128, 256], "blocks": 9, "out_channels": 3, "conv_bias": False,
+                   "bn_eps": 1e-5},
+        "tiny": {"widths": [8, 12, 16], "blocks": 2, "out_channels": 3, "conv_bias": False, "bn_eps": 1e-5},
+    },
+    "envmap": {
+        "thesis": {"widths": [64, 128, 256], "blocks": 4, "tail_widths": [256, 128], "out_channels": 3,
+                   "conv_bias": False, "bn_eps": 1e-5},
+        "tiny": {"widths": [8, 12, 16], "blocks": 1, "tail_widths": [16, 12], "out_channels": 3,
+                 "conv_bias": True, "bn_eps": 1e-5},
+    },
+}
+
+
+def preset(net, name):
+    """Returns a fresh copy of the config of preset ``name`` (``thesis`` | ``tiny``) for ``net``."""
+    if net not in PRESETS:
+        raise ValueError(f"unknown net {net!r}; expected one of {NETS}")
+    if name not in PRESETS[net]:
+        raise ValueError(f"unknown preset {name!r} for {net}; expected one of {tuple(PRESETS[net])}")
+    return copy.deepcopy(PRESETS[net][name])
+
+
+def validate_config(net, config):
+    """Raises ValueError unless ``config`` has exactly the contract's keys for ``net`` and sane values."""
+    expected = CONFIG_KEYS[net]
+    if set(config) != set(expected):
+        raise ValueError(f"{net} config keys {sorted(config)} != contract keys {sorted(expected)}")
+    if not isinstance(config["conv_bias"], bool) or not config["bn_eps"] > 0:
+        raise ValueError(f"conv_bias must be a bool and bn_eps > 0, got {config}")
+    if len(config["widths"]) != 3 or min(config["widths"]) < 1:
+        raise ValueError(f"widths must be three positive ints, got {config['widths']}")
+    if config["blocks"] < 0:
+        raise ValueError(f"blocks must be >= 0, got {config['blocks']}")
+    if net == "irn":
+        names = [h["name"] for h in config["heads"]]
+        if not names or len(set(names)) != len(names):
+            raise ValueError(f"head names must be non-empty and unique, got {names}")
+        for h in config["heads"]:
+            if set(h) != {"name", "channels"} or h["channels"] < 1:
+                raise ValueError(f"bad head {h}")
+    if net == "envmap" and len(config["tail_widths"]) != 2:
+        raise ValueError(f"tail_widths must have two entries, got {config['tail_widths']}")
+
+
+def config_json(config):
+    """The config as the compact JSON string stored in the weights metadata (key order as given)."""
+    return json.dumps(config, separators=(",", ":"))
+
+
+def _conv(cin, cout, k):
+    """Parameters of one conv after BatchNorm folding: weight + one bias per output channel."""
+    return cin * cout * k * k + cout
+
+
+def net_of_config(config):
+    """Which net a config describes, from its keys (``heads`` → irn, ``tail_widths`` → envmap, else msn)."""
+    if "heads" in config:
+        return "irn"
+    return "envmap" if "tail_widths" in config else "msn"
+
+
+def count_params_folded(config):
+    """Parameters of the inference network after BatchNorm folding: sum over convs of (weights + c_out).
+
+    Matches the contract's count: thesis IRN 108,856,080, MSN 11,378,179, EnvMap 5,463,427.
+    """
+    net = net_of_config(config)
+    validate_config(net, config)
+    w0, w1, w2 = config["widths"]
+    encoder = _conv(3, w0, 7) + _conv(w0, w1, 3) + _conv(w1, w2, 3)
+    blocks = config["blocks"] * 2 * _conv(w2, w2, 3)
+
+    def decoder(c):
+        return _conv(w2, w1, 3) + _conv(w1, w0, 3) + _conv(w0, c, 7)
+
+    if net == "irn":
+        return encoder + sum(blocks + decoder(h["channels"]) for h in config["heads"])
+    if net == "msn":
+        return encoder + blocks + decoder(config["out_channels"])
+    t0, t1 = config["tail_widths"]
+    return encoder + blocks + _conv(w2, t0, 1) + _conv(t0, t1, 3) + _conv(t1, config["out_channels"], 3)
