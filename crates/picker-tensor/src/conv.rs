@@ -314,14 +314,17 @@ impl BSource for Gather<'_> {
                     }
                     zero_short(&mut out[hi..]);
                 } else {
-                    for (t, o) in out.iter_mut().enumerate() {
-                        let ix = ix0 + (t * s) as isize;
-                        *o = if ix >= 0 && (ix as usize) < w {
-                            src[ix as usize]
-                        } else {
-                            0.0
-                        };
+                    // ix = ix0 + t·s lies in [0, w) for t in [lo, hi)
+                    let si = s as isize;
+                    let lo = (((-ix0).max(0) + si - 1) / si).min(run as isize);
+                    let hi = (((w as isize - ix0).max(0) + si - 1) / si).clamp(lo, run as isize);
+                    let (lo, hi) = (lo as usize, hi as usize);
+                    zero_short(&mut out[..lo]);
+                    let base = ix0 + (lo * s) as isize;
+                    for (t, o) in out[lo..hi].iter_mut().enumerate() {
+                        *o = src[base as usize + t * s];
                     }
+                    zero_short(&mut out[hi..]);
                 }
             }
         }

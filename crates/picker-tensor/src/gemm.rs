@@ -146,8 +146,10 @@ pub(crate) fn gemm<B: BSource>(a: &PackedA, b: &B, n: usize, c: &mut [f32], epi:
     };
     let per_task = n_panels.div_ceil(target).clamp(1, MAX_PANELS_PER_TASK);
     let n_tasks = n_panels.div_ceil(per_task);
-    let m_split = if n_tasks < target {
-        target.div_ceil(n_tasks).min(a.m_panels)
+    // Splitting M too makes every row block pack the same B again, so only do
+    // it when there are fewer column tasks than threads.
+    let m_split = if n_tasks < threads {
+        (2 * threads).div_ceil(n_tasks).min(a.m_panels)
     } else {
         1
     };
