@@ -1,0 +1,388 @@
+//! The building blocks shared by the three networks (contract, "Modules and
+//! state_dict keys"), each with its BatchNorm folded into the convolution at
+//! load and its activation fused into the kernel epilogue.
+
+use picker_tensor::{
+    fold_batchnorm, reflect_pad, Activation, BatchNorm, Conv2d, ConvSpec, ConvTranspose2d,
+    ConvTransposeSpec, Tensor, WeightLayout,
+};
+
+use crate::error::{Error, Result};
+use crate::weights::WeightsPrefix;
+
+/// Options every layer of a network shares.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LayerOptions {
+    /// Whether the convolutions before a BatchNorm have a bias (`conv_bias`).
+    pub conv_bias: bool,
+    /// BatchNorm ε.
+    pub bn_eps: f32,
+}
+
+impl Default for LayerOptions {
+    fn default() -> Self {
+        Self {
+            conv_bias: false,
+            bn_eps: 1e-5,
+        }
+    }
+}
+
+/// Where intermediate activations go when tracing: `(module path, tensor)`
+/// pairs, e.g. `("heads.normals.blocks.0", ...)`.
+pub type Trace = Vec<(String, Tensor)>;
+
+/// An optional trace sink; recording costs nothing when it is `None`.
+pub(crate) struct Tracer<'a> {
+    sink: Option<&'a mut Trace>,
+}
+
+impl<'a> Tracer<'a> {
+    pub(crate) fn new(sink: Option<&'a mut Trace>) -> Self {
+        Self { sink }
+    }
+    /// Records a clone of `t` as `prefix.name` (or `name` when `prefix` is empty).
+    pub(crate) fn record(&mut self, prefix: &str, name: &str, t: &Tensor) {
+        if let Some(s) = self.sink.as_deref_mut() {
+            let key = if prefix.is_empty() {
+                name.to_string()
+            } else if name.is_empty() {
+                prefix.to_string()
+            } else {
+                format!("{prefix}.{name}")
+            };
+            s.push((key, t.clone()));
+        }
+    }
+}
+
+pub(crate) fn join(prefix: &str, name: &str) -> String {
+    if prefix.is_empty() {
+        name.to_string()
+    } else {
+        format!("{prefix}.{name}")
+    }
+}
+
+fn load_bn(w: &WeightsPrefix<'_>, c: usize, eps: f32) -> Result<BatchNorm> {
+    let bn = BatchNorm {
+        gamma: w.get("weight", &[c])?,
+        beta: w.get("bias", &[c])?,
+        mean: w.get("running_mean", &[c])?,
+        var: w.get("running_var", &[c])?,
+        eps,
+    };
+    if let Some(i) = bn.var.iter().position(|&v| v < 0.0) {
+        return Err(Error::InvalidTensor {
+            path: w.weights().path().to_path_buf(),
+            key: w.key("running_var"),
+            reason: format!(
+                "variance {} at channel {i} is negative; a running variance must be ≥ 0",
+                bn.var[i]
+            ),
+        });
+    }
+    Ok(bn)
+}
+
+/// Reads `conv.weight` (+ `conv.bias` when `opts.conv_bias`) and the BatchNorm `bn`
+/// under `w`, and folds them into one convolution with activation `act`.
+fn folded_conv(
+    w: &WeightsPrefix<'_>,
+    conv: &str,
+    bn: &str,
+    spec: ConvSpec,
+    opts: LayerOptions,
+    act: Activation,
+) -> Result<Conv2d> {
+    let cw = w.pp(conv);
+    let weight = cw.get("weight", &[spec.c_out, spec.c_in, spec.kh, spec.kw])?;
+    let bias = if opts.conv_bias {
+        Some(cw.get("bias", &[spec.c_out])?)
+    } else {
+        None
+    };
+    let bn = load_bn(&w.pp(bn), spec.c_out, opts.bn_eps)?;
+    let (fw, fb) = fold_batchnorm(&weight, bias.as_deref(), &bn, WeightLayout::Conv)?;
+    Ok(Conv2d::new(spec, &fw, Some(&fb), act)?)
+}
+
+fn conv_params(spec: ConvSpec) -> u64 {
+    (spec.weight_len() + spec.c_out) as u64
+}
+
+/// `Conv2d` (zero padding) + BatchNorm + activation, folded into one convolution.
+/// Keys: `P.conv.weight`, `P.conv.bias` (if `conv_bias`), `P.bn.{weight,bias,running_mean,running_var}`.
+#[derive(Clone, Debug)]
+pub struct ConvBn {
+    conv: Conv2d,
+}
+
+impl ConvBn {
+    /// Loads and folds the layer at prefix `w`.
+    pub fn load(
+        w: &WeightsPrefix<'_>,
+        spec: ConvSpec,
+        opts: LayerOptions,
+        act: Activation,
+    ) -> Result<Self> {
+        Ok(Self {
+            conv: folded_conv(w, "conv", "bn", spec, opts, act)?,
+        })
+    }
+    /// `act(bn(conv(x)))`.
+    pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
+        Ok(self.conv.forward(x)?)
+    }
+    /// Parameters after folding.
+    pub fn param_count(&self) -> u64 {
+        conv_params(self.conv.spec())
+    }
+    /// The folded convolution.
+    pub fn conv(&self) -> &Conv2d {
+        &self.conv
+    }
+}
+
+/// `ConvTranspose2d(k3, stride 2, pad 1, output_padding 1)` + BatchNorm + ReLU, folded.
+/// Keys as [`ConvBn`], with the weight `[c_in, c_out, 3, 3]`.
+#[derive(Clone, Debug)]
+pub struct ConvTBn {
+    conv: ConvTranspose2d,
+}
+
+impl ConvTBn {
+    /// Loads and folds the layer at prefix `w` (`c_in → c_out`).
+    pub fn load(
+        w: &WeightsPrefix<'_>,
+        c_in: usize,
+        c_out: usize,
+        opts: LayerOptions,
+    ) -> Result<Self> {
+        let spec = ConvTransposeSpec::square(c_in, c_out, 3, 2, 1, 1);
+        let cw = w.pp("conv");
+        let weight = cw.get("weight", &[c_in, c_out, 3, 3])?;
+        let bias = if opts.conv_bias {
+            Some(cw.get("bias", &[c_out])?)
+        } else {
+            None
+        };
+        let bn = load_bn(&w.pp("bn"), c_out, opts.bn_eps)?;
+        let (fw, fb) = fold_batchnorm(
+            &weight,
+            bias.as_deref(),
+            &bn,
+            WeightLayout::Transposed { kernel_area: 9 },
+        )?;
+        Ok(Self {
+            conv: ConvTranspose2d::new(spec, &fw, Some(&fb), Activation::Relu)?,
+        })
+    }
+    /// `relu(bn(conv_transpose(x)))`: doubles height and width.
+    pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
+        Ok(self.conv.forward(x)?)
+    }
+    /// Parameters after folding.
+    pub fn param_count(&self) -> u64 {
+        let s = self.conv.spec();
+        (s.weight_len() + s.c_out) as u64
+    }
+}
+
+/// Residual block: ReflectionPad(1) → `conv1` → `bn1` → ReLU → ReflectionPad(1) →
+/// `conv2` → `bn2`, plus the input (no activation after the sum).
+#[derive(Clone, Debug)]
+pub struct ResBlock {
+    conv1: Conv2d,
+    conv2: Conv2d,
+}
+
+impl ResBlock {
+    /// Loads a `c`-channel block at prefix `w`.
+    pub fn load(w: &WeightsPrefix<'_>, c: usize, opts: LayerOptions) -> Result<Self> {
+        let spec = ConvSpec::square(c, c, 3, 1, 0);
+        Ok(Self {
+            conv1: folded_conv(w, "conv1", "bn1", spec, opts, Activation::Relu)?,
+            conv2: folded_conv(w, "conv2", "bn2", spec, opts, Activation::None)?,
+        })
+    }
+    /// `x + bn2(conv2(pad(relu(bn1(conv1(pad(x)))))))`; needs `h, w ≥ 2`.
+    pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
+        let h = self.conv1.forward(&reflect_pad(x, [1; 4])?)?;
+        Ok(self.conv2.forward_add(&reflect_pad(&h, [1; 4])?, x)?)
+    }
+    /// Parameters after folding.
+    pub fn param_count(&self) -> u64 {
+        conv_params(self.conv1.spec()) + conv_params(self.conv2.spec())
+    }
+}
+
+/// A stack of residual blocks (`P.<i>`).
+#[derive(Clone, Debug, Default)]
+pub struct ResBlocks {
+    blocks: Vec<ResBlock>,
+}
+
+impl ResBlocks {
+    /// Loads `n` blocks of `c` channels at `P.0 … P.{n-1}`.
+    pub fn load(w: &WeightsPrefix<'_>, n: usize, c: usize, opts: LayerOptions) -> Result<Self> {
+        let blocks = (0..n)
+            .map(|i| ResBlock::load(&w.pp(i), c, opts))
+            .collect::<Result<_>>()?;
+        Ok(Self { blocks })
+    }
+    /// Runs every block in turn.
+    pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
+        self.forward_traced(x, &mut Tracer::new(None), "")
+    }
+    pub(crate) fn forward_traced(
+        &self,
+        x: &Tensor,
+        tr: &mut Tracer<'_>,
+        path: &str,
+    ) -> Result<Tensor> {
+        let Some((first, rest)) = self.blocks.split_first() else {
+            return Ok(x.clone());
+        };
+        let mut y = first.forward(x)?;
+        tr.record(path, "0", &y);
+        for (i, b) in rest.iter().enumerate() {
+            y = b.forward(&y)?;
+            tr.record(path, &(i + 1).to_string(), &y);
+        }
+        Ok(y)
+    }
+    /// Number of blocks.
+    pub fn len(&self) -> usize {
+        self.blocks.len()
+    }
+    /// True with no blocks.
+    pub fn is_empty(&self) -> bool {
+        self.blocks.is_empty()
+    }
+    /// Parameters after folding.
+    pub fn param_count(&self) -> u64 {
+        self.blocks.iter().map(ResBlock::param_count).sum()
+    }
+}
+
+/// Encoder: ReflectionPad(3) → `conv_in` ConvBn(3, w0, k7, stride0) + ReLU →
+/// `down.0` ConvBn(w0, w1, k3, s2, pad 1) + ReLU → `down.1` ConvBn(w1, w2, k3, s2, pad 1) + ReLU.
+#[derive(Clone, Debug)]
+pub struct Encoder {
+    conv_in: ConvBn,
+    down: [ConvBn; 2],
+}
+
+impl Encoder {
+    /// Loads the encoder at prefix `w` (`stride0` = 1 for IRN/MSN, 2 for EnvMap).
+    pub fn load(
+        w: &WeightsPrefix<'_>,
+        [w0, w1, w2]: [usize; 3],
+        stride0: usize,
+        opts: LayerOptions,
+    ) -> Result<Self> {
+        let relu = Activation::Relu;
+        Ok(Self {
+            conv_in: ConvBn::load(
+                &w.pp("conv_in"),
+                ConvSpec::square(3, w0, 7, stride0, 0),
+                opts,
+                relu,
+            )?,
+            down: [
+                ConvBn::load(
+                    &w.pp("down.0"),
+                    ConvSpec::square(w0, w1, 3, 2, 1),
+                    opts,
+                    relu,
+                )?,
+                ConvBn::load(
+                    &w.pp("down.1"),
+                    ConvSpec::square(w1, w2, 3, 2, 1),
+                    opts,
+                    relu,
+                )?,
+            ],
+        })
+    }
+    /// Runs the encoder (input at least 4×4).
+    pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
+        self.forward_traced(x, &mut Tracer::new(None), "")
+    }
+    pub(crate) fn forward_traced(
+        &self,
+        x: &Tensor,
+        tr: &mut Tracer<'_>,
+        path: &str,
+    ) -> Result<Tensor> {
+        let x = self.conv_in.forward(&reflect_pad(x, [3; 4])?)?;
+        tr.record(path, "conv_in", &x);
+        let x = self.down[0].forward(&x)?;
+        tr.record(path, "down.0", &x);
+        let x = self.down[1].forward(&x)?;
+        tr.record(path, "down.1", &x);
+        tr.record(path, "", &x);
+        Ok(x)
+    }
+    /// Parameters after folding.
+    pub fn param_count(&self) -> u64 {
+        self.conv_in.param_count() + self.down.iter().map(ConvBn::param_count).sum::<u64>()
+    }
+}
+
+/// Decoder: `up.0` ConvTBn(w2, w1) → `up.1` ConvTBn(w1, w0) → ReflectionPad(3) →
+/// `conv_out` Conv2d(w0, c, 7, bias) → Tanh.
+#[derive(Clone, Debug)]
+pub struct Decoder {
+    up: [ConvTBn; 2],
+    conv_out: Conv2d,
+}
+
+impl Decoder {
+    /// Loads a decoder with `c` outputs at prefix `w`.
+    pub fn load(
+        w: &WeightsPrefix<'_>,
+        [w0, w1, w2]: [usize; 3],
+        c: usize,
+        opts: LayerOptions,
+    ) -> Result<Self> {
+        let spec = ConvSpec::square(w0, c, 7, 1, 0);
+        let out = w.pp("conv_out");
+        let weight = out.get("weight", &[c, w0, 7, 7])?;
+        let bias = out.get("bias", &[c])?;
+        Ok(Self {
+            up: [
+                ConvTBn::load(&w.pp("up.0"), w2, w1, opts)?,
+                ConvTBn::load(&w.pp("up.1"), w1, w0, opts)?,
+            ],
+            conv_out: Conv2d::new(spec, &weight, Some(&bias), Activation::Tanh)?,
+        })
+    }
+    /// Runs the decoder: ×4 spatially, tanh outputs.
+    pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
+        self.forward_traced(x, &mut Tracer::new(None), "")
+    }
+    pub(crate) fn forward_traced(
+        &self,
+        x: &Tensor,
+        tr: &mut Tracer<'_>,
+        path: &str,
+    ) -> Result<Tensor> {
+        let x = self.up[0].forward(x)?;
+        tr.record(path, "up.0", &x);
+        let x = self.up[1].forward(&x)?;
+        tr.record(path, "up.1", &x);
+        let y = self.conv_out.forward(&reflect_pad(&x, [3; 4])?)?;
+        tr.record(path, "conv_out", &y);
+        Ok(y)
+    }
+    /// Output channels.
+    pub fn out_channels(&self) -> usize {
+        self.conv_out.spec().c_out
+    }
+    /// Parameters after folding.
+    pub fn param_count(&self) -> u64 {
+        self.up.iter().map(ConvTBn::param_count).sum::<u64>() + conv_params(self.conv_out.spec())
+    }
+}

@@ -1,0 +1,435 @@
+//! The three networks (thesis ch. 5.2) as typed models, and [`Net`] over them.
+//!
+//! Every `forward` takes a normalised input `[N, 3, H, W]`
+//! ([`crate::conventions::normalize_input`]) of any size ≥ 1×1, mirror-pads it
+//! to what the network needs ([`NetKind::padded_size`]), runs, and crops
+//! back (IRN, MSN) or resizes to `(max(1, H/8), max(1, W/8))` (EnvMap).
+
+use std::borrow::Cow;
+
+use picker_tensor::{mirror_pad, resize_bilinear, Activation, ConvSpec, Tensor};
+
+use crate::config::{EnvMapConfig, IrnConfig, MsnConfig, NetConfig, NetKind};
+use crate::error::{Error, Result};
+use crate::layers::{join, ConvBn, Decoder, Encoder, LayerOptions, ResBlocks, Trace, Tracer};
+use crate::weights::Weights;
+
+fn options(cfg: &NetConfig) -> LayerOptions {
+    LayerOptions {
+        conv_bias: cfg.conv_bias(),
+        bn_eps: cfg.bn_eps() as f32,
+    }
+}
+
+/// Checks `x` is `[N ≥ 1, 3, H ≥ 1, W ≥ 1]` and mirror-pads it for `kind`.
+fn pad_input(kind: NetKind, x: &Tensor) -> Result<(Cow<'_, Tensor>, [usize; 4])> {
+    let [n, c, h, w] = x.shape();
+    if n == 0 || c != 3 || h == 0 || w == 0 {
+        return Err(Error::Input {
+            reason: format!(
+                "{kind} needs a normalised RGB tensor [N >= 1, 3, H >= 1, W >= 1]; got {:?}",
+                x.shape()
+            ),
+        });
+    }
+    if let Some(i) = x.data().iter().position(|v| !v.is_finite()) {
+        return Err(Error::Input {
+            reason: format!("input value at flat index {i} is {}", x.data()[i]),
+        });
+    }
+    let pads = kind.input_pads(h, w);
+    if pads == [0; 4] {
+        Ok((Cow::Borrowed(x), pads))
+    } else {
+        Ok((Cow::Owned(mirror_pad(x, pads)), pads))
+    }
+}
+
+/// Crops a padded output back to the input's `h × w`.
+fn crop_back(y: Tensor, pads: [usize; 4], h: usize, w: usize) -> Result<Tensor> {
+    if pads == [0; 4] {
+        return Ok(y);
+    }
+    Ok(y.crop(pads[0], pads[2], h, w)?)
+}
+
+fn load_start(w: &Weights, kind: NetKind) -> Result<()> {
+    w.expect_kind(kind)
+}
+
+/// One IRN head: `blocks` residual blocks and a decoder.
+#[derive(Clone, Debug)]
+pub struct Tower {
+    blocks: ResBlocks,
+    dec: Decoder,
+}
+
+impl Tower {
+    /// Parameters after folding.
+    pub fn param_count(&self) -> u64 {
+        self.blocks.param_count() + self.dec.param_count()
+    }
+    /// Output channels.
+    pub fn out_channels(&self) -> usize {
+        self.dec.out_channels()
+    }
+    fn forward_traced(&self, x: &Tensor, tr: &mut Tracer<'_>, path: &str) -> Result<Tensor> {
+        let y = self.blocks.forward_traced(x, tr, &join(path, "blocks"))?;
+        self.dec.forward_traced(&y, tr, &join(path, "dec"))
+    }
+}
+
+/// The IRN's outputs: each head's raw tanh values `[N, c, H, W]`, in config order.
+#[derive(Clone, Debug)]
+pub struct IrnOutput {
+    /// `(head name, tensor)` in the configuration's head order.
+    pub heads: Vec<(String, Tensor)>,
+}
+
+impl IrnOutput {
+    /// The output of head `name`.
+    pub fn get(&self, name: &str) -> Option<&Tensor> {
+        self.heads.iter().find(|(n, _)| n == name).map(|(_, t)| t)
+    }
+}
+
+/// Intrinsic Render-element Network: a shared encoder, then per head a tower of
+/// residual blocks and a decoder.
+#[derive(Clone, Debug)]
+pub struct Irn {
+    config: IrnConfig,
+    enc: Encoder,
+    heads: Vec<(String, Tower)>,
+}
+
+impl Irn {
+    /// Builds the IRN of an `irn` weights file (strict: every tensor must be used).
+    pub fn load(w: &Weights) -> Result<Self> {
+        load_start(w, NetKind::Irn)?;
+        let NetConfig::Irn(config) = w.config().clone() else {
+            return Err(Error::NetMismatch {
+                path: w.path().to_path_buf(),
+                expected: NetKind::Irn,
+                found: w.config().kind(),
+            });
+        };
+        let opts = options(w.config());
+        let enc = Encoder::load(&w.pp("enc"), config.widths, 1, opts)?;
+        let mut heads = Vec::with_capacity(config.heads.len());
+        for h in &config.heads {
+            let p = w.pp("heads").pp(&h.name);
+            let tower = Tower {
+                blocks: ResBlocks::load(&p.pp("blocks"), config.blocks, config.widths[2], opts)?,
+                dec: Decoder::load(&p.pp("dec"), config.widths, h.channels, opts)?,
+            };
+            heads.push((h.name.clone(), tower));
+        }
+        w.check_all_used()?;
+        Ok(Self { config, enc, heads })
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &IrnConfig {
+        &self.config
+    }
+    /// The heads `(name, tower)` in order.
+    pub fn heads(&self) -> &[(String, Tower)] {
+        &self.heads
+    }
+    /// Parameters after BatchNorm folding.
+    pub fn param_count(&self) -> u64 {
+        self.enc.param_count() + self.heads.iter().map(|(_, t)| t.param_count()).sum::<u64>()
+    }
+
+    /// Runs the network on a normalised `[N, 3, H, W]` input of any size.
+    pub fn forward(&self, x: &Tensor) -> Result<IrnOutput> {
+        self.run(x, &mut Tracer::new(None))
+    }
+
+    /// As [`Irn::forward`], also pushing intermediate activations (at the padded
+    /// size) onto `trace`: `enc.conv_in`, `enc.down.0`, `enc`,
+    /// `heads.<name>.blocks.<i>`, `heads.<name>.dec.up.0`, `….up.1`, `….conv_out`.
+    pub fn forward_traced(&self, x: &Tensor, trace: &mut Trace) -> Result<IrnOutput> {
+        self.run(x, &mut Tracer::new(Some(trace)))
+    }
+
+    fn run(&self, x: &Tensor, tr: &mut Tracer<'_>) -> Result<IrnOutput> {
+        let (xp, pads) = pad_input(NetKind::Irn, x)?;
+        let e = self.enc.forward_traced(&xp, tr, "enc")?;
+        let mut heads = Vec::with_capacity(self.heads.len());
+        for (name, tower) in &self.heads {
+            let y = tower.forward_traced(&e, tr, &format!("heads.{name}"))?;
+            heads.push((name.clone(), crop_back(y, pads, x.h(), x.w())?));
+        }
+        Ok(IrnOutput { heads })
+    }
+}
+
+/// The MSN's output: segmentation colours as raw tanh values `[N, out_channels, H, W]`.
+#[derive(Clone, Debug)]
+pub struct MsnOutput {
+    /// Raw tanh values.
+    pub segmentation: Tensor,
+}
+
+/// Material Segmentation Network: encoder, residual blocks, decoder.
+#[derive(Clone, Debug)]
+pub struct Msn {
+    config: MsnConfig,
+    enc: Encoder,
+    blocks: ResBlocks,
+    dec: Decoder,
+}
+
+impl Msn {
+    /// Builds the MSN of an `msn` weights file (strict).
+    pub fn load(w: &Weights) -> Result<Self> {
+        load_start(w, NetKind::Msn)?;
+        let NetConfig::Msn(config) = *w.config() else {
+            return Err(Error::NetMismatch {
+                path: w.path().to_path_buf(),
+                expected: NetKind::Msn,
+                found: w.config().kind(),
+            });
+        };
+        let opts = options(w.config());
+        let net = Self {
+            config,
+            enc: Encoder::load(&w.pp("enc"), config.widths, 1, opts)?,
+            blocks: ResBlocks::load(&w.pp("blocks"), config.blocks, config.widths[2], opts)?,
+            dec: Decoder::load(&w.pp("dec"), config.widths, config.out_channels, opts)?,
+        };
+        w.check_all_used()?;
+        Ok(net)
+    }
+    /// The configuration.
+    pub fn config(&self) -> &MsnConfig {
+        &self.config
+    }
+    /// Parameters after BatchNorm folding.
+    pub fn param_count(&self) -> u64 {
+        self.enc.param_count() + self.blocks.param_count() + self.dec.param_count()
+    }
+    /// Runs the network on a normalised `[N, 3, H, W]` input of any size.
+    pub fn forward(&self, x: &Tensor) -> Result<MsnOutput> {
+        self.run(x, &mut Tracer::new(None))
+    }
+    /// As [`Msn::forward`], also recording `enc.conv_in`, `enc.down.0`, `enc`,
+    /// `blocks.<i>`, `dec.up.0`, `dec.up.1`, `dec.conv_out` (padded size).
+    pub fn forward_traced(&self, x: &Tensor, trace: &mut Trace) -> Result<MsnOutput> {
+        self.run(x, &mut Tracer::new(Some(trace)))
+    }
+    fn run(&self, x: &Tensor, tr: &mut Tracer<'_>) -> Result<MsnOutput> {
+        let (xp, pads) = pad_input(NetKind::Msn, x)?;
+        let e = self.enc.forward_traced(&xp, tr, "enc")?;
+        let b = self.blocks.forward_traced(&e, tr, "blocks")?;
+        let y = self.dec.forward_traced(&b, tr, "dec")?;
+        Ok(MsnOutput {
+            segmentation: crop_back(y, pads, x.h(), x.w())?,
+        })
+    }
+}
+
+/// The EnvMap network's output: an equirectangular map `[N, out_channels,
+/// max(1, H/8), max(1, W/8)]` of raw tanh values (decode with
+/// [`crate::conventions::decode_radiance`]).
+#[derive(Clone, Debug)]
+pub struct EnvMapOutput {
+    /// Raw tanh values.
+    pub envmap: Tensor,
+}
+
+/// Environment-map network: encoder (first conv stride 2), residual blocks, a
+/// tail of three strided convolutions (the last with tanh), bilinear resize.
+#[derive(Clone, Debug)]
+pub struct EnvMap {
+    config: EnvMapConfig,
+    enc: Encoder,
+    blocks: ResBlocks,
+    tail: [ConvBn; 3],
+}
+
+impl EnvMap {
+    /// Builds the EnvMap network of an `envmap` weights file (strict).
+    pub fn load(w: &Weights) -> Result<Self> {
+        load_start(w, NetKind::EnvMap)?;
+        let NetConfig::EnvMap(config) = *w.config() else {
+            return Err(Error::NetMismatch {
+                path: w.path().to_path_buf(),
+                expected: NetKind::EnvMap,
+                found: w.config().kind(),
+            });
+        };
+        let opts = options(w.config());
+        let [_, _, w2] = config.widths;
+        let [t0, t1] = config.tail_widths;
+        let relu = Activation::Relu;
+        let tail = w.pp("tail");
+        let net = Self {
+            config,
+            enc: Encoder::load(&w.pp("enc"), config.widths, 2, opts)?,
+            blocks: ResBlocks::load(&w.pp("blocks"), config.blocks, w2, opts)?,
+            tail: [
+                ConvBn::load(&tail.pp(0), ConvSpec::square(w2, t0, 1, 2, 0), opts, relu)?,
+                ConvBn::load(&tail.pp(1), ConvSpec::square(t0, t1, 3, 2, 1), opts, relu)?,
+                ConvBn::load(
+                    &tail.pp(2),
+                    ConvSpec::square(t1, config.out_channels, 3, 2, 1),
+                    opts,
+                    Activation::Tanh,
+                )?,
+            ],
+        };
+        w.check_all_used()?;
+        Ok(net)
+    }
+    /// The configuration.
+    pub fn config(&self) -> &EnvMapConfig {
+        &self.config
+    }
+    /// Parameters after BatchNorm folding.
+    pub fn param_count(&self) -> u64 {
+        self.enc.param_count()
+            + self.blocks.param_count()
+            + self.tail.iter().map(ConvBn::param_count).sum::<u64>()
+    }
+    /// The output size `(max(1, h/8), max(1, w/8))` for an `h × w` input.
+    pub fn output_size(h: usize, w: usize) -> (usize, usize) {
+        ((h / 8).max(1), (w / 8).max(1))
+    }
+    /// Runs the network on a normalised `[N, 3, H, W]` input of any size.
+    pub fn forward(&self, x: &Tensor) -> Result<EnvMapOutput> {
+        self.run(x, &mut Tracer::new(None))
+    }
+    /// As [`EnvMap::forward`], also recording `enc.conv_in`, `enc.down.0`, `enc`,
+    /// `blocks.<i>`, `tail.0`, `tail.1`, `tail.2` (before the resize).
+    pub fn forward_traced(&self, x: &Tensor, trace: &mut Trace) -> Result<EnvMapOutput> {
+        self.run(x, &mut Tracer::new(Some(trace)))
+    }
+    fn run(&self, x: &Tensor, tr: &mut Tracer<'_>) -> Result<EnvMapOutput> {
+        let (xp, _) = pad_input(NetKind::EnvMap, x)?;
+        let e = self.enc.forward_traced(&xp, tr, "enc")?;
+        let mut y = self.blocks.forward_traced(&e, tr, "blocks")?;
+        for (i, t) in self.tail.iter().enumerate() {
+            y = t.forward(&y)?;
+            tr.record("tail", &i.to_string(), &y);
+        }
+        let (oh, ow) = Self::output_size(x.h(), x.w());
+        let envmap = if (y.h(), y.w()) == (oh, ow) {
+            y
+        } else {
+            resize_bilinear(&y, oh, ow)?
+        };
+        Ok(EnvMapOutput { envmap })
+    }
+}
+
+/// Named outputs of any network: IRN heads by name, MSN `segmentation`, EnvMap `envmap`.
+#[derive(Clone, Debug)]
+pub struct NetOutput {
+    /// Which network produced them.
+    pub kind: NetKind,
+    /// `(name, raw tanh values)` in a fixed order.
+    pub tensors: Vec<(String, Tensor)>,
+}
+
+impl NetOutput {
+    /// The output called `name`.
+    pub fn get(&self, name: &str) -> Option<&Tensor> {
+        self.tensors.iter().find(|(n, _)| n == name).map(|(_, t)| t)
+    }
+    /// The output names in order.
+    pub fn names(&self) -> impl Iterator<Item = &str> {
+        self.tensors.iter().map(|(n, _)| n.as_str())
+    }
+}
+
+impl From<IrnOutput> for NetOutput {
+    fn from(o: IrnOutput) -> Self {
+        Self {
+            kind: NetKind::Irn,
+            tensors: o.heads,
+        }
+    }
+}
+impl From<MsnOutput> for NetOutput {
+    fn from(o: MsnOutput) -> Self {
+        Self {
+            kind: NetKind::Msn,
+            tensors: vec![("segmentation".to_string(), o.segmentation)],
+        }
+    }
+}
+impl From<EnvMapOutput> for NetOutput {
+    fn from(o: EnvMapOutput) -> Self {
+        Self {
+            kind: NetKind::EnvMap,
+            tensors: vec![("envmap".to_string(), o.envmap)],
+        }
+    }
+}
+
+/// Any of the three networks.
+// One `Net` exists per loaded file and the variants hold only layer handles (the
+// weights live on the heap), so boxing them would buy nothing.
+#[allow(clippy::large_enum_variant)]
+#[derive(Clone, Debug)]
+pub enum Net {
+    /// An IRN.
+    Irn(Irn),
+    /// An MSN.
+    Msn(Msn),
+    /// An EnvMap network.
+    EnvMap(EnvMap),
+}
+
+impl Net {
+    /// Builds the network the file holds (metadata `net`), strictly.
+    pub fn load(w: &Weights) -> Result<Self> {
+        Ok(match w.kind() {
+            NetKind::Irn => Net::Irn(Irn::load(w)?),
+            NetKind::Msn => Net::Msn(Msn::load(w)?),
+            NetKind::EnvMap => Net::EnvMap(EnvMap::load(w)?),
+        })
+    }
+    /// Which network.
+    pub fn kind(&self) -> NetKind {
+        match self {
+            Net::Irn(_) => NetKind::Irn,
+            Net::Msn(_) => NetKind::Msn,
+            Net::EnvMap(_) => NetKind::EnvMap,
+        }
+    }
+    /// The configuration.
+    pub fn config(&self) -> NetConfig {
+        match self {
+            Net::Irn(n) => n.config().clone().into(),
+            Net::Msn(n) => (*n.config()).into(),
+            Net::EnvMap(n) => (*n.config()).into(),
+        }
+    }
+    /// Parameters after BatchNorm folding.
+    pub fn param_count(&self) -> u64 {
+        match self {
+            Net::Irn(n) => n.param_count(),
+            Net::Msn(n) => n.param_count(),
+            Net::EnvMap(n) => n.param_count(),
+        }
+    }
+    /// Runs the network on a normalised `[N, 3, H, W]` input of any size.
+    pub fn forward(&self, x: &Tensor) -> Result<NetOutput> {
+        Ok(match self {
+            Net::Irn(n) => n.forward(x)?.into(),
+            Net::Msn(n) => n.forward(x)?.into(),
+            Net::EnvMap(n) => n.forward(x)?.into(),
+        })
+    }
+    /// As [`Net::forward`], also recording intermediate activations by module path.
+    pub fn forward_traced(&self, x: &Tensor, trace: &mut Trace) -> Result<NetOutput> {
+        Ok(match self {
+            Net::Irn(n) => n.forward_traced(x, trace)?.into(),
+            Net::Msn(n) => n.forward_traced(x, trace)?.into(),
+            Net::EnvMap(n) => n.forward_traced(x, trace)?.into(),
+        })
+    }
+}
