@@ -1,1 +1,85 @@
-fn main() {}
+//! `picker`: the Material Picker command-line tool.
+//!
+//! Subcommands (one module each, no numerics here — decoding and conventions
+//! live in `picker_nets::conventions`, kernels in `picker_tensor`):
+//!
+//! - `picker infer PHOTO --weights DIR_OR_FILE --out DIR`: run IRN, MSN and/or
+//!   EnvMap on a photo and write every decoded output as EXR + PNG
+//!   ([`infer`]).
+//! - `picker weights random|inspect`: make random weights files, describe one
+//!   ([`weights_cmd`]).
+//! - `picker bench --net irn --size 240x320`: time forward passes ([`bench`]).
+//!
+//! Errors are printed as one line, `error: <what>: <cause>`, and the exit
+//! status is 1 (2 for command-line usage errors, from clap).
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+mod args;
+mod bench;
+mod display;
+mod infer;
+mod output;
+mod photo;
+mod threads;
+mod weights_cmd;
+
+/// Material Picker: material recognition in photographs (IRN, MSN and EnvMap
+/// networks, pure-Rust CPU inference).
+#[derive(Debug, Parser)]
+#[command(name = "picker", version)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Run the networks on a photo and write their decoded outputs (EXR + PNG).
+    Infer(infer::Args),
+    /// Create or describe weights files.
+    #[command(subcommand)]
+    Weights(weights_cmd::Command),
+    /// Time forward passes of one network.
+    Bench(bench::Args),
+}
+
+fn run(cli: Cli) -> anyhow::Result<()> {
+    match cli.command {
+        Command::Infer(a) => infer::run(a),
+        Command::Weights(c) => weights_cmd::run(c),
+        Command::Bench(a) => bench::run(a),
+    }
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {}", one_line(&e));
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// The error and its causes joined by `": "` on one line, skipping a cause
+/// whose text the message already contains (some library errors print their
+/// source themselves).
+fn one_line(e: &anyhow::Error) -> String {
+    let mut msg = String::new();
+    for cause in e.chain() {
+        let text = cause.to_string();
+        let text = text.trim().trim_end_matches('.');
+        if text.is_empty() || msg.contains(text) {
+            continue;
+        }
+        if !msg.is_empty() {
+            msg.push_str(": ");
+        }
+        msg.push_str(text);
+    }
+    msg.replace(['\n', '\r'], " ")
+}

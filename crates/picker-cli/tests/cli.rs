@@ -1,0 +1,611 @@
+//! End-to-end tests of the `picker` binary: inference on real and generated
+//! photos with the committed tiny random weights (`fixtures/weights/tiny`,
+//! made by `picker weights random --preset tiny`, see its README), weights
+//! generation and inspection, benchmarking, and the error messages users see.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use image::{ImageEncoder, Luma, Rgb, Rgba};
+
+/// The repository root (two levels above this crate).
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+fn example_photo() -> PathBuf {
+    root().join("fixtures/examples/coffee.jpg")
+}
+
+fn tiny_weights() -> PathBuf {
+    root().join("fixtures/weights/tiny")
+}
+
+fn picker<I, S>(args: I) -> Output
+where
+    I: IntoIterator<Item = S>,
+    S: AsRef<std::ffi::OsStr>,
+{
+    Command::new(env!("CARGO_BIN_EXE_picker"))
+        .args(args)
+        .env("RAYON_NUM_THREADS", "2")
+        .output()
+        .expect("running picker")
+}
+
+fn stdout(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn assert_ok(o: &Output) {
+    assert!(
+        o.status.success(),
+        "picker failed ({:?})\nstdout: {}\nstderr: {}",
+        o.status,
+        stdout(o),
+        stderr(o)
+    );
+}
+
+/// Asserts a failure with exactly one `error: …` line on stderr that mentions `needle`.
+fn assert_error_names(o: &Output, needle: &str) {
+    let err = stderr(o);
+    assert!(
+        !o.status.success(),
+        "expected failure, got success; stdout: {}",
+        stdout(o)
+    );
+    assert_eq!(o.status.code(), Some(1), "exit status; stderr: {err}");
+    assert!(err.starts_with("error: "), "stderr: {err}");
+    assert_eq!(
+        err.trim_end().lines().count(),
+        1,
+        "one line expected: {err}"
+    );
+    assert!(err.contains(needle), "stderr should name {needle:?}: {err}");
+    assert!(!err.contains("panicked"), "{err}");
+}
+
+/// `(width, height)` of a PNG.
+fn png_size(p: &Path) -> (u32, u32) {
+    image::image_dimensions(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
+}
+
+/// An EXR file's first layer: `(width, height)` and `(channel name, samples)` in file order.
+type Exr = ((usize, usize), Vec<(String, Vec<f32>)>);
+
+/// Reads an EXR file's first layer.
+fn read_exr(p: &Path) -> Exr {
+    use exr::prelude::*;
+    let img = read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .all_channels()
+        .first_valid_layer()
+        .all_attributes()
+        .from_file(p)
+        .unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+    let size = img.layer_data.size;
+    let chans = img
+        .layer_data
+        .channel_data
+        .list
+        .iter()
+        .map(|c| {
+            (
+                c.name.to_string(),
+                c.sample_data.values_as_f32().collect::<Vec<_>>(),
+            )
+        })
+        .collect();
+    ((size.0, size.1), chans)
+}
+
+const IRN_HEADS: [(&str, usize); 6] = [
+    ("diffuse_albedo", 3),
+    ("specular_albedo", 3),
+    ("normals", 3),
+    ("glossiness", 1),
+    ("view_vector", 3),
+    ("uv", 3),
+];
+
+/// Checks every output of a full (IRN + MSN + EnvMap) run at working size `w × h`.
+fn check_full_outputs(out: &Path, w: usize, h: usize) {
+    assert_eq!(png_size(&out.join("input.png")), (w as u32, h as u32));
+    let (ew, eh) = ((w / 8).max(1), (h / 8).max(1));
+    let mut expected: Vec<(String, usize, usize, usize)> = IRN_HEADS
+        .iter()
+        .map(|&(n, c)| (n.to_string(), c, w, h))
+        .collect();
+    expected.push(("segmentation".into(), 3, w, h));
+    expected.push(("envmap".into(), 3, ew, eh));
+    for (name, c, ow, oh) in &expected {
+        let exr = out.join(format!("{name}.exr"));
+        let ((xw, xh), chans) = read_exr(&exr);
+        assert_eq!((xw, xh), (*ow, *oh), "{name}.exr size");
+        let names: Vec<&str> = chans.iter().map(|(n, _)| n.as_str()).collect();
+        if *c == 1 {
+            assert_eq!(names, ["Y"], "{name}.exr channels");
+        } else {
+            // exr sorts channel names alphabetically.
+            assert_eq!(names, ["B", "G", "R"], "{name}.exr channels");
+        }
+        for (ch, values) in &chans {
+            assert_eq!(values.len(), ow * oh);
+            assert!(
+                values.iter().all(|v| v.is_finite()),
+                "{name}.{ch} not finite"
+            );
+            if name != "envmap" && name != "normals" && name != "view_vector" {
+                assert!(
+                    values.iter().all(|v| (0.0..=1.0).contains(v)),
+                    "{name}.{ch} outside [0, 1]"
+                );
+            }
+        }
+        if name == "normals" || name == "view_vector" {
+            let get = |n: &str| &chans.iter().find(|(c, _)| c == n).unwrap().1;
+            let (x, y, z) = (get("R"), get("G"), get("B"));
+            for i in 0..x.len() {
+                let len = (x[i] * x[i] + y[i] * y[i] + z[i] * z[i]).sqrt();
+                assert!((len - 1.0).abs() < 1e-4, "{name} not unit at {i}: {len}");
+            }
+        }
+        let png = out.join(format!("{name}.png"));
+        assert_eq!(png_size(&png), (*ow as u32, *oh as u32), "{name}.png size");
+    }
+    let manifest: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("manifest.json")).unwrap()).unwrap();
+    let files = manifest["files"].as_array().unwrap();
+    assert_eq!(files.len(), 1 + 2 * expected.len());
+    for f in files {
+        let name = f["file"].as_str().unwrap();
+        assert!(out.join(name).is_file(), "manifest lists missing {name}");
+    }
+    let nets: Vec<&str> = manifest["nets"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|n| n["net"].as_str().unwrap())
+        .collect();
+    assert_eq!(nets, ["irn", "msn", "envmap"]);
+    assert_eq!(manifest["working_size"]["width"], w);
+    assert_eq!(manifest["working_size"]["height"], h);
+    // No temporary files left behind by the atomic writes.
+    for e in std::fs::read_dir(out).unwrap() {
+        let n = e.unwrap().file_name().to_string_lossy().into_owned();
+        assert!(!n.starts_with('.'), "leftover {n}");
+    }
+}
+
+fn infer(photo: &Path, out: &Path, extra: &[&str]) -> Output {
+    let mut args: Vec<std::ffi::OsString> = vec![
+        "infer".into(),
+        photo.into(),
+        "--weights".into(),
+        tiny_weights().into(),
+        "--out".into(),
+        out.into(),
+    ];
+    args.extend(extra.iter().map(Into::into));
+    picker(args)
+}
+
+#[test]
+fn infer_example_photo_writes_every_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("nested/out");
+    let o = infer(&example_photo(), &out, &[]);
+    assert_ok(&o);
+    assert!(stdout(&o).contains("wrote 17 files"), "{}", stdout(&o));
+    // coffee.jpg is 320×213; the default work size 320 keeps it.
+    check_full_outputs(&out, 320, 213);
+}
+
+#[test]
+fn infer_odd_size_rgb_png_upscales_to_work_size() {
+    let dir = tempfile::tempdir().unwrap();
+    let photo = dir.path().join("odd.png");
+    image::RgbImage::from_fn(37, 53, |x, y| Rgb([(x * 7) as u8, (y * 5) as u8, 128]))
+        .save(&photo)
+        .unwrap();
+    let out = dir.path().join("out");
+    assert_ok(&infer(&photo, &out, &["--work-size", "96"]));
+    // Long side 53 → 96, short side round(37·96/53) = 67.
+    check_full_outputs(&out, 67, 96);
+}
+
+#[test]
+fn infer_grey_16bit_png() {
+    let dir = tempfile::tempdir().unwrap();
+    let photo = dir.path().join("grey16.png");
+    image::ImageBuffer::<Luma<u16>, Vec<u16>>::from_fn(37, 53, |x, y| {
+        Luma([((x * 1500 + y * 700) % 65536) as u16])
+    })
+    .save(&photo)
+    .unwrap();
+    let out = dir.path().join("out");
+    assert_ok(&infer(&photo, &out, &["--work-size", "64"]));
+    check_full_outputs(&out, 45, 64);
+    // Greyscale in, grey working image out.
+    let input = image::open(out.join("input.png")).unwrap().to_rgb8();
+    assert!(input.pixels().all(|p| p[0] == p[1] && p[1] == p[2]));
+}
+
+#[test]
+fn infer_rgba_png_and_tiny_work_size() {
+    let dir = tempfile::tempdir().unwrap();
+    let photo = dir.path().join("rgba.png");
+    image::RgbaImage::from_fn(20, 9, |x, y| {
+        Rgba([(x * 12) as u8, (y * 20) as u8, 90, (x * 10) as u8])
+    })
+    .save(&photo)
+    .unwrap();
+    let out = dir.path().join("out");
+    // A 5×2 working image: smaller than any network's stride; padding handles it.
+    assert_ok(&infer(&photo, &out, &["--work-size", "5"]));
+    check_full_outputs(&out, 5, 2);
+}
+
+/// A minimal little-endian EXIF (TIFF) block holding only an Orientation tag.
+fn exif_orientation(value: u16) -> Vec<u8> {
+    let mut e = b"II*\0".to_vec();
+    e.extend_from_slice(&8u32.to_le_bytes()); // offset of IFD0
+    e.extend_from_slice(&1u16.to_le_bytes()); // one entry
+    e.extend_from_slice(&0x0112u16.to_le_bytes()); // Orientation
+    e.extend_from_slice(&3u16.to_le_bytes()); // SHORT
+    e.extend_from_slice(&1u32.to_le_bytes()); // count
+    e.extend_from_slice(&value.to_le_bytes());
+    e.extend_from_slice(&[0, 0]);
+    e.extend_from_slice(&0u32.to_le_bytes()); // no next IFD
+    e
+}
+
+#[test]
+fn infer_applies_exif_orientation() {
+    let dir = tempfile::tempdir().unwrap();
+    let photo = dir.path().join("rotated.png");
+    // Stored 40 wide × 20 tall, left half black; orientation 6 = rotate 90° clockwise to view.
+    let img = image::RgbImage::from_fn(40, 20, |x, _| {
+        if x < 20 {
+            Rgb([0, 0, 0])
+        } else {
+            Rgb([255, 255, 255])
+        }
+    });
+    let mut bytes = Vec::new();
+    let mut enc = image::codecs::png::PngEncoder::new(&mut bytes);
+    enc.set_exif_metadata(exif_orientation(6)).unwrap();
+    enc.write_image(img.as_raw(), 40, 20, image::ExtendedColorType::Rgb8)
+        .unwrap();
+    std::fs::write(&photo, bytes).unwrap();
+    let out = dir.path().join("out");
+    assert_ok(&infer(&photo, &out, &["--work-size", "40"]));
+    // Viewed: 20 wide × 40 tall, the stored left (black) half now on top.
+    let input = image::open(out.join("input.png")).unwrap().to_rgb8();
+    assert_eq!(input.dimensions(), (20, 40));
+    assert_eq!(input.get_pixel(10, 2).0, [0, 0, 0]);
+    assert_eq!(input.get_pixel(10, 37).0, [255, 255, 255]);
+    let manifest: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("manifest.json")).unwrap()).unwrap();
+    assert_eq!(manifest["photo"]["width"], 20);
+    assert_eq!(manifest["photo"]["exif_orientation"], "Rotate90");
+}
+
+#[test]
+fn infer_single_weights_file_runs_that_net_only() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let o = picker([
+        "infer".as_ref(),
+        example_photo().as_os_str(),
+        "--weights".as_ref(),
+        tiny_weights().join("msn.safetensors").as_os_str(),
+        "--out".as_ref(),
+        out.as_os_str(),
+        "--work-size".as_ref(),
+        "64".as_ref(),
+    ]);
+    assert_ok(&o);
+    let mut names: Vec<String> = std::fs::read_dir(&out)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    assert_eq!(
+        names,
+        [
+            "input.png",
+            "manifest.json",
+            "segmentation.exr",
+            "segmentation.png"
+        ]
+    );
+    assert_eq!(png_size(&out.join("segmentation.png")), (64, 43));
+}
+
+#[test]
+fn weights_random_and_inspect_tiny() {
+    let dir = tempfile::tempdir().unwrap();
+    let f = dir.path().join("envmap.safetensors");
+    let o = picker([
+        "weights".as_ref(),
+        "random".as_ref(),
+        "--net".as_ref(),
+        "envmap".as_ref(),
+        "--preset".as_ref(),
+        "tiny".as_ref(),
+        "--seed".as_ref(),
+        "9".as_ref(),
+        "--dtype".as_ref(),
+        "f16".as_ref(),
+        "--out".as_ref(),
+        f.as_os_str(),
+    ]);
+    assert_ok(&o);
+    let o = picker([
+        "weights".as_ref(),
+        "inspect".as_ref(),
+        f.as_os_str(),
+        "--json".as_ref(),
+        "--check".as_ref(),
+    ]);
+    assert_ok(&o);
+    let v: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+    assert_eq!(v["net"], "envmap");
+    assert_eq!(v["preset"], "tiny");
+    assert_eq!(v["parameters"], 10_783);
+    assert_eq!(v["check"], "ok");
+    assert_eq!(v["config"]["tail_widths"], serde_json::json!([16, 12]));
+    assert!(v["dtypes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .any(|d| d["dtype"] == "F16"));
+    assert_eq!(v["file_size"], std::fs::metadata(&f).unwrap().len());
+
+    // Same seed, same tensors; the text form names the net and count.
+    let g = dir.path().join("again.safetensors");
+    assert_ok(&picker([
+        "weights",
+        "random",
+        "--net",
+        "envmap",
+        "--preset",
+        "tiny",
+        "--seed",
+        "9",
+        "--dtype",
+        "f16",
+        "--out",
+        g.to_str().unwrap(),
+    ]));
+    // (Compared tensor by tensor: the header's JSON key order may differ between runs.)
+    let (a, b) = (std::fs::read(&f).unwrap(), std::fs::read(&g).unwrap());
+    let (a, b) = (
+        safetensors::SafeTensors::deserialize(&a).unwrap(),
+        safetensors::SafeTensors::deserialize(&b).unwrap(),
+    );
+    assert_eq!(a.len(), b.len());
+    for (name, t) in a.tensors() {
+        let u = b.tensor(&name).unwrap();
+        assert!(
+            t.data() == u.data() && t.shape() == u.shape() && t.dtype() == u.dtype(),
+            "{name} differs"
+        );
+    }
+    let o = picker(["weights".as_ref(), "inspect".as_ref(), f.as_os_str()]);
+    assert_ok(&o);
+    let text = stdout(&o);
+    assert!(text.contains("envmap"), "{text}");
+    assert!(text.contains("10.78 K (10,783)"), "{text}");
+}
+
+#[test]
+fn inspect_reports_thesis_msn_parameter_count() {
+    let dir = tempfile::tempdir().unwrap();
+    let f = dir.path().join("msn.safetensors");
+    assert_ok(&picker([
+        "weights",
+        "random",
+        "--net",
+        "msn",
+        "--preset",
+        "thesis",
+        "--dtype",
+        "bf16",
+        "--out",
+        f.to_str().unwrap(),
+    ]));
+    let o = picker(["weights".as_ref(), "inspect".as_ref(), f.as_os_str()]);
+    assert_ok(&o);
+    let text = stdout(&o);
+    assert!(text.contains("11.38 M (11,378,179)"), "{text}");
+    assert!(text.contains("thesis"), "{text}");
+    assert!(text.contains("BF16"), "{text}");
+}
+
+#[test]
+fn bench_json_has_the_keys() {
+    let irn = tiny_weights().join("irn.safetensors");
+    let o = picker([
+        "bench".as_ref(),
+        "--weights".as_ref(),
+        irn.as_os_str(),
+        "--size".as_ref(),
+        "24x40".as_ref(),
+        "--runs".as_ref(),
+        "3".as_ref(),
+        "--warmup".as_ref(),
+        "1".as_ref(),
+        "--threads".as_ref(),
+        "2".as_ref(),
+        "--json".as_ref(),
+    ]);
+    assert_ok(&o);
+    let text = stdout(&o);
+    assert_eq!(text.trim().lines().count(), 1, "{text}");
+    let v: serde_json::Value = serde_json::from_str(text.trim()).unwrap();
+    for key in [
+        "net",
+        "size",
+        "threads",
+        "runs",
+        "median_ms",
+        "min_ms",
+        "gflops",
+        "peak_rss_mb",
+        "isa",
+    ] {
+        assert!(v.get(key).is_some(), "missing {key}: {text}");
+    }
+    assert_eq!(v["net"], "irn");
+    assert_eq!(v["size"], "24x40");
+    assert_eq!(v["threads"], 2);
+    assert_eq!(v["runs"], 3);
+    let (median, min) = (
+        v["median_ms"].as_f64().unwrap(),
+        v["min_ms"].as_f64().unwrap(),
+    );
+    assert!(min > 0.0 && min <= median, "{text}");
+    assert!(v["gflops"].as_f64().unwrap() > 0.0);
+
+    // Without --weights: random weights of a preset, via a temporary file.
+    let o = picker([
+        "bench", "--net", "envmap", "--preset", "tiny", "--size", "17x23", "--runs", "1",
+        "--warmup", "0", "--json",
+    ]);
+    assert_ok(&o);
+    let v: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+    assert_eq!(v["net"], "envmap");
+    assert_eq!(v["preset"], "tiny");
+}
+
+// ---- errors: one line on stderr naming the file, exit status 1 ----
+
+#[test]
+fn error_missing_photo() {
+    let dir = tempfile::tempdir().unwrap();
+    let photo = dir.path().join("no-such-photo.jpg");
+    let o = infer(&photo, &dir.path().join("out"), &[]);
+    assert_error_names(&o, "no-such-photo.jpg");
+}
+
+#[test]
+fn error_corrupt_png() {
+    let dir = tempfile::tempdir().unwrap();
+    let photo = dir.path().join("noise.png");
+    let noise: Vec<u8> = (0..600u32)
+        .map(|i| (i.wrapping_mul(2_654_435_761) >> 13) as u8)
+        .collect();
+    std::fs::write(&photo, noise).unwrap();
+    let o = infer(&photo, &dir.path().join("out"), &[]);
+    assert_error_names(&o, "noise.png");
+}
+
+#[test]
+fn error_truncated_png() {
+    let dir = tempfile::tempdir().unwrap();
+    let full = dir.path().join("full.png");
+    image::RgbImage::from_fn(64, 64, |x, y| {
+        Rgb([(x * 3) as u8, (y * 3) as u8, ((x ^ y) * 4) as u8])
+    })
+    .save(&full)
+    .unwrap();
+    let bytes = std::fs::read(&full).unwrap();
+    let photo = dir.path().join("truncated.png");
+    std::fs::write(&photo, &bytes[..bytes.len() / 2]).unwrap();
+    let o = infer(&photo, &dir.path().join("out"), &[]);
+    assert_error_names(&o, "truncated.png");
+}
+
+#[test]
+fn error_unsupported_format() {
+    let dir = tempfile::tempdir().unwrap();
+    let photo = dir.path().join("anim.gif");
+    std::fs::write(&photo, b"GIF89a\x01\x00\x01\x00\x00\x00\x00;").unwrap();
+    let o = infer(&photo, &dir.path().join("out"), &[]);
+    assert_error_names(&o, "anim.gif");
+}
+
+#[test]
+fn error_missing_weights() {
+    let dir = tempfile::tempdir().unwrap();
+    let w = dir.path().join("no-such-weights.safetensors");
+    let o = picker([
+        "infer".as_ref(),
+        example_photo().as_os_str(),
+        "--weights".as_ref(),
+        w.as_os_str(),
+        "--out".as_ref(),
+        dir.path().join("out").as_os_str(),
+    ]);
+    assert_error_names(&o, "no-such-weights.safetensors");
+    // A directory without any weights file in it.
+    let empty = dir.path().join("empty-weights-dir");
+    std::fs::create_dir(&empty).unwrap();
+    let o = picker([
+        "infer".as_ref(),
+        example_photo().as_os_str(),
+        "--weights".as_ref(),
+        empty.as_os_str(),
+        "--out".as_ref(),
+        dir.path().join("out").as_os_str(),
+    ]);
+    assert_error_names(&o, "empty-weights-dir");
+}
+
+#[test]
+fn error_weights_with_a_tensor_removed() {
+    use safetensors::SafeTensors;
+    let dir = tempfile::tempdir().unwrap();
+    let src = std::fs::read(tiny_weights().join("msn.safetensors")).unwrap();
+    let st = SafeTensors::deserialize(&src).unwrap();
+    let (_, meta) = SafeTensors::read_metadata(&src).unwrap();
+    let removed = "dec.conv_out.bias";
+    let kept: Vec<_> = st
+        .tensors()
+        .into_iter()
+        .filter(|(k, _)| k != removed)
+        .collect();
+    assert_eq!(kept.len() + 1, st.len(), "fixture should hold {removed}");
+    let bad = dir.path().join("broken-msn.safetensors");
+    safetensors::serialize_to_file(kept, meta.metadata(), &bad).unwrap();
+
+    let o = picker([
+        "infer".as_ref(),
+        example_photo().as_os_str(),
+        "--weights".as_ref(),
+        bad.as_os_str(),
+        "--out".as_ref(),
+        dir.path().join("out").as_os_str(),
+        "--work-size".as_ref(),
+        "32".as_ref(),
+    ]);
+    assert_error_names(&o, "broken-msn.safetensors");
+    assert!(stderr(&o).contains(removed), "{}", stderr(&o));
+    // inspect reads the header fine; --check builds the network and fails the same way.
+    let o = picker([
+        "weights".as_ref(),
+        "inspect".as_ref(),
+        bad.as_os_str(),
+        "--check".as_ref(),
+    ]);
+    assert_error_names(&o, "broken-msn.safetensors");
+}
+
+#[test]
+fn error_unwritable_out_dir() {
+    let dir = tempfile::tempdir().unwrap();
+    // A regular file where a directory is needed: fails for every user, root included.
+    let blocker = dir.path().join("a-file");
+    std::fs::write(&blocker, b"x").unwrap();
+    let out = blocker.join("out");
+    let o = infer(&example_photo(), &out, &["--work-size", "32"]);
+    assert_error_names(&o, "a-file");
+}
