@@ -18,7 +18,7 @@ use picker_nets::{IrnOutput, Net, NetKind, Weights};
 use picker_tensor::{Isa, Tensor};
 use serde_json::json;
 
-use crate::{display, output, photo};
+use crate::{output, photo};
 
 /// Arguments of `picker infer`.
 #[derive(Debug, clap::Args)]
@@ -231,10 +231,10 @@ fn decode_irn(out: IrnOutput) -> Result<Vec<Decoded>> {
     for (name, raw) in &out.heads {
         let d = match (&re, name.as_str()) {
             (Some(re), conv::DIFFUSE_ALBEDO) => {
-                Decoded::new(name, k, &re.diffuse_albedo).png_map(display::srgb_encode)
+                Decoded::new(name, k, &re.diffuse_albedo).png_map(conv::srgb_encode)
             }
             (Some(re), conv::SPECULAR_ALBEDO) => {
-                Decoded::new(name, k, &re.specular_albedo).png_map(display::srgb_encode)
+                Decoded::new(name, k, &re.specular_albedo).png_map(conv::srgb_encode)
             }
             (Some(re), conv::GLOSSINESS) => Decoded::new(name, k, &re.glossiness).png_map(|v| v),
             (Some(re), conv::UV) => Decoded::new(name, k, &re.uv).png_map(|v| v),
@@ -281,7 +281,7 @@ fn run_net(net: &Net, x: &Tensor) -> Result<Vec<Decoded>> {
                     conv::ENVMAP => {
                         let mut d = Decoded::new(name, out.kind, &conv::decode_envmap(raw));
                         if d.c == 3 {
-                            d.png = Some(display::tone_map_rgb(&d.exr, d.plane_len()));
+                            d.png = Some(conv::tone_map_rgb(&d.exr, d.plane_len()));
                         }
                         d
                     }

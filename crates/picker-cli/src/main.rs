@@ -19,7 +19,6 @@ use clap::{Parser, Subcommand};
 
 mod args;
 mod bench;
-mod display;
 mod infer;
 mod output;
 mod photo;

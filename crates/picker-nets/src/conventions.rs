@@ -13,6 +13,8 @@
 //!   centre column (`x = W/2`) is straight ahead (−z), `x = 3W/4` is right (+x),
 //!   the left/right edges are behind (+z). See [`envmap_direction`].
 
+pub use crate::display::{srgb_encode, tone_map_rgb, TONE_MAP_KEY};
+
 use picker_tensor::Tensor;
 
 use crate::error::{Error, Result};

@@ -62,6 +62,7 @@
 
 pub mod config;
 pub mod conventions;
+mod display;
 mod error;
 pub mod keys;
 pub mod layers;

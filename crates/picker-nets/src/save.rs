@@ -193,8 +193,37 @@ pub fn serialize_safetensors(
         .iter()
         .map(|(k, v)| (k.clone(), v.clone()))
         .collect();
-    safetensors::serialize(encoded.iter().map(|(k, e)| (k.as_str(), e)), &Some(meta))
-        .map_err(|e| invalid(format!("cannot serialise: {e:?}")))
+    let bytes = safetensors::serialize(encoded.iter().map(|(k, e)| (k.as_str(), e)), &Some(meta))
+        .map_err(|e| invalid(format!("cannot serialise: {e:?}")))?;
+    canonical_header(bytes).map_err(invalid)
+}
+
+/// Rewrites the JSON header of a serialised safetensors file with its keys
+/// sorted (the `safetensors` crate takes metadata as a `HashMap`, whose order
+/// changes from run to run), padded with spaces to the original length so the
+/// data offsets stay valid: the same tensors and metadata give the same bytes.
+fn canonical_header(mut bytes: Vec<u8>) -> std::result::Result<Vec<u8>, String> {
+    let len_bytes: [u8; 8] = bytes
+        .get(..8)
+        .and_then(|b| b.try_into().ok())
+        .ok_or("serialised file shorter than its length prefix")?;
+    let n = u64::from_le_bytes(len_bytes) as usize;
+    let header = bytes
+        .get(8..8 + n)
+        .ok_or("serialised header runs past the end")?;
+    // serde_json's map is a BTreeMap (no `preserve_order`), so this sorts every object.
+    let value: serde_json::Value = serde_json::from_slice(header)
+        .map_err(|e| format!("serialised header is not JSON: {e}"))?;
+    let mut sorted = serde_json::to_vec(&value).map_err(|e| e.to_string())?;
+    if sorted.len() > n {
+        return Err(format!(
+            "sorted header grew from {n} to {} bytes",
+            sorted.len()
+        ));
+    }
+    sorted.resize(n, b' ');
+    bytes[8..8 + n].copy_from_slice(&sorted);
+    Ok(bytes)
 }
 
 /// Writes a safetensors file atomically: the bytes go to a temporary file in
@@ -276,4 +305,32 @@ pub fn metadata_for(config: &NetConfig, preset: &str) -> Result<BTreeMap<String,
         format!("picker-nets {}", env!("CARGO_PKG_VERSION")),
     );
     Ok(m)
+}
+
+#[cfg(test)]
+mod canonical_tests {
+    use super::*;
+    use crate::{random_weights, NetConfig, NetKind, Weights};
+
+    #[test]
+    fn same_tensors_and_metadata_give_the_same_bytes() {
+        let cfg = NetConfig::preset(NetKind::EnvMap, "tiny").unwrap();
+        let tensors = random_weights(&cfg, 3);
+        let mut meta = metadata_for(&cfg, "tiny").unwrap();
+        for i in 0..12 {
+            meta.insert(format!("extra.{i}"), format!("value {i}"));
+        }
+        let path = Path::new("memory");
+        let first = serialize_safetensors(path, &tensors, &meta, StorageDtype::F16).unwrap();
+        // Each call builds a fresh HashMap with its own random order.
+        for _ in 0..8 {
+            let again = serialize_safetensors(path, &tensors, &meta, StorageDtype::F16).unwrap();
+            assert!(again == first, "serialisation is not byte-stable");
+        }
+        let w = Weights::from_bytes("memory", first).unwrap();
+        assert_eq!(
+            w.metadata().get("extra.7").map(String::as_str),
+            Some("value 7")
+        );
+    }
 }

@@ -1,7 +1,6 @@
-//! Display encodings for the 8-bit PNG previews (the EXR files hold the exact
-//! decoded values). `picker_nets::conventions` has no display transforms yet;
-//! these two belong there (or in a future `picker-render`) and should move
-//! when it grows them.
+//! Display encodings for 8-bit previews of decoded render elements (files
+//! meant for exact values, such as EXR, hold the decoded values themselves).
+//! Part of the conventions: re-exported from [`crate::conventions`].
 
 /// The sRGB transfer function (IEC 61966-2-1): linear `[0, 1]` → encoded `[0, 1]`.
 /// Values outside `[0, 1]` are clamped; NaN gives 0.
