@@ -26,11 +26,18 @@ pub struct Photo {
 /// Reads `path`, applying its EXIF orientation. Errors name the file.
 pub fn load(path: &Path) -> Result<Photo> {
     let ctx = || format!("reading photo {}", path.display());
-    let reader = ImageReader::open(path)
-        .with_context(ctx)?
+    let bytes = std::fs::read(path).with_context(ctx)?;
+    let reader = ImageReader::new(std::io::Cursor::new(&bytes))
         .with_guessed_format()
         .with_context(ctx)?;
     let format = reader.format();
+    // The JPEG decoder fills a cut-off file with grey instead of failing.
+    if format == Some(image::ImageFormat::Jpeg) && !jpeg_is_complete(&bytes) {
+        anyhow::bail!(
+            "reading photo {}: the JPEG data is truncated (no end-of-image marker after the image data)",
+            path.display()
+        );
+    }
     let mut decoder = reader.into_decoder().with_context(ctx)?;
     // A broken EXIF block is not worth refusing the photo for.
     let orientation = decoder
@@ -51,6 +58,33 @@ pub fn load(path: &Path) -> Result<Photo> {
         orientation,
         format,
     })
+}
+
+/// True when a JPEG stream has an end-of-image marker (`FF D9`) after its
+/// first scan. The marker segments before the scan are walked by their
+/// lengths, so an EXIF thumbnail's own end marker does not count; inside the
+/// entropy-coded data `FF` is always followed by `00` or a restart marker.
+fn jpeg_is_complete(b: &[u8]) -> bool {
+    if !b.starts_with(&[0xFF, 0xD8]) {
+        return false;
+    }
+    let mut i = 2;
+    loop {
+        while b.get(i) == Some(&0xFF) && b.get(i + 1) == Some(&0xFF) {
+            i += 1; // fill bytes
+        }
+        match (b.get(i), b.get(i + 1)) {
+            (Some(0xFF), Some(0xDA)) => break, // start of scan
+            (Some(0xFF), Some(0xD9)) | (None, _) | (_, None) => return false,
+            (Some(0xFF), Some(m)) if (0xD0..=0xD7).contains(m) || *m == 0x01 => i += 2,
+            (Some(0xFF), Some(_)) => match (b.get(i + 2), b.get(i + 3)) {
+                (Some(&hi), Some(&lo)) => i += 2 + u16::from_be_bytes([hi, lo]) as usize,
+                _ => return false,
+            },
+            _ => return false,
+        }
+    }
+    b[i..].windows(2).any(|w| w == [0xFF, 0xD9])
 }
 
 /// The working size `(width, height)` for a `w × h` photo: the long side
@@ -95,6 +129,20 @@ pub fn to_planar(rgb: &Rgb32FImage) -> Vec<f32> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn jpeg_completeness() {
+        let full = std::fs::read(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../../fixtures/examples/coffee.jpg"
+        ))
+        .unwrap();
+        assert!(jpeg_is_complete(&full));
+        for cut in [2, 100, 700, full.len() / 2, full.len() - 2] {
+            assert!(!jpeg_is_complete(&full[..cut]), "cut at {cut}");
+        }
+        assert!(!jpeg_is_complete(b"not a jpeg"));
+    }
 
     #[test]
     fn working_size_keeps_aspect() {

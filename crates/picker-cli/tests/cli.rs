@@ -525,6 +525,17 @@ fn error_truncated_png() {
 }
 
 #[test]
+fn error_truncated_jpeg() {
+    let dir = tempfile::tempdir().unwrap();
+    let bytes = std::fs::read(example_photo()).unwrap();
+    let photo = dir.path().join("truncated.jpg");
+    std::fs::write(&photo, &bytes[..bytes.len() / 3]).unwrap();
+    let o = infer(&photo, &dir.path().join("out"), &[]);
+    assert_error_names(&o, "truncated.jpg");
+    assert!(String::from_utf8_lossy(&o.stderr).contains("truncated"));
+}
+
+#[test]
 fn error_unsupported_format() {
     let dir = tempfile::tempdir().unwrap();
     let photo = dir.path().join("anim.gif");
