@@ -420,7 +420,7 @@ impl Conv2d {
                 ));
             }
         }
-        let mut out = Tensor::zeros(shape);
+        let mut out = Tensor::for_overwrite(shape);
         let per_out = s.c_out * oh * ow;
         for b in 0..x.n() {
             let img = x.image(b);
@@ -597,7 +597,7 @@ impl ConvTranspose2d {
         let (oh, ow) = sp.out_hw(x.h(), x.w())?;
         let s = sp.stride;
         let per_out = sp.c_out * oh * ow;
-        let mut out = Tensor::zeros([x.n(), sp.c_out, oh, ow]);
+        let mut out = Tensor::for_overwrite([x.n(), sp.c_out, oh, ow]);
         // One buffer per x-phase of the current row phase, then one pass that
         // writes whole output rows with the x-phases interleaved.
         let mut tmps: Vec<Vec<f32>> = vec![Vec::new(); s];

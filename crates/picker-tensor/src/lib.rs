@@ -36,6 +36,7 @@ mod isa;
 mod microkernel;
 mod pad;
 pub mod params;
+mod pool;
 pub mod reference;
 mod resize;
 mod rng;

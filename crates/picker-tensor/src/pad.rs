@@ -44,10 +44,10 @@ pub fn mirror_pad(x: &Tensor, pads: Pads) -> Tensor {
     let [t, b, l, r] = pads;
     let (h, w) = (x.h(), x.w());
     let (oh, ow) = (h + t + b, w + l + r);
-    let mut out = Tensor::zeros([x.n(), x.c(), oh, ow]);
-    if out.is_empty() || x.is_empty() {
-        return out;
+    if x.is_empty() {
+        return Tensor::zeros([x.n(), x.c(), oh, ow]);
     }
+    let mut out = Tensor::for_overwrite([x.n(), x.c(), oh, ow]);
     let cols: Vec<usize> = (0..ow)
         .map(|j| reflect_index(j as isize - l as isize, w))
         .collect();

@@ -28,7 +28,7 @@ pub fn resize_bilinear(x: &Tensor, oh: usize, ow: usize) -> Result<Tensor> {
     let (h, w) = (x.h(), x.w());
     let ys: Vec<_> = (0..oh).map(|i| source_taps(i, h, oh)).collect();
     let xs: Vec<_> = (0..ow).map(|j| source_taps(j, w, ow)).collect();
-    let mut out = Tensor::zeros([x.n(), x.c(), oh, ow]);
+    let mut out = Tensor::for_overwrite([x.n(), x.c(), oh, ow]);
     let src = x.data();
     out.data_mut()
         .par_chunks_mut(oh * ow)

@@ -10,6 +10,12 @@ pub struct Tensor {
     data: Vec<f32>,
 }
 
+impl Drop for Tensor {
+    fn drop(&mut self) {
+        crate::pool::give(std::mem::take(&mut self.data));
+    }
+}
+
 impl std::fmt::Debug for Tensor {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(f, "Tensor{:?}", self.shape)
@@ -32,9 +38,17 @@ impl Tensor {
 
     /// A tensor of zeros.
     pub fn zeros(shape: [usize; 4]) -> Self {
+        let mut data = crate::pool::take(shape.iter().product());
+        data.fill(0.0);
+        Self { shape, data }
+    }
+
+    /// A tensor whose every element the caller overwrites before reading:
+    /// its contents are unspecified (stale values of a reused buffer).
+    pub(crate) fn for_overwrite(shape: [usize; 4]) -> Self {
         Self {
             shape,
-            data: vec![0.0; shape.iter().product()],
+            data: crate::pool::take(shape.iter().product()),
         }
     }
 
@@ -93,8 +107,8 @@ impl Tensor {
         &mut self.data
     }
     /// Consumes the tensor, giving back its elements.
-    pub fn into_data(self) -> Vec<f32> {
-        self.data
+    pub fn into_data(mut self) -> Vec<f32> {
+        std::mem::take(&mut self.data)
     }
     /// Element at `(n, c, y, x)`; panics when out of range (indexing, like slices).
     pub fn at(&self, n: usize, c: usize, y: usize, x: usize) -> f32 {

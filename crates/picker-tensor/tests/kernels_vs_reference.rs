@@ -497,3 +497,32 @@ fn bad_parameters_are_refused() {
     );
     assert!(Tensor::new([1, 2, 3, 4], vec![0.0; 23]).is_err());
 }
+
+#[test]
+fn reused_buffers_never_leak_stale_values() {
+    // Large tensors go back to a pool when dropped; new ones must still be exact.
+    let shape = [1, 8, 256, 256];
+    for round in 0..3 {
+        let mut big = Tensor::zeros(shape);
+        big.data_mut().fill(7.0 + round as f32);
+        drop(big);
+        assert!(
+            Tensor::zeros(shape).data().iter().all(|&v| v == 0.0),
+            "zeros after reuse"
+        );
+        let mut rng = Rng::new(round);
+        let x = rng.tensor([1, 8, 254, 254]);
+        let spec = ConvSpec::square(8, 8, 3, 1, 1);
+        let wt = rng.normal_vec(spec.weight_len(), 0.2);
+        let conv = Conv2d::new(spec, &wt, None, Activation::None).unwrap();
+        let fast = conv.forward(&mirror_pad(&x, [1, 1, 1, 1])).unwrap();
+        let slow =
+            reference::conv2d(&reference::mirror_pad(&x, [1, 1, 1, 1]), &wt, None, spec).unwrap();
+        check(
+            "conv after buffer reuse",
+            &fast,
+            &slow,
+            Tolerance::KERNEL_F32,
+        );
+    }
+}
