@@ -9,6 +9,10 @@
 //! - `picker weights random|inspect`: make random weights files, describe one
 //!   ([`weights_cmd`]).
 //! - `picker bench --net irn --size 240x320`: time forward passes ([`bench`]).
+//! - `picker synth --count N --size HxW --seed S --out DIR`: synthetic scenes
+//!   with ground-truth render elements ([`synth`]).
+//! - `picker render ELEMENTS_DIR --envmap F --out DIR`: re-render from render
+//!   elements and score against a reference; `--preview` renders a material ([`render`]).
 //!
 //! Errors are printed as one line, `error: <what>: <cause>`, and the exit
 //! status is 1 (2 for command-line usage errors, from clap).
@@ -22,6 +26,8 @@ mod bench;
 mod infer;
 mod output;
 mod photo;
+mod render;
+mod synth;
 mod threads;
 mod weights_cmd;
 
@@ -43,6 +49,10 @@ enum Command {
     Weights(weights_cmd::Command),
     /// Time forward passes of one network.
     Bench(bench::Args),
+    /// Re-render an image from render elements and an environment map, or preview a material.
+    Render(render::Args),
+    /// Generate synthetic indoor scenes with ground-truth render elements.
+    Synth(synth::Args),
 }
 
 fn run(cli: Cli) -> anyhow::Result<()> {
@@ -50,6 +60,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Infer(a) => infer::run(a),
         Command::Weights(c) => weights_cmd::run(c),
         Command::Bench(a) => bench::run(a),
+        Command::Render(a) => render::run(a),
+        Command::Synth(a) => synth::run(a),
     }
 }
 

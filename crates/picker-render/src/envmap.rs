@@ -1,0 +1,498 @@
+//! Equirectangular environment maps in the conventions' mapping
+//! ([`picker_nets::conventions::envmap_direction`]: row 0 straight up, centre
+//! column straight ahead = −z, camera space): sampling, area-correct
+//! resampling, rotation, and EXR / Radiance `.hdr` files.
+
+use std::path::Path;
+
+use glam::{DVec3, Mat3, Vec3};
+use picker_nets::conventions as conv;
+use picker_tensor::Tensor;
+
+use crate::error::{Error, Result};
+use crate::io;
+
+/// A linear-RGB HDR radiance map, `height × width`, row-major.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EnvMap {
+    width: usize,
+    height: usize,
+    data: Vec<Vec3>,
+}
+
+impl EnvMap {
+    /// A map from row-major radiance values; refuses a zero size or a wrong length.
+    pub fn new(width: usize, height: usize, data: Vec<Vec3>) -> Result<Self> {
+        if width == 0 || height == 0 {
+            return Err(Error::Invalid {
+                what: "environment map size",
+                reason: format!("{height}x{width} is empty"),
+            });
+        }
+        if data.len() != width * height {
+            return Err(Error::shape(
+                format!("{height}x{width} environment map"),
+                format!("{} pixels", width * height),
+                data.len(),
+            ));
+        }
+        Ok(Self {
+            width,
+            height,
+            data,
+        })
+    }
+
+    /// A map of constant radiance `rgb` (sizes of 0 are raised to 1).
+    pub fn uniform(width: usize, height: usize, rgb: Vec3) -> Self {
+        let (width, height) = (width.max(1), height.max(1));
+        Self {
+            width,
+            height,
+            data: vec![rgb; width * height],
+        }
+    }
+
+    /// Columns.
+    pub fn width(&self) -> usize {
+        self.width
+    }
+
+    /// Rows.
+    pub fn height(&self) -> usize {
+        self.height
+    }
+
+    /// The row-major pixels.
+    pub fn data(&self) -> &[Vec3] {
+        &self.data
+    }
+
+    /// The row-major pixels, mutable.
+    pub fn data_mut(&mut self) -> &mut [Vec3] {
+        &mut self.data
+    }
+
+    /// Radiance of pixel `(row, col)`.
+    pub fn get(&self, row: usize, col: usize) -> Vec3 {
+        self.data[row * self.width + col]
+    }
+
+    /// Unit camera-space direction of the centre of pixel `(row, col)`
+    /// ([`conv::envmap_pixel_direction`]).
+    pub fn direction(&self, row: usize, col: usize) -> Vec3 {
+        let d = conv::envmap_pixel_direction(row, col, self.height, self.width);
+        Vec3::new(d[0] as f32, d[1] as f32, d[2] as f32)
+    }
+
+    /// Solid angle (sr) of a pixel of row `row` ([`conv::pixel_solid_angle`], exact band area).
+    pub fn solid_angle(&self, row: usize) -> f64 {
+        conv::pixel_solid_angle(row, self.height, self.width)
+    }
+
+    /// Radiance seen in direction `dir` (need not be unit length): bilinear
+    /// between pixel centres, wrapping in longitude and clamping in latitude
+    /// (within half a pixel of a pole the nearest row is used).
+    pub fn sample(&self, dir: Vec3) -> Vec3 {
+        let (x, y) = conv::envmap_position(
+            [dir.x as f64, dir.y as f64, dir.z as f64],
+            self.height,
+            self.width,
+        );
+        self.sample_position(x, y)
+    }
+
+    /// Bilinear sample at the continuous position `(x, y)` in pixels (centres at `+0.5`).
+    pub(crate) fn sample_position(&self, x: f64, y: f64) -> Vec3 {
+        let (w, h) = (self.width, self.height);
+        let fy = (y - 0.5).clamp(0.0, (h - 1) as f64);
+        let r0 = (fy.floor() as usize).min(h - 1);
+        let r1 = (r0 + 1).min(h - 1);
+        let ty = (fy - r0 as f64) as f32;
+        let fx = x - 0.5;
+        let c0f = fx.floor();
+        let tx = (fx - c0f) as f32;
+        let c0 = (c0f as i64).rem_euclid(w as i64) as usize;
+        let c1 = (c0 + 1) % w;
+        let top = self.get(r0, c0).lerp(self.get(r0, c1), tx);
+        let bottom = self.get(r1, c0).lerp(self.get(r1, c1), tx);
+        top.lerp(bottom, ty)
+    }
+
+    /// The solid-angle-weighted mean radiance `Σ L_i ΔΩ_i / 4π` (f64 accumulation).
+    pub fn mean(&self) -> Vec3 {
+        let mut acc = DVec3::ZERO;
+        for row in 0..self.height {
+            let mut r = DVec3::ZERO;
+            for col in 0..self.width {
+                r += self.get(row, col).as_dvec3();
+            }
+            acc += r * self.solid_angle(row);
+        }
+        (acc / (4.0 * std::f64::consts::PI)).as_vec3()
+    }
+
+    /// The map at `width × height`. Downsampling (either dimension smaller) is
+    /// area-correct: each target pixel is the solid-angle-weighted average of
+    /// the source pixels it overlaps (weights = overlap area on the sphere, so
+    /// the map's mean radiance is preserved exactly). Upsampling (both
+    /// dimensions at least as large) samples bilinearly at the target centres.
+    pub fn resample(&self, width: usize, height: usize) -> Result<EnvMap> {
+        if width == 0 || height == 0 {
+            return Err(Error::Invalid {
+                what: "environment map size",
+                reason: format!("{height}x{width} is empty"),
+            });
+        }
+        if width == self.width && height == self.height {
+            return Ok(self.clone());
+        }
+        if width >= self.width && height >= self.height {
+            let sx = self.width as f64 / width as f64;
+            let sy = self.height as f64 / height as f64;
+            let mut data = Vec::with_capacity(width * height);
+            for row in 0..height {
+                for col in 0..width {
+                    data.push(
+                        self.sample_position((col as f64 + 0.5) * sx, (row as f64 + 0.5) * sy),
+                    );
+                }
+            }
+            return EnvMap::new(width, height, data);
+        }
+        // Longitude overlaps: fractions of the full turn shared by target column j and source column k.
+        let overlaps = |n_src: usize, n_dst: usize, weight: &dyn Fn(f64, f64) -> f64| {
+            let mut out: Vec<Vec<(usize, f64)>> = vec![Vec::new(); n_dst];
+            for (j, o) in out.iter_mut().enumerate() {
+                let (a, b) = (j as f64 / n_dst as f64, (j + 1) as f64 / n_dst as f64);
+                let k0 = (a * n_src as f64).floor() as usize;
+                let k1 = ((b * n_src as f64).ceil() as usize).min(n_src);
+                for k in k0..k1 {
+                    let lo = a.max(k as f64 / n_src as f64);
+                    let hi = b.min((k + 1) as f64 / n_src as f64);
+                    if hi > lo {
+                        let wgt = weight(lo, hi);
+                        if wgt > 0.0 {
+                            o.push((k, wgt));
+                        }
+                    }
+                }
+            }
+            out
+        };
+        let cols = overlaps(self.width, width, &|lo, hi| hi - lo);
+        // Latitude: t ∈ [0,1] from the top; band area ∝ sin(lat(lo)) − sin(lat(hi)).
+        let lat = |t: f64| std::f64::consts::FRAC_PI_2 - std::f64::consts::PI * t;
+        let rows = overlaps(self.height, height, &|lo, hi| lat(lo).sin() - lat(hi).sin());
+        let mut data = Vec::with_capacity(width * height);
+        for rw in &rows {
+            for cw in &cols {
+                let mut acc = DVec3::ZERO;
+                let mut total = 0.0;
+                for &(r, wr) in rw {
+                    for &(c, wc) in cw {
+                        acc += self.get(r, c).as_dvec3() * (wr * wc);
+                        total += wr * wc;
+                    }
+                }
+                data.push(if total > 0.0 {
+                    (acc / total).as_vec3()
+                } else {
+                    Vec3::ZERO
+                });
+            }
+        }
+        EnvMap::new(width, height, data)
+    }
+
+    /// The environment turned by the rotation `r`: `out.sample(r·d) == self.sample(d)`,
+    /// i.e. each output pixel in direction `e` is `self.sample(rᵀ·e)` (bilinear).
+    /// `r` should be orthonormal; the output has the same size.
+    pub fn rotated(&self, r: Mat3) -> EnvMap {
+        let rt = r.transpose();
+        let mut data = Vec::with_capacity(self.data.len());
+        for row in 0..self.height {
+            for col in 0..self.width {
+                data.push(self.sample(rt * self.direction(row, col)));
+            }
+        }
+        EnvMap {
+            width: self.width,
+            height: self.height,
+            data,
+        }
+    }
+
+    /// [`rotated`](Self::rotated) by `radians` about the up axis (+y, right-handed:
+    /// a positive angle turns what was straight ahead (−z) towards the left (−x)).
+    pub fn rotated_yaw(&self, radians: f32) -> EnvMap {
+        self.rotated(Mat3::from_rotation_y(radians))
+    }
+
+    /// From a tensor `[1, 3, H, W]` (planar RGB).
+    pub fn from_tensor(t: &Tensor) -> Result<EnvMap> {
+        let [n, c, h, w] = t.shape();
+        if n != 1 || c != 3 {
+            return Err(Error::shape(
+                "environment map tensor",
+                "[1, 3, H, W]",
+                format!("{:?}", t.shape()),
+            ));
+        }
+        let img = t.image(0);
+        let hw = h * w;
+        let data = (0..hw)
+            .map(|i| Vec3::new(img[i], img[hw + i], img[2 * hw + i]))
+            .collect();
+        EnvMap::new(w, h, data)
+    }
+
+    /// As a tensor `[1, 3, H, W]` (planar RGB).
+    pub fn to_tensor(&self) -> Tensor {
+        let img = self.to_image();
+        Tensor::new([1, 3, self.height, self.width], img.data)
+            .expect("the length of a 3-plane image matches its shape")
+    }
+
+    /// As a planar 3-channel image.
+    pub fn to_image(&self) -> io::Image {
+        let mut img = io::Image::zeros(3, self.height, self.width);
+        for (i, &v) in self.data.iter().enumerate() {
+            img.set_rgb(i, v);
+        }
+        img
+    }
+
+    /// From a planar image with 3 (RGB) or 1 (grey) channels.
+    pub fn from_image(img: &io::Image) -> Result<EnvMap> {
+        if img.channels != 3 && img.channels != 1 {
+            return Err(Error::shape(
+                "environment map image",
+                "1 or 3 channels",
+                img.channels,
+            ));
+        }
+        EnvMap::new(
+            img.width,
+            img.height,
+            (0..img.plane_len()).map(|i| img.rgb(i)).collect(),
+        )
+    }
+
+    /// Reads an environment map: OpenEXR (`.exr`: channels R,G,B — an A is
+    /// ignored — or Y; f32 or half) or Radiance RGBE (`.hdr`, `.pic`), by extension.
+    pub fn read(path: &Path) -> Result<EnvMap> {
+        match io::extension(path).as_str() {
+            "exr" => EnvMap::from_image(&io::read_exr(path)?).map_err(|e| Error::decode(path, e)),
+            "hdr" | "pic" => {
+                let f = std::fs::File::open(path).map_err(|e| Error::io(path, "open", e))?;
+                let dec = image::codecs::hdr::HdrDecoder::new(std::io::BufReader::new(f))
+                    .map_err(|e| Error::decode(path, e))?;
+                let img = image::DynamicImage::from_decoder(dec)
+                    .map_err(|e| Error::decode(path, e))?
+                    .to_rgb32f();
+                let (w, h) = (img.width() as usize, img.height() as usize);
+                let data = img.pixels().map(|p| Vec3::from(p.0)).collect();
+                EnvMap::new(w, h, data).map_err(|e| Error::decode(path, e))
+            }
+            other => Err(Error::decode(
+                path,
+                format!("unsupported environment map type {other:?} (expected .exr or .hdr)"),
+            )),
+        }
+    }
+
+    /// Writes the map as a 32-bit float RGB EXR, atomically.
+    pub fn write_exr(&self, path: &Path) -> Result<()> {
+        io::write_exr(path, &self.to_image())
+    }
+
+    /// Writes the map as Radiance RGBE (`.hdr`, run-length encoded by the
+    /// `image` crate's encoder), atomically. RGBE keeps 8-bit mantissas: about
+    /// 1% relative precision; negative values become 0.
+    pub fn write_hdr(&self, path: &Path) -> Result<()> {
+        let px: Vec<image::Rgb<f32>> = self
+            .data
+            .iter()
+            .map(|v| image::Rgb(v.max(Vec3::ZERO).to_array()))
+            .collect();
+        let mut buf = Vec::new();
+        image::codecs::hdr::HdrEncoder::new(&mut buf)
+            .encode(&px, self.width, self.height)
+            .map_err(|e| Error::Encode {
+                format: "HDR",
+                reason: e.to_string(),
+            })?;
+        io::write_atomic(path, &buf)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use picker_tensor::Rng;
+
+    fn random_map(rng: &mut Rng, w: usize, h: usize) -> EnvMap {
+        let data = (0..w * h)
+            .map(|_| {
+                Vec3::new(
+                    rng.uniform(0.0, 4.0),
+                    rng.uniform(0.0, 2.0),
+                    rng.uniform(0.0, 1.0),
+                )
+            })
+            .collect();
+        EnvMap::new(w, h, data).unwrap()
+    }
+
+    /// A smooth map (so bilinear sampling is accurate): a sky gradient and a soft lobe.
+    pub(crate) fn smooth_map(w: usize, h: usize) -> EnvMap {
+        let probe = EnvMap::uniform(w, h, Vec3::ZERO);
+        let sun = Vec3::new(0.3, 0.6, -0.5).normalize();
+        let data = (0..h)
+            .flat_map(|r| (0..w).map(move |c| (r, c)))
+            .map(|(r, c)| {
+                let d = probe.direction(r, c);
+                let s = (d.dot(sun) - 1.0).exp() * 3.0;
+                Vec3::new(
+                    0.5 + 0.4 * d.y + s,
+                    0.7 + 0.2 * d.x + s,
+                    1.0 - 0.3 * d.z + 0.5 * s,
+                )
+            })
+            .collect();
+        EnvMap::new(w, h, data).unwrap()
+    }
+
+    #[test]
+    fn sampling_hits_pixel_centres_and_wraps() {
+        let mut rng = Rng::new(1);
+        let m = random_map(&mut rng, 12, 6);
+        for r in 0..6 {
+            for c in 0..12 {
+                assert!(
+                    (m.sample(m.direction(r, c)) - m.get(r, c))
+                        .abs()
+                        .max_element()
+                        < 1e-4
+                );
+            }
+        }
+        // Half-way across the seam: the average of the first and last columns.
+        let mid = m.sample_position(0.0, 2.5);
+        assert!(
+            (mid - (m.get(2, 0) + m.get(2, 11)) / 2.0)
+                .abs()
+                .max_element()
+                < 1e-5
+        );
+        assert!(EnvMap::new(0, 3, vec![]).is_err());
+        assert!(EnvMap::new(2, 2, vec![Vec3::ONE; 3]).is_err());
+    }
+
+    #[test]
+    fn resample_preserves_mean() {
+        let mut rng = Rng::new(2);
+        let m = random_map(&mut rng, 40, 30);
+        for (w, h) in [(20, 15), (16, 8), (7, 5), (1, 1), (40, 15), (13, 31)] {
+            let r = m.resample(w, h).unwrap();
+            assert_eq!((r.width(), r.height()), (w, h));
+            let (a, b) = (m.mean(), r.mean());
+            assert!(
+                (a - b).abs().max_element() < 1e-5 * a.max_element(),
+                "{w}x{h}: {a} {b}"
+            );
+        }
+        let s = smooth_map(32, 16);
+        let up = s.resample(128, 64).unwrap();
+        let (a, b) = (s.mean(), up.mean());
+        assert!(
+            (a - b).abs().max_element() < 1e-2 * a.max_element(),
+            "{a} {b}"
+        );
+        let u = EnvMap::uniform(9, 5, Vec3::splat(2.0))
+            .resample(4, 3)
+            .unwrap();
+        assert!(u
+            .data()
+            .iter()
+            .all(|v| (*v - Vec3::splat(2.0)).abs().max_element() < 1e-6));
+    }
+
+    #[test]
+    fn rotation_round_trips_away_from_poles() {
+        let m = smooth_map(64, 32);
+        let r = Mat3::from_euler(glam::EulerRot::YXZ, 0.7, 0.3, -0.2);
+        let back = m.rotated(r).rotated(r.transpose());
+        for row in 6..26 {
+            for col in 0..64 {
+                let (a, b) = (m.get(row, col), back.get(row, col));
+                assert!(
+                    (a - b).abs().max_element() < 0.03 * a.max_element(),
+                    "{row},{col}: {a} {b}"
+                );
+            }
+        }
+        // The defining property, and yaw by a whole number of columns is a shift.
+        let rot = m.rotated(r);
+        for d in [Vec3::new(0.2, 0.1, -1.0), Vec3::new(-0.5, -0.4, 0.3)] {
+            let (a, b) = (rot.sample(r * d), m.sample(d));
+            assert!(
+                (a - b).abs().max_element() < 0.05 * b.max_element(),
+                "{a} {b}"
+            );
+        }
+        let q = std::f32::consts::FRAC_PI_2;
+        let y = m.rotated_yaw(q);
+        // Turning by +90° about +y brings what was ahead (-z) to the left (-x).
+        let ahead = m.sample(Vec3::NEG_Z);
+        assert!((y.sample(Vec3::NEG_X) - ahead).abs().max_element() < 1e-3 * ahead.max_element());
+    }
+
+    #[test]
+    fn files_round_trip() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut rng = Rng::new(3);
+        let m = random_map(&mut rng, 10, 5);
+        let p = dir.path().join("env.exr");
+        m.write_exr(&p).unwrap();
+        assert_eq!(EnvMap::read(&p).unwrap(), m);
+        let p = dir.path().join("env.hdr");
+        m.write_hdr(&p).unwrap();
+        let back = EnvMap::read(&p).unwrap();
+        assert_eq!((back.width(), back.height()), (10, 5));
+        for (a, b) in back.data().iter().zip(m.data()) {
+            // RGBE: 8-bit mantissa shared by the channels.
+            assert!(
+                (*a - *b).abs().max_element() <= 0.01 * b.max_element() + 1e-6,
+                "{a} {b}"
+            );
+        }
+        // Half-float RGBA EXRs are read too (alpha ignored).
+        let p = dir.path().join("half.exr");
+        exr::prelude::write_rgba_file(&p, 10, 5, |x, y| {
+            let v = m.get(y, x);
+            (
+                half::f16::from_f32(v.x),
+                half::f16::from_f32(v.y),
+                half::f16::from_f32(v.z),
+                half::f16::from_f32(1.0),
+            )
+        })
+        .unwrap();
+        let back = EnvMap::read(&p).unwrap();
+        for (a, b) in back.data().iter().zip(m.data()) {
+            assert!(
+                (*a - *b).abs().max_element() <= 2e-3 * b.max_element() + 1e-6,
+                "{a} {b}"
+            );
+        }
+        let t = m.to_tensor();
+        assert_eq!(EnvMap::from_tensor(&t).unwrap(), m);
+        let e = EnvMap::read(&dir.path().join("nope.hdr"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("nope.hdr"), "{e}");
+        assert!(EnvMap::read(&dir.path().join("x.jpg")).is_err());
+    }
+}

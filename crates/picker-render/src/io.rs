@@ -1,0 +1,451 @@
+//! Planar `f32` images and their files: EXR (exact `f32`, channels `R,G,B` or
+//! `Y`), 8-bit PNG (display values) and 16-bit PNG (ids, precise previews).
+//! Every write is atomic ([`picker_nets::write_atomic`]: temporary file in the
+//! same directory, fsync, rename), so a crash never leaves a half-written file.
+//! `picker infer`, `picker synth` and `picker render` all write through here.
+
+use std::io::Cursor;
+use std::path::Path;
+
+use crate::error::{Error, Result};
+
+/// A planar `f32` image: `channels` planes of `height × width` values, row-major,
+/// row 0 at the top (`data[c·h·w + row·w + col]`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Image {
+    /// Number of planes (1 grey, 3 RGB, ...).
+    pub channels: usize,
+    /// Rows.
+    pub height: usize,
+    /// Columns.
+    pub width: usize,
+    /// `channels · height · width` values, plane after plane.
+    pub data: Vec<f32>,
+}
+
+impl Image {
+    /// An image from planar data; refuses a length that is not `channels·height·width`.
+    pub fn new(channels: usize, height: usize, width: usize, data: Vec<f32>) -> Result<Self> {
+        let n = channels * height * width;
+        if data.len() != n {
+            return Err(Error::shape(
+                format!("{channels}x{height}x{width} image"),
+                format!("{n} values"),
+                data.len(),
+            ));
+        }
+        Ok(Self {
+            channels,
+            height,
+            width,
+            data,
+        })
+    }
+
+    /// An image of zeros.
+    pub fn zeros(channels: usize, height: usize, width: usize) -> Self {
+        Self {
+            channels,
+            height,
+            width,
+            data: vec![0.0; channels * height * width],
+        }
+    }
+
+    /// Pixels per plane (`height · width`).
+    pub fn plane_len(&self) -> usize {
+        self.height * self.width
+    }
+
+    /// Plane `c`.
+    pub fn plane(&self, c: usize) -> &[f32] {
+        let n = self.plane_len();
+        &self.data[c * n..(c + 1) * n]
+    }
+
+    /// Value of channel `c` at pixel index `i = row·width + col`.
+    pub fn at(&self, c: usize, i: usize) -> f32 {
+        self.data[c * self.plane_len() + i]
+    }
+
+    /// The first three channels at pixel index `i` (a one-channel image repeats its value).
+    pub fn rgb(&self, i: usize) -> glam::Vec3 {
+        if self.channels >= 3 {
+            glam::Vec3::new(self.at(0, i), self.at(1, i), self.at(2, i))
+        } else {
+            glam::Vec3::splat(self.at(0, i))
+        }
+    }
+
+    /// Sets the first three channels at pixel index `i` (needs ≥ 3 channels).
+    pub fn set_rgb(&mut self, i: usize, v: glam::Vec3) {
+        let n = self.plane_len();
+        self.data[i] = v.x;
+        self.data[n + i] = v.y;
+        self.data[2 * n + i] = v.z;
+    }
+
+    /// Every value passed through `f`.
+    pub fn map(&self, f: impl Fn(f32) -> f32) -> Image {
+        Image {
+            data: self.data.iter().map(|&v| f(v)).collect(),
+            ..self.clone()
+        }
+    }
+}
+
+/// Writes `bytes` to `path` atomically (via [`picker_nets::write_atomic`]).
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    picker_nets::write_atomic(path, bytes).map_err(|e| match Error::from(e) {
+        Error::Io {
+            path: p,
+            op,
+            source,
+        } if p.as_os_str().is_empty() => Error::io(path, op, source),
+        other => other,
+    })
+}
+
+/// EXR channel names for `c` channels: `Y` for one, `R G B` for three,
+/// `R G B A` for four, `C0 C1 …` otherwise.
+pub fn exr_channel_names(c: usize) -> Vec<String> {
+    match c {
+        1 => vec!["Y".into()],
+        3 => ["R", "G", "B"].map(String::from).to_vec(),
+        4 => ["R", "G", "B", "A"].map(String::from).to_vec(),
+        _ => (0..c).map(|i| format!("C{i}")).collect(),
+    }
+}
+
+fn check_planes(format: &'static str, planes: &[f32], c: usize, w: usize, h: usize) -> Result<()> {
+    if c == 0 || planes.len() != c * w * h {
+        return Err(Error::Encode {
+            format,
+            reason: format!("given {} values for {c} channels of {w}x{h}", planes.len()),
+        });
+    }
+    Ok(())
+}
+
+/// Encodes planar f32 data (`c` planes of `w × h`, row-major, row 0 at the
+/// top) as a single-layer, losslessly compressed, 32-bit float OpenEXR file
+/// with the channels of [`exr_channel_names`].
+pub fn encode_exr(planes: &[f32], c: usize, w: usize, h: usize) -> Result<Vec<u8>> {
+    use exr::prelude::*;
+    check_planes("EXR", planes, c, w, h)?;
+    let n = w * h;
+    let channels: Vec<AnyChannel<FlatSamples>> = exr_channel_names(c)
+        .into_iter()
+        .enumerate()
+        .map(|(i, name)| {
+            AnyChannel::new(
+                name.as_str(),
+                FlatSamples::F32(planes[i * n..(i + 1) * n].to_vec()),
+            )
+        })
+        .collect();
+    let layer = Layer::new(
+        (w, h),
+        LayerAttributes::default(),
+        Encoding::FAST_LOSSLESS,
+        AnyChannels::sort(SmallVec::from_vec(channels)),
+    );
+    let mut buf = Cursor::new(Vec::new());
+    Image::from_layer(layer)
+        .write()
+        .non_parallel()
+        .to_buffered(&mut buf)
+        .map_err(|e| crate::error::Error::Encode {
+            format: "EXR",
+            reason: e.to_string(),
+        })?;
+    Ok(buf.into_inner())
+}
+
+/// Quantises a display value in `[0, 1]` to 8 bits (rounded, clamped; NaN → 0).
+pub fn to_u8(v: f32) -> u8 {
+    if v.is_nan() {
+        0
+    } else {
+        (v.clamp(0.0, 1.0) * 255.0).round() as u8
+    }
+}
+
+/// Quantises a display value in `[0, 1]` to 16 bits (rounded, clamped; NaN → 0).
+pub fn to_u16(v: f32) -> u16 {
+    if v.is_nan() {
+        0
+    } else {
+        (v.clamp(0.0, 1.0) * 65535.0).round() as u16
+    }
+}
+
+fn png_dims(w: usize, h: usize) -> Result<(u32, u32)> {
+    let bad = |what| Error::Encode {
+        format: "PNG",
+        reason: format!("image too {what}"),
+    };
+    Ok((
+        u32::try_from(w).map_err(|_| bad("wide"))?,
+        u32::try_from(h).map_err(|_| bad("tall"))?,
+    ))
+}
+
+fn png_bytes(img: image::DynamicImage) -> Result<Vec<u8>> {
+    let mut buf = Cursor::new(Vec::new());
+    img.write_to(&mut buf, image::ImageFormat::Png)
+        .map_err(|e| Error::Encode {
+            format: "PNG",
+            reason: e.to_string(),
+        })?;
+    Ok(buf.into_inner())
+}
+
+/// Interleaves `c` planes of `n` values, quantised by `q`.
+fn interleave<T>(planes: &[f32], c: usize, n: usize, q: impl Fn(f32) -> T) -> Vec<T> {
+    let mut px = Vec::with_capacity(c * n);
+    for i in 0..n {
+        for ch in 0..c {
+            px.push(q(planes[ch * n + i]));
+        }
+    }
+    px
+}
+
+fn check_png(planes: &[f32], c: usize, w: usize, h: usize) -> Result<()> {
+    check_planes("PNG", planes, c, w, h)?;
+    if c != 1 && c != 3 && c != 4 {
+        return Err(Error::Encode {
+            format: "PNG",
+            reason: format!("needs 1, 3 or 4 channels, given {c}"),
+        });
+    }
+    Ok(())
+}
+
+/// Encodes planar display values in `[0, 1]` (`c` = 1 grey, 3 RGB or 4 RGBA
+/// planes of `w × h`) as an 8-bit PNG ([`to_u8`]; no transfer function is applied).
+pub fn encode_png(planes: &[f32], c: usize, w: usize, h: usize) -> Result<Vec<u8>> {
+    check_png(planes, c, w, h)?;
+    let (wu, hu) = png_dims(w, h)?;
+    let px = interleave(planes, c, w * h, to_u8);
+    let mismatch = || Error::Encode {
+        format: "PNG",
+        reason: "buffer size mismatch".into(),
+    };
+    let img: image::DynamicImage = match c {
+        1 => image::GrayImage::from_raw(wu, hu, px)
+            .ok_or_else(mismatch)?
+            .into(),
+        3 => image::RgbImage::from_raw(wu, hu, px)
+            .ok_or_else(mismatch)?
+            .into(),
+        _ => image::RgbaImage::from_raw(wu, hu, px)
+            .ok_or_else(mismatch)?
+            .into(),
+    };
+    png_bytes(img)
+}
+
+/// Like [`encode_png`] with 16 bits per sample ([`to_u16`]).
+pub fn encode_png16(planes: &[f32], c: usize, w: usize, h: usize) -> Result<Vec<u8>> {
+    check_png(planes, c, w, h)?;
+    let (wu, hu) = png_dims(w, h)?;
+    let px = interleave(planes, c, w * h, to_u16);
+    let mismatch = || Error::Encode {
+        format: "PNG",
+        reason: "buffer size mismatch".into(),
+    };
+    let img: image::DynamicImage = match c {
+        1 => image::ImageBuffer::<image::Luma<u16>, _>::from_raw(wu, hu, px)
+            .ok_or_else(mismatch)?
+            .into(),
+        3 => image::ImageBuffer::<image::Rgb<u16>, _>::from_raw(wu, hu, px)
+            .ok_or_else(mismatch)?
+            .into(),
+        _ => image::ImageBuffer::<image::Rgba<u16>, _>::from_raw(wu, hu, px)
+            .ok_or_else(mismatch)?
+            .into(),
+    };
+    png_bytes(img)
+}
+
+/// Writes `img` as a 32-bit float EXR ([`encode_exr`]), atomically.
+pub fn write_exr(path: &Path, img: &Image) -> Result<()> {
+    let bytes = encode_exr(&img.data, img.channels, img.width, img.height)?;
+    write_atomic(path, &bytes)
+}
+
+/// Writes `img` (display values in `[0, 1]`) as an 8-bit PNG ([`encode_png`]), atomically.
+pub fn write_png(path: &Path, img: &Image) -> Result<()> {
+    let bytes = encode_png(&img.data, img.channels, img.width, img.height)?;
+    write_atomic(path, &bytes)
+}
+
+/// Writes `img` (values in `[0, 1]`) as a 16-bit PNG ([`encode_png16`]), atomically.
+pub fn write_png16(path: &Path, img: &Image) -> Result<()> {
+    let bytes = encode_png16(&img.data, img.channels, img.width, img.height)?;
+    write_atomic(path, &bytes)
+}
+
+/// Reads an EXR's first layer (any sample type: f32, f16, u32, as f32) into a
+/// planar image: channels `R,G,B` (an `A` is dropped) → 3 planes, `Y` → 1 plane,
+/// otherwise every channel in the file's (alphabetical) order.
+pub fn read_exr(path: &Path) -> Result<Image> {
+    let img = exr::prelude::read_all_flat_layers_from_file(path).map_err(|e| match e {
+        exr::error::Error::Io(io) => Error::io(path, "read", io),
+        other => Error::decode(path, other),
+    })?;
+    let layer = img
+        .layer_data
+        .first()
+        .ok_or_else(|| Error::decode(path, "no layer"))?;
+    let (w, h) = (layer.size.width(), layer.size.height());
+    let list = &layer.channel_data.list;
+    let find = |name: &str| list.iter().find(|c| c.name.to_string() == name);
+    let chosen: Vec<_> = match (find("R"), find("G"), find("B"), find("Y")) {
+        (Some(r), Some(g), Some(b), _) => vec![r, g, b],
+        (_, _, _, Some(y)) => vec![y],
+        _ => list.iter().collect(),
+    };
+    let mut data = Vec::with_capacity(chosen.len() * w * h);
+    for ch in &chosen {
+        data.extend(ch.sample_data.values_as_f32());
+    }
+    Image::new(chosen.len(), h, w, data).map_err(|e| Error::decode(path, e))
+}
+
+/// Reads a PNG (8- or 16-bit, grey, grey+alpha, RGB or RGBA) into values in
+/// `[0, 1]` as stored (no transfer function): grey → 1 plane, colour → 3 planes
+/// (alpha dropped).
+pub fn read_png(path: &Path) -> Result<Image> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, "read", e))?;
+    let dynimg = image::load_from_memory_with_format(&bytes, image::ImageFormat::Png)
+        .map_err(|e| Error::decode(path, e))?;
+    let (w, h) = (dynimg.width() as usize, dynimg.height() as usize);
+    let grey = !dynimg.color().has_color();
+    if grey {
+        let g = dynimg.to_luma32f();
+        Image::new(1, h, w, g.into_raw()).map_err(|e| Error::decode(path, e))
+    } else {
+        let rgb = dynimg.to_rgb32f().into_raw();
+        let n = w * h;
+        let mut data = vec![0.0; 3 * n];
+        for i in 0..n {
+            for c in 0..3 {
+                data[c * n + i] = rgb[3 * i + c];
+            }
+        }
+        Image::new(3, h, w, data).map_err(|e| Error::decode(path, e))
+    }
+}
+
+/// Reads an EXR or PNG by its extension (`.exr` → [`read_exr`], `.png` → [`read_png`]).
+pub fn read_image(path: &Path) -> Result<Image> {
+    match extension(path).as_str() {
+        "exr" => read_exr(path),
+        "png" => read_png(path),
+        other => Err(Error::decode(
+            path,
+            format!("unsupported image type {other:?} (expected .exr or .png)"),
+        )),
+    }
+}
+
+/// The lower-case extension of `path` (empty if none).
+pub(crate) fn extension(path: &Path) -> String {
+    path.extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default()
+}
+
+/// The inverse of [`picker_nets::conventions::srgb_encode`] (IEC 61966-2-1):
+/// encoded `[0, 1]` → linear; values outside `[0, 1]` are clamped, NaN gives 0.
+pub fn srgb_decode(v: f32) -> f32 {
+    if v.is_nan() {
+        return 0.0;
+    }
+    let v = v.clamp(0.0, 1.0);
+    if v <= 0.040_45 {
+        v / 12.92
+    } else {
+        ((v + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use picker_nets::conventions::srgb_encode;
+
+    #[test]
+    fn quantisation() {
+        assert_eq!(to_u8(-1.0), 0);
+        assert_eq!(to_u8(0.5), 128);
+        assert_eq!(to_u8(2.0), 255);
+        assert_eq!(to_u8(f32::NAN), 0);
+        assert_eq!(to_u16(1.0), 65535);
+        for i in 0..=100 {
+            let v = i as f32 / 100.0;
+            assert!((srgb_decode(srgb_encode(v)) - v).abs() < 1e-5);
+        }
+    }
+
+    #[test]
+    fn atomic_write_replaces_and_leaves_no_temp() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("a.txt");
+        write_atomic(&p, b"one").unwrap();
+        write_atomic(&p, b"two").unwrap();
+        assert_eq!(std::fs::read(&p).unwrap(), b"two");
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+        let e = write_atomic(&dir.path().join("no/such/dir/x"), b"x").unwrap_err();
+        assert!(e.to_string().contains("no/such/dir"), "{e}");
+    }
+
+    #[test]
+    fn exr_and_png_round_trip() {
+        let dir = tempfile::tempdir().unwrap();
+        let (h, w) = (3, 5);
+        let data: Vec<f32> = (0..3 * h * w).map(|i| i as f32 * 0.37 - 2.0).collect();
+        let img = Image::new(3, h, w, data).unwrap();
+        let p = dir.path().join("x.exr");
+        write_exr(&p, &img).unwrap();
+        assert_eq!(read_image(&p).unwrap(), img);
+        let grey = Image::new(1, h, w, (0..h * w).map(|i| i as f32).collect()).unwrap();
+        write_exr(&p, &grey).unwrap();
+        assert_eq!(read_exr(&p).unwrap(), grey);
+
+        let disp = img.map(|v| (v + 2.0) / 6.0);
+        let p8 = dir.path().join("x.png");
+        write_png(&p8, &disp).unwrap();
+        let back = read_image(&p8).unwrap();
+        assert_eq!((back.channels, back.height, back.width), (3, h, w));
+        for (a, b) in back.data.iter().zip(&disp.data) {
+            assert!((a - b.clamp(0.0, 1.0)).abs() <= 0.5 / 255.0 + 1e-6);
+        }
+        write_png16(&p8, &disp).unwrap();
+        let back = read_png(&p8).unwrap();
+        for (a, b) in back.data.iter().zip(&disp.data) {
+            assert!((a - b.clamp(0.0, 1.0)).abs() <= 0.5 / 65535.0 + 1e-6);
+        }
+        write_png16(&p8, &grey.map(|v| v / 20.0)).unwrap();
+        assert_eq!(read_png(&p8).unwrap().channels, 1);
+    }
+
+    #[test]
+    fn errors_name_the_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("missing.exr");
+        assert!(read_exr(&p)
+            .unwrap_err()
+            .to_string()
+            .contains("missing.exr"));
+        let bad = dir.path().join("bad.png");
+        std::fs::write(&bad, b"not a png").unwrap();
+        assert!(read_png(&bad).unwrap_err().to_string().contains("bad.png"));
+        assert!(read_image(&dir.path().join("a.jpg")).is_err());
+        assert!(encode_png(&[0.0; 6], 2, 3, 1).is_err());
+        assert!(Image::new(3, 2, 2, vec![0.0; 5]).is_err());
+    }
+}

@@ -1,0 +1,210 @@
+//! The fast path: eq. 3.7 evaluated from precomputed data, tested against
+//! [`shade_exact`](crate::shade_exact).
+//!
+//! - **Diffuse**: the irradiance `E(N) = Σ_i L_i max(0, ω_i·N) ΔΩ_i` is
+//!   computed exactly on a 32 × 64 grid of normals (from the map area-averaged
+//!   to at most 64 × 128) and looked up bilinearly: `ρd/π · E(N)`.
+//! - **Specular**: the same quadrature as the exact path, but over a map
+//!   pre-averaged to the lobe's scale and only over the lobe's support. A
+//!   chain of area-correct downsamplings of the map (rows `8·2^(j/2)`, up to
+//!   the map itself) is built once; for exponent `n` the coarsest one whose
+//!   pixel spacing `π/H` is at most 2/3 of the lobe width `1/√n` is used, and
+//!   only its pixels within the cone where the lobe `cosⁿα` exceeds `10⁻³` of
+//!   its peak are summed (about 100–200 pixels for any `n`). The cosine
+//!   `max(0, ω·N)`, the horizon and the exponent are exact.
+//!
+//! Where the map cannot resolve a lobe (`n` above
+//! [`resolved_exponent`](crate::phong::resolved_exponent)) the finest level is
+//! the map itself, so the fast path aliases exactly as the exact quadrature does.
+
+use glam::{DVec3, Vec3};
+use picker_nets::conventions as conv;
+use rayon::prelude::*;
+
+use crate::envmap::EnvMap;
+use crate::phong::{unit, PhongMaterial};
+
+/// Rows of the irradiance grid (columns are twice as many).
+pub const IRRADIANCE_ROWS: usize = 32;
+/// Rows of the coarsest specular level.
+pub const MIN_LEVEL_ROWS: usize = 16;
+/// Lobe weights below this fraction of the peak are skipped.
+pub const LOBE_CUTOFF: f64 = 1e-3;
+/// Largest ratio of pixel spacing to lobe width `1/√n` in the chosen level.
+const SPACING_PER_LOBE_WIDTH: f64 = 2.0 / 3.0;
+
+/// One level of the specular chain: directions and `L·ΔΩ` of every pixel.
+#[derive(Clone, Debug)]
+struct Level {
+    rows: usize,
+    cols: usize,
+    dirs: Vec<Vec3>,
+    weighted: Vec<Vec3>,
+    lat: Vec<f64>,
+}
+
+impl Level {
+    fn new(env: &EnvMap) -> Self {
+        let (h, w) = (env.height(), env.width());
+        let mut dirs = Vec::with_capacity(h * w);
+        let mut weighted = Vec::with_capacity(h * w);
+        for row in 0..h {
+            let sa = conv::pixel_solid_angle(row, h, w) as f32;
+            for col in 0..w {
+                dirs.push(env.direction(row, col));
+                weighted.push(env.get(row, col) * sa);
+            }
+        }
+        Self {
+            rows: h,
+            cols: w,
+            dirs,
+            weighted,
+            lat: (0..h).map(|r| conv::envmap_row_latitude(r, h)).collect(),
+        }
+    }
+
+    /// `Σ L_i ΔΩ_i cosⁿ(ω_i·R) max(0, ω_i·N)` over the lobe's support around unit `r`.
+    fn lobe_sum(&self, r: DVec3, n: DVec3, exponent: f64) -> DVec3 {
+        use std::f64::consts::{FRAC_PI_2, PI};
+        let c_min = LOBE_CUTOFF.powf(1.0 / exponent.max(1e-3));
+        let alpha = c_min.clamp(-1.0, 1.0).acos();
+        let lat_r = r.y.clamp(-1.0, 1.0).asin();
+        let margin = PI / self.rows as f64;
+        let (sw, rf, nf) = (self.cols, r.as_vec3(), n.as_vec3());
+        let span = if lat_r.abs() + alpha + margin >= FRAC_PI_2 {
+            PI
+        } else {
+            (alpha.sin() / (lat_r.abs() + margin).cos())
+                .clamp(-1.0, 1.0)
+                .asin()
+                + 2.0 * PI / sw as f64
+        };
+        let half_cols = (span / (2.0 * PI) * sw as f64).ceil() as i64;
+        let all_cols = 2 * half_cols + 1 >= sw as i64;
+        let (x, _) = conv::envmap_position(r.to_array(), self.rows, sw);
+        let centre = x.floor() as i64;
+        let mut acc = DVec3::ZERO;
+        let mut visit = |i: usize| {
+            let d = self.dirs[i];
+            let ca = d.dot(rf);
+            if ca < c_min as f32 {
+                return;
+            }
+            let ci = d.dot(nf);
+            if ci <= 0.0 {
+                return;
+            }
+            acc += self.weighted[i].as_dvec3() * ((ca as f64).powf(exponent) * ci as f64);
+        };
+        for (row, &lat) in self.lat.iter().enumerate() {
+            if (lat - lat_r).abs() > alpha + margin {
+                continue;
+            }
+            let base = row * sw;
+            if all_cols {
+                (0..sw).for_each(|c| visit(base + c));
+            } else {
+                for dc in -half_cols..=half_cols {
+                    visit(base + (centre + dc).rem_euclid(sw as i64) as usize);
+                }
+            }
+        }
+        acc
+    }
+}
+
+/// An environment map prepared for fast Phong shading (module docs).
+#[derive(Clone, Debug)]
+pub struct PrefilteredEnv {
+    irradiance: EnvMap,
+    levels: Vec<Level>,
+}
+
+/// `env` area-averaged down to at most `rows × 2·rows` (as is if already smaller).
+fn at_most(env: &EnvMap, rows: usize) -> EnvMap {
+    if env.height() <= rows && env.width() <= 2 * rows {
+        env.clone()
+    } else {
+        let h = env.height().min(rows);
+        let w = env.width().min(2 * rows);
+        env.resample(w, h).expect("sizes are positive")
+    }
+}
+
+/// The irradiance `E(N)` on an `IRRADIANCE_ROWS × 2·IRRADIANCE_ROWS` grid of normals.
+fn irradiance_map(env: &EnvMap) -> EnvMap {
+    let src = at_most(env, 2 * IRRADIANCE_ROWS);
+    let (sh, sw) = (src.height(), src.width());
+    let dirs: Vec<DVec3> = (0..sh * sw)
+        .map(|i| DVec3::from(conv::envmap_pixel_direction(i / sw, i % sw, sh, sw)))
+        .collect();
+    let sa = conv::envmap_row_solid_angles(sh, sw);
+    let (h, w) = (IRRADIANCE_ROWS, 2 * IRRADIANCE_ROWS);
+    let data: Vec<Vec3> = (0..h * w)
+        .into_par_iter()
+        .map(|i| {
+            let n = DVec3::from(conv::envmap_pixel_direction(i / w, i % w, h, w));
+            let mut acc = DVec3::ZERO;
+            for (j, (d, l)) in dirs.iter().zip(src.data()).enumerate() {
+                let c = d.dot(n);
+                if c > 0.0 {
+                    acc += l.as_dvec3() * (c * sa[j / sw]);
+                }
+            }
+            acc.as_vec3()
+        })
+        .collect();
+    EnvMap::new(w, h, data).expect("grid size matches")
+}
+
+impl PrefilteredEnv {
+    /// Prepares `env`: the irradiance grid (rayon over normals) and the chain
+    /// of downsampled levels. Deterministic.
+    pub fn new(env: &EnvMap) -> Self {
+        let mut levels = Vec::new();
+        let mut j = 0;
+        loop {
+            let rows = (MIN_LEVEL_ROWS as f64 * (j as f64 / 2.0).exp2()).round() as usize;
+            if rows >= env.height() {
+                levels.push(Level::new(env));
+                break;
+            }
+            levels.push(Level::new(&at_most(env, rows)));
+            j += 1;
+        }
+        Self {
+            irradiance: irradiance_map(env),
+            levels,
+        }
+    }
+
+    /// The irradiance `E(N) = ∫ L(ω) max(0, ω·N) dω` for a unit normal (bilinear lookup).
+    pub fn irradiance(&self, normal: Vec3) -> Vec3 {
+        self.irradiance.sample(normal)
+    }
+
+    /// Eq. 3.7, approximated (module docs): same arguments and conventions as
+    /// [`shade_exact`](crate::shade_exact); a zero or non-finite normal gives black.
+    pub fn shade(&self, normal: Vec3, view: Vec3, material: &PhongMaterial) -> Vec3 {
+        let Some(n) = unit(normal) else {
+            return Vec3::ZERO;
+        };
+        let v = unit(view).unwrap_or(DVec3::Z);
+        let diffuse = material.diffuse * self.irradiance.sample(n.as_vec3()) / std::f32::consts::PI;
+        if material.specular == Vec3::ZERO {
+            return diffuse;
+        }
+        let e = material.exponent.max(0.0) as f64;
+        // Finest spacing needed: π/H ≤ (2/3)/√n.
+        let need = std::f64::consts::PI * e.sqrt() / SPACING_PER_LOBE_WIDTH;
+        let level = self
+            .levels
+            .iter()
+            .find(|l| l.rows as f64 >= need)
+            .unwrap_or(&self.levels[self.levels.len() - 1]);
+        let r = 2.0 * v.dot(n) * n - v;
+        let s = level.lobe_sum(r, n, e) * ((e + 2.0) / (2.0 * std::f64::consts::PI));
+        diffuse + material.specular * s.as_vec3()
+    }
+}

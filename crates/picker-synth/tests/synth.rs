@@ -1,0 +1,230 @@
+//! Properties of generated scenes: determinism (also across thread counts), the
+//! camera never inside or clipping geometry, element validity, and the re-render
+//! check of `direct_env.exr` against `picker_render::rerender` (exact quadrature).
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use glam::Vec3;
+use picker_render::{io, rerender, ElementImages, EnvMap, Quality};
+use picker_synth::geometry::Shape;
+use picker_synth::render::render;
+use picker_synth::scene::{generate, SceneConfig};
+
+fn files(dir: &Path) -> BTreeMap<String, Vec<u8>> {
+    let mut out = BTreeMap::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                let rel = p.strip_prefix(dir).unwrap().to_string_lossy().into_owned();
+                out.insert(rel, std::fs::read(&p).unwrap());
+            }
+        }
+    }
+    out
+}
+
+fn write_in_pool(threads: usize, dir: &Path, seed: u64, indices: &[u64], cfg: SceneConfig) {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap();
+    pool.install(|| {
+        use rayon::prelude::*;
+        indices.par_iter().for_each(|&i| {
+            let d = dir.join(picker_synth::scene_dir_name(i));
+            picker_synth::generate_scene_to(&d, seed, i, cfg, None, true).unwrap();
+        })
+    });
+}
+
+#[test]
+fn same_seed_same_bytes_on_any_thread_count() {
+    let cfg = SceneConfig::for_size(24, 32);
+    let a = tempfile::tempdir().unwrap();
+    let b = tempfile::tempdir().unwrap();
+    write_in_pool(1, a.path(), 11, &[0, 1, 2], cfg);
+    write_in_pool(2, b.path(), 11, &[2, 1, 0], cfg);
+    let (fa, fb) = (files(a.path()), files(b.path()));
+    assert!(fa.len() > 3 * 20, "{} files", fa.len());
+    assert_eq!(fa.keys().collect::<Vec<_>>(), fb.keys().collect::<Vec<_>>());
+    for (k, v) in &fa {
+        assert!(v == &fb[k], "{k} differs between runs with 1 and 2 threads");
+    }
+    // A different seed gives a different scene.
+    let c = tempfile::tempdir().unwrap();
+    write_in_pool(1, c.path(), 12, &[0], cfg);
+    let fc = files(c.path());
+    assert_ne!(fc["scene_000000/image.exr"], fa["scene_000000/image.exr"]);
+}
+
+#[test]
+fn camera_never_inside_or_clipping_geometry() {
+    let cfg = SceneConfig {
+        height: 24,
+        width: 32,
+        texture_size: 8,
+        sky_height: 8,
+    };
+    let near = 0.05;
+    for index in 0..150 {
+        let s = generate(3, index, cfg, None).unwrap();
+        let cam = &s.camera;
+        let p = cam.position;
+        assert!(
+            p.cmpgt(Vec3::splat(0.0)).all() && p.cmplt(s.room).all(),
+            "scene {index}: camera {p} outside the room {}",
+            s.room
+        );
+        let fov = cam.fov_y.to_degrees();
+        assert!((40.0..=75.0).contains(&fov), "fov {fov}");
+        assert!(cam.pitch.to_degrees().abs() <= 20.0 && cam.roll.to_degrees().abs() <= 3.0);
+        for prim in &s.primitives {
+            let d = prim.shape.aabb().distance(p);
+            assert!(
+                d >= 0.4 - 1e-4,
+                "scene {index}: camera {d} m from {:?}",
+                prim.shape
+            );
+            if let Shape::Sphere { center, radius } = prim.shape {
+                assert!((p - center).length() > radius + 0.4 - 1e-4);
+            }
+        }
+        // The near plane's corners and centre see every surface beyond it.
+        for (row, col) in [(0, 0), (0, 31), (23, 0), (23, 31), (12, 16)] {
+            let d = cam.rotation * cam.pixel_direction(row, col, 24, 32);
+            let hit = picker_synth::geometry::nearest(&s.shapes, p, d, 0.0, f32::INFINITY);
+            if let Some((_, h)) = hit {
+                assert!(h.t > near, "scene {index}: surface at {} m", h.t);
+            }
+        }
+    }
+}
+
+#[test]
+fn elements_are_valid() {
+    let cfg = SceneConfig::for_size(36, 48);
+    for index in 0..6 {
+        let s = generate(5, index, cfg, None).unwrap();
+        let b = render(&s);
+        let mut seg_of: BTreeMap<u16, Vec3> = BTreeMap::new();
+        let mut surfaces = 0;
+        for i in 0..b.height * b.width {
+            let (n, v) = (b.normals[i], b.view[i]);
+            assert!((n.length() - 1.0).abs() < 1e-4, "normal {n}");
+            assert!((v.length() - 1.0).abs() < 1e-4, "view {v}");
+            assert!(
+                n.dot(v) >= -1e-5,
+                "scene {index} pixel {i}: normal {n} faces away from {v}"
+            );
+            let uv = b.uv[i];
+            assert!(
+                (0.0..1.0).contains(&uv.x) && (0.0..1.0).contains(&uv.y),
+                "uv {uv}"
+            );
+            assert!(uv.z == 0.0 || uv.z == 1.0);
+            if uv.z == 0.0 {
+                assert_eq!((uv.x, uv.y), (0.0, 0.0));
+            }
+            assert!((0.0..=1.0).contains(&b.glossiness[i]));
+            assert!(b.image[i].is_finite() && b.image[i].min_element() >= 0.0);
+            assert!(b.direct_env[i].is_finite() && b.direct_env[i].min_element() >= 0.0);
+            let id = b.material_id[i];
+            if id == 0 {
+                assert_eq!(b.depth[i], 0.0);
+                assert_eq!(b.diffuse[i], Vec3::ZERO);
+                continue;
+            }
+            surfaces += 1;
+            assert!(b.depth[i] > 0.0);
+            let m = &s.materials[id as usize - 1];
+            assert_eq!(m.id, id);
+            assert_eq!(uv.z == 1.0, m.textured());
+            let seg = *seg_of.entry(id).or_insert(b.segmentation[i]);
+            assert_eq!(
+                seg, b.segmentation[i],
+                "segmentation not constant for material {id}"
+            );
+            assert_eq!(seg, (m.diffuse_mode + m.specular) * 0.5);
+            assert_eq!(b.specular[i], m.specular);
+            assert_eq!(b.glossiness[i], m.glossiness);
+        }
+        assert!(surfaces > 0);
+        assert!(b.exposure.is_finite() && b.exposure > 0.0);
+    }
+}
+
+/// Worst per-pixel error of the fast path allowed, relative to the image's
+/// mean direct-env radiance, and the allowed mean absolute error (same units).
+const RERENDER_MAX_REL: f32 = 0.1;
+const RERENDER_MEAN_REL: f32 = 0.01;
+
+#[test]
+fn rerender_matches_direct_env() {
+    let cfg = SceneConfig::for_size(30, 40);
+    for index in 0..3 {
+        let dir = tempfile::tempdir().unwrap();
+        picker_synth::generate_scene_to(dir.path(), 21, index, cfg, None, false).unwrap();
+        let el = ElementImages::load(dir.path()).unwrap();
+        let env = EnvMap::read(&dir.path().join("envmap.exr")).unwrap();
+        assert_eq!((env.height(), env.width()), (30 / 8, 40 / 8));
+        let exact = rerender(&el, &env, Quality::Exact);
+        let direct = io::read_exr(&dir.path().join("direct_env.exr")).unwrap();
+        assert_eq!(exact.data.len(), direct.data.len());
+        let n = direct.data.len();
+        let mean = direct.data.iter().map(|v| v.abs()).sum::<f32>() / n as f32;
+        let mut worst = 0.0f32;
+        let mut sum = 0.0f32;
+        for (a, b) in exact.data.iter().zip(&direct.data) {
+            let e = (a - b).abs();
+            worst = worst.max(e);
+            sum += e;
+        }
+        let (worst_rel, mean_rel) = (worst / mean, sum / n as f32 / mean);
+        eprintln!("scene {index}: rerender vs direct_env: worst {worst_rel:.4}, mean {mean_rel:.5} of mean radiance {mean}");
+        assert!(
+            worst_rel <= RERENDER_MAX_REL && mean_rel <= RERENDER_MEAN_REL,
+            "scene {index}: worst {worst_rel}, mean {mean_rel} (relative to the mean radiance {mean})"
+        );
+    }
+}
+
+#[test]
+fn envmap_is_the_sky_in_the_camera_frame() {
+    let cfg = SceneConfig {
+        sky_height: 64,
+        ..SceneConfig::for_size(24, 32)
+    };
+    for index in 0..4 {
+        let s = generate(8, index, cfg, None).unwrap();
+        let r = s.camera.rotation;
+        let cam_sky = s.sky.rotated(r.transpose());
+        let (mut err, mut total, mut err_wrong) = (0.0f32, 0.0f32, 0.0f32);
+        for k in 0..400 {
+            let a = k as f32 * 0.731;
+            let b = (k as f32 * 0.377).sin() * 1.4;
+            let d_cam = Vec3::new(a.sin() * b.cos(), b.sin(), a.cos() * b.cos()).normalize();
+            let want = s.sky.sample(r * d_cam);
+            err += (cam_sky.sample(d_cam) - want).abs().element_sum();
+            err_wrong += (cam_sky.sample(r * d_cam) - want).abs().element_sum();
+            total += want.element_sum();
+        }
+        // Resampling the rotated map blurs it a little (a sun most); a wrong frame
+        // (the rotation applied the other way) is far off unless the camera is level.
+        eprintln!(
+            "scene {index}: mean error {:.4}, wrong frame {:.4}",
+            err / total,
+            err_wrong / total
+        );
+        assert!(
+            err <= 0.1 * total,
+            "scene {index}: mean error {}",
+            err / total
+        );
+        assert!(err <= err_wrong + 1e-3 * total);
+    }
+}
