@@ -892,14 +892,15 @@ fn tiles(rng: &mut Rng, size: usize) -> Pattern {
         let tile = cells[c.iy * nx + c.ix] * (1.0 + noise * n);
         let shade = 0.85 + 0.15 * smoothstep(0.0, bevel, c.edge - grout_width / 2.0);
         let grout = grout_color * (1.0 + 0.1 * n);
-        let t = smoothstep(
-            grout_width / 2.0 - aa / 2.0,
-            grout_width / 2.0 + aa / 2.0,
-            c.edge,
-        );
-        grout.lerp(tile * shade, t)
+        grout.lerp(tile * shade, joint_mask(c.edge, grout_width, aa))
     };
     (Box::new(f), params)
+}
+
+/// 0 inside a joint (grout, mortar) of `width` centred on a cell edge, 1 on
+/// the cell, anti-aliased over `aa`; `edge` is the distance to the nearest edge.
+fn joint_mask(edge: f32, width: f32, aa: f32) -> f32 {
+    smoothstep(width / 2.0 - aa / 2.0, width / 2.0 + aa / 2.0, edge)
 }
 
 fn bricks(rng: &mut Rng, size: usize) -> Pattern {
@@ -943,12 +944,7 @@ fn bricks(rng: &mut Rng, size: usize) -> Pattern {
         let brick = cells[c.iy * nx + c.ix] * (1.0 + noise * (0.6 * n + 0.6 * s));
         let edge_dark = 0.8 + 0.2 * smoothstep(0.0, mortar_width, c.edge - mortar_width / 2.0);
         let mortar = mortar_color * (0.85 + 0.3 * (0.5 + 0.5 * s)) * (1.0 + 0.1 * n);
-        let t = smoothstep(
-            mortar_width / 2.0 - aa / 2.0,
-            mortar_width / 2.0 + aa / 2.0,
-            c.edge,
-        );
-        mortar.lerp(brick * edge_dark, t)
+        mortar.lerp(brick * edge_dark, joint_mask(c.edge, mortar_width, aa))
     };
     (Box::new(f), params)
 }
