@@ -22,6 +22,16 @@ impl Activation {
         }
     }
 
+    /// The activation of one value.
+    #[inline(always)]
+    pub fn apply_one(self, x: f32) -> f32 {
+        match self {
+            Activation::None => x,
+            Activation::Relu => x.max(0.0),
+            Activation::Tanh => x.tanh(),
+        }
+    }
+
     /// The activation of one value, in f64 (for reference code).
     pub fn apply_f64(self, x: f64) -> f64 {
         match self {

@@ -10,6 +10,7 @@ use crate::gemm::{gemm, BSource, DenseB, Epilogue, PackedA};
 use crate::isa::Isa;
 use crate::microkernel::MicroKernel;
 use crate::tensor::Tensor;
+use crate::winograd::Winograd;
 
 /// Shape of a 2-D convolution (PyTorch `Conv2d`, zero padding, no dilation, no groups).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -198,6 +199,53 @@ pub struct Conv2d {
     path: ConvPath,
 }
 
+/// Which algorithm a [`Conv2d`] uses.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[non_exhaustive]
+pub enum ConvAlgorithm {
+    /// Chosen from the shape: direct for ≤ 4 outputs (stride 1, no padding),
+    /// Winograd for 3×3 stride-1 layers with ≥ 16 input and output channels,
+    /// else the packed GEMM.
+    Auto,
+    /// Packed GEMM over an implicit im2col (any shape).
+    Gemm,
+    /// Direct row-vectorised convolution (stride 1, no padding, ≤ 4 outputs).
+    Direct,
+    /// Winograd F(4×4, 3×3) (3×3 kernels, stride 1, any zero padding).
+    Winograd,
+}
+
+impl ConvAlgorithm {
+    /// Every algorithm that can be asked for explicitly.
+    pub const EXPLICIT: [ConvAlgorithm; 3] = [
+        ConvAlgorithm::Gemm,
+        ConvAlgorithm::Direct,
+        ConvAlgorithm::Winograd,
+    ];
+
+    /// True when the algorithm can run a layer of this shape.
+    pub fn applies(self, s: &ConvSpec) -> bool {
+        match self {
+            ConvAlgorithm::Auto | ConvAlgorithm::Gemm => true,
+            ConvAlgorithm::Direct => s.stride == 1 && s.pad == 0 && s.c_out <= direct::MAX_CO,
+            ConvAlgorithm::Winograd => s.kh == 3 && s.kw == 3 && s.stride == 1,
+        }
+    }
+
+    fn resolve(self, s: &ConvSpec) -> ConvAlgorithm {
+        match self {
+            ConvAlgorithm::Auto if ConvAlgorithm::Direct.applies(s) => ConvAlgorithm::Direct,
+            ConvAlgorithm::Auto
+                if ConvAlgorithm::Winograd.applies(s) && s.c_in >= 16 && s.c_out >= 16 =>
+            {
+                ConvAlgorithm::Winograd
+            }
+            ConvAlgorithm::Auto => ConvAlgorithm::Gemm,
+            other => other,
+        }
+    }
+}
+
 /// How a [`Conv2d`] runs.
 #[derive(Clone)]
 enum ConvPath {
@@ -208,6 +256,8 @@ enum ConvPath {
     },
     /// Direct convolution (stride 1, no padding, ≤ `direct::MAX_CO` outputs).
     Direct { isa: Isa, weight: Vec<f32> },
+    /// Winograd F(4×4, 3×3).
+    Winograd { isa: Isa, wino: Winograd },
 }
 
 impl std::fmt::Debug for Conv2d {
@@ -217,7 +267,7 @@ impl std::fmt::Debug for Conv2d {
             .field("act", &self.act)
             .field("bias", &self.bias.is_some())
             .field("isa", &self.isa())
-            .field("direct", &matches!(self.path, ConvPath::Direct { .. }))
+            .field("algorithm", &self.algorithm())
             .finish()
     }
 }
@@ -233,7 +283,7 @@ fn check_input(op: &'static str, x: &Tensor, c: usize) -> Result<()> {
 /// Copies a short run (a panel row is at most a few dozen floats) without a
 /// libc call: 16-float blocks move as vectors, the rest one by one.
 #[inline(always)]
-fn copy_short(dst: &mut [f32], src: &[f32]) {
+pub(crate) fn copy_short(dst: &mut [f32], src: &[f32]) {
     let mut d = dst.chunks_exact_mut(16);
     let mut s = src.chunks_exact(16);
     for (d, s) in (&mut d).zip(&mut s) {
@@ -247,7 +297,7 @@ fn copy_short(dst: &mut [f32], src: &[f32]) {
 
 /// Zeroes a short run without a libc call.
 #[inline(always)]
-fn zero_short(dst: &mut [f32]) {
+pub(crate) fn zero_short(dst: &mut [f32]) {
     let mut d = dst.chunks_exact_mut(16);
     for d in &mut d {
         d.copy_from_slice(&[0.0; 16]);
@@ -351,24 +401,48 @@ impl Conv2d {
         bias: Option<&[f32]>,
         act: Activation,
     ) -> Result<Self> {
+        Self::with_algorithm(isa, ConvAlgorithm::Auto, spec, weight, bias, act)
+    }
+
+    /// As [`Conv2d::with_isa`], with the algorithm chosen by the caller
+    /// (refused when it cannot run this shape).
+    pub fn with_algorithm(
+        isa: Isa,
+        algorithm: ConvAlgorithm,
+        spec: ConvSpec,
+        weight: &[f32],
+        bias: Option<&[f32]>,
+        act: Activation,
+    ) -> Result<Self> {
         spec.validate()?;
         check_weight("conv2d", weight.len(), spec.weight_len())?;
         let bias = check_bias("conv2d", bias, spec.c_out)?;
         let kernel = kernel_for("conv2d", isa)?;
-        let path = if spec.stride == 1 && spec.pad == 0 && spec.c_out <= direct::MAX_CO {
-            ConvPath::Direct {
+        if !algorithm.applies(&spec) {
+            return Err(invalid(
+                "conv2d",
+                format!("algorithm {algorithm:?} cannot run {spec:?}"),
+            ));
+        }
+        let path = match algorithm.resolve(&spec) {
+            ConvAlgorithm::Direct => ConvPath::Direct {
                 isa,
                 weight: weight.to_vec(),
-            }
-        } else {
-            let k = spec.c_in * spec.kh * spec.kw;
-            let p = spec.pad as isize;
-            let taps = (0..spec.kh as isize)
-                .flat_map(|ky| (0..spec.kw as isize).map(move |kx| (ky - p, kx - p)))
-                .collect();
-            ConvPath::Gemm {
-                packed: PackedA::pack(kernel, spec.c_out, k, |r, c| weight[r * k + c]),
-                taps,
+            },
+            ConvAlgorithm::Winograd => ConvPath::Winograd {
+                isa,
+                wino: Winograd::new(kernel, spec.c_in, spec.c_out, spec.pad, weight),
+            },
+            _ => {
+                let k = spec.c_in * spec.kh * spec.kw;
+                let p = spec.pad as isize;
+                let taps = (0..spec.kh as isize)
+                    .flat_map(|ky| (0..spec.kw as isize).map(move |kx| (ky - p, kx - p)))
+                    .collect();
+                ConvPath::Gemm {
+                    packed: PackedA::pack(kernel, spec.c_out, k, |r, c| weight[r * k + c]),
+                    taps,
+                }
             }
         };
         Ok(Self {
@@ -391,7 +465,16 @@ impl Conv2d {
     pub fn isa(&self) -> Isa {
         match &self.path {
             ConvPath::Gemm { packed, .. } => packed.kernel.isa,
-            ConvPath::Direct { isa, .. } => *isa,
+            ConvPath::Direct { isa, .. } | ConvPath::Winograd { isa, .. } => *isa,
+        }
+    }
+
+    /// The algorithm the layer runs with.
+    pub fn algorithm(&self) -> ConvAlgorithm {
+        match &self.path {
+            ConvPath::Gemm { .. } => ConvAlgorithm::Gemm,
+            ConvPath::Direct { .. } => ConvAlgorithm::Direct,
+            ConvPath::Winograd { .. } => ConvAlgorithm::Winograd,
         }
     }
 
@@ -442,6 +525,17 @@ impl Conv2d {
                     if let Some(r) = residual {
                         c.iter_mut().zip(r).for_each(|(v, r)| *v += r);
                     }
+                }
+                ConvPath::Winograd { wino, .. } => {
+                    wino.forward_image(
+                        img,
+                        x.h(),
+                        x.w(),
+                        self.bias.as_deref(),
+                        self.act,
+                        residual,
+                        c,
+                    );
                 }
                 ConvPath::Gemm { packed, taps } => {
                     let epi = Epilogue {

@@ -119,8 +119,31 @@ thread_local! {
     static B_PACK: RefCell<AlignedBuf> = RefCell::new(AlignedBuf::default());
 }
 
-/// `c = epilogue(a · b)` with `c` row-major `a.m × n`.
+/// `c = epilogue(a · b)` with `c` row-major `a.m × n`, on the rayon pool.
 pub(crate) fn gemm<B: BSource>(a: &PackedA, b: &B, n: usize, c: &mut [f32], epi: &Epilogue<'_>) {
+    gemm_on(a, b, n, c, epi, rayon::current_num_threads().max(1));
+}
+
+/// As [`gemm`], all on the calling thread (for callers that parallelise over
+/// many independent products themselves).
+pub(crate) fn gemm_serial<B: BSource>(
+    a: &PackedA,
+    b: &B,
+    n: usize,
+    c: &mut [f32],
+    epi: &Epilogue<'_>,
+) {
+    gemm_on(a, b, n, c, epi, 1);
+}
+
+fn gemm_on<B: BSource>(
+    a: &PackedA,
+    b: &B,
+    n: usize,
+    c: &mut [f32],
+    epi: &Epilogue<'_>,
+    threads: usize,
+) {
     let (m, mr, nr) = (a.m, a.kernel.mr, a.kernel.nr);
     assert_eq!(c.len(), m * n, "gemm: C has the wrong length");
     if let Some(r) = epi.residual {
@@ -138,7 +161,6 @@ pub(crate) fn gemm<B: BSource>(a: &PackedA, b: &B, n: usize, c: &mut [f32], epi:
         return;
     }
     let n_panels = n.div_ceil(nr);
-    let threads = rayon::current_num_threads().max(1);
     let target = if threads == 1 {
         1
     } else {
@@ -213,8 +235,8 @@ pub(crate) fn gemm<B: BSource>(a: &PackedA, b: &B, n: usize, c: &mut [f32], epi:
         });
     };
     let total = n_tasks * m_split;
-    if total == 1 {
-        task(0);
+    if threads == 1 {
+        (0..total).for_each(task);
     } else {
         (0..total).into_par_iter().for_each(task);
     }

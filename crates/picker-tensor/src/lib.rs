@@ -42,10 +42,11 @@ mod resize;
 mod rng;
 mod tensor;
 mod tolerance;
+mod winograd;
 
 pub use activation::Activation;
 pub use bn::{fold_batchnorm, BatchNorm, WeightLayout};
-pub use conv::{Conv2d, ConvSpec, ConvTranspose2d, ConvTransposeSpec};
+pub use conv::{Conv2d, ConvAlgorithm, ConvSpec, ConvTranspose2d, ConvTransposeSpec};
 pub use elementwise::{activate, add_assign};
 pub use error::{Error, Result};
 pub use isa::Isa;

@@ -15,6 +15,13 @@ impl Tolerance {
         abs: 1e-4,
         rel: 1e-4,
     };
+    /// Winograd F(4×4, 3×3) against the direct reference. Its transforms scale
+    /// values by up to ~10², so it loses a few bits against a GEMM (measured:
+    /// ~1.2e-5 max on O(1) outputs); it still meets the kernel tier.
+    pub const WINOGRAD_F32: Tolerance = Tolerance {
+        abs: 1e-4,
+        rel: 1e-4,
+    };
     /// Pure data movement (padding, cropping): exact.
     pub const EXACT: Tolerance = Tolerance { abs: 0.0, rel: 0.0 };
     /// Whole networks against the PyTorch reference, on tanh outputs in [-1, 1].

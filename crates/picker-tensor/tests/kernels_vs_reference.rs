@@ -3,8 +3,8 @@
 
 use picker_tensor::{
     activate, add_assign, fold_batchnorm, mirror_pad, reference, reflect_pad, resize_bilinear,
-    Activation, BatchNorm, Conv2d, ConvSpec, ConvTranspose2d, ConvTransposeSpec, Isa, Rng, Tensor,
-    Tolerance, WeightLayout,
+    Activation, BatchNorm, Conv2d, ConvAlgorithm, ConvSpec, ConvTranspose2d, ConvTransposeSpec,
+    Isa, Rng, Tensor, Tolerance, WeightLayout,
 };
 
 /// The families to test: available ones, with a line for each skipped one.
@@ -48,22 +48,30 @@ impl ConvProblem {
         let k = s.c_in * s.kh * s.kw;
         let wt = rng.normal_vec(s.weight_len(), (1.0 / k as f32).sqrt());
         let b = self.bias.then(|| rng.normal_vec(s.c_out, 0.5));
-        let conv = Conv2d::with_isa(isa, s, &wt, b.as_deref(), self.act).unwrap();
         let mut expected = reference::conv2d(&x, &wt, b.as_deref(), s).unwrap();
         expected = reference::activate(&expected, self.act);
-        let found = if self.residual {
-            let r = rng.tensor(expected.shape());
+        let r = rng.tensor(expected.shape());
+        if self.residual {
             expected = reference::add(&expected, &r).unwrap();
-            conv.forward_add(&x, &r).unwrap()
-        } else {
-            conv.forward(&x).unwrap()
-        };
-        check(
-            &format!("{isa} {self:?}"),
-            &found,
-            &expected,
-            Tolerance::KERNEL_F32,
-        );
+        }
+        for algo in ConvAlgorithm::EXPLICIT
+            .into_iter()
+            .filter(|a| a.applies(&s))
+        {
+            let conv = Conv2d::with_algorithm(isa, algo, s, &wt, b.as_deref(), self.act).unwrap();
+            assert_eq!(conv.algorithm(), algo);
+            let found = if self.residual {
+                conv.forward_add(&x, &r).unwrap()
+            } else {
+                conv.forward(&x).unwrap()
+            };
+            let tol = if algo == ConvAlgorithm::Winograd {
+                Tolerance::WINOGRAD_F32
+            } else {
+                Tolerance::KERNEL_F32
+            };
+            check(&format!("{isa} {algo:?} {self:?}"), &found, &expected, tol);
+        }
     }
 }
 
@@ -121,6 +129,9 @@ fn named_conv_problems() -> Vec<ConvProblem> {
         relu(conv(1, 20, 20, 70, 50, 3, 1, 1)), // K = 630: several K blocks
         conv(1, 3, 97, 2, 2, 1, 1, 0),        // N not a multiple of any NR, tiny M
         relu(conv(1, 30, 40, 64, 64, 3, 1, 1)), // many tasks, real-ish sizes
+        res(conv(1, 17, 23, 40, 36, 3, 1, 0)), // Winograd: partial tiles on both axes
+        relu(conv(1, 2, 3, 16, 16, 3, 1, 1)), // Winograd: one partial tile
+        res(conv(1, 34, 44, 256, 256, 3, 1, 0)), // the ResBlock convs at full width
         tanh(conv(1, 11, 150, 6, 3, 7, 1, 0)), // direct path: full and partial row blocks
         res(conv(2, 5, 70, 4, 4, 3, 1, 0)),   // direct path, 4 outputs, residual
         conv(1, 4, 66, 3, 2, 1, 1, 0),        // direct path, 1x1
@@ -169,6 +180,40 @@ fn conv2d_random_shapes() {
             p.run(isa, 5000 + case);
         }
     }
+}
+
+#[test]
+fn auto_algorithm_choice() {
+    let w = vec![0.01; 256 * 256 * 9];
+    let pick = |s: ConvSpec| {
+        Conv2d::new(s, &w[..s.weight_len()], None, Activation::None)
+            .unwrap()
+            .algorithm()
+    };
+    assert_eq!(
+        pick(ConvSpec::square(256, 256, 3, 1, 0)),
+        ConvAlgorithm::Winograd
+    );
+    assert_eq!(
+        pick(ConvSpec::square(64, 3, 7, 1, 0)),
+        ConvAlgorithm::Direct
+    );
+    assert_eq!(
+        pick(ConvSpec::square(64, 128, 3, 2, 1)),
+        ConvAlgorithm::Gemm
+    );
+    assert_eq!(pick(ConvSpec::square(3, 64, 7, 1, 0)), ConvAlgorithm::Gemm);
+    let s = ConvSpec::square(8, 8, 5, 1, 2);
+    let w5 = &w[..s.weight_len()];
+    let r = Conv2d::with_algorithm(
+        Isa::Portable,
+        ConvAlgorithm::Winograd,
+        s,
+        w5,
+        None,
+        Activation::None,
+    );
+    assert!(r.is_err(), "Winograd refuses 5x5 kernels");
 }
 
 #[test]
