@@ -204,8 +204,9 @@ pub struct Conv2d {
 #[non_exhaustive]
 pub enum ConvAlgorithm {
     /// Chosen from the shape: direct for ≤ 4 outputs (stride 1, no padding),
-    /// Winograd for 3×3 stride-1 layers with ≥ 16 input and output channels,
-    /// else the packed GEMM.
+    /// Winograd for 3×3 stride-1 layers with ≥ 16 input and output channels
+    /// (unless the environment variable `PICKER_CONV=gemm` is set when the layer
+    /// is built, for comparisons), else the packed GEMM.
     Auto,
     /// Packed GEMM over an implicit im2col (any shape).
     Gemm,
@@ -236,7 +237,10 @@ impl ConvAlgorithm {
         match self {
             ConvAlgorithm::Auto if ConvAlgorithm::Direct.applies(s) => ConvAlgorithm::Direct,
             ConvAlgorithm::Auto
-                if ConvAlgorithm::Winograd.applies(s) && s.c_in >= 16 && s.c_out >= 16 =>
+                if ConvAlgorithm::Winograd.applies(s)
+                    && s.c_in >= 16
+                    && s.c_out >= 16
+                    && std::env::var("PICKER_CONV").as_deref() != Ok("gemm") =>
             {
                 ConvAlgorithm::Winograd
             }

@@ -1,0 +1,44 @@
+//! Largest output difference between the Winograd and the plain-GEMM
+//! convolutions on random thesis-size networks:
+//! `cargo run --release -p picker-nets --example algo_diff -- [HxW]`.
+
+use picker_nets::{
+    metadata_for, random_weights, serialize_safetensors, Net, NetConfig, NetKind, StorageDtype,
+    Weights,
+};
+use picker_tensor::Rng;
+use std::path::Path;
+
+fn load(bytes: &[u8]) -> Net {
+    let weights = Weights::from_bytes("memory", bytes.to_vec()).expect("weights");
+    Net::load(&weights).expect("load")
+}
+
+fn main() {
+    let size = std::env::args().nth(1).unwrap_or_else(|| "240x320".into());
+    let (h, w) = size
+        .split_once('x')
+        .and_then(|(a, b)| Some((a.parse().ok()?, b.parse().ok()?)))
+        .expect("size as HxW");
+    let x = Rng::new(5).tensor([1, 3, h, w]);
+    for kind in [NetKind::Irn, NetKind::Msn, NetKind::EnvMap] {
+        let cfg = NetConfig::preset(kind, "thesis").expect("preset");
+        let meta = metadata_for(&cfg, "thesis").expect("metadata");
+        let bytes = serialize_safetensors(
+            Path::new("memory"),
+            &random_weights(&cfg, 0),
+            &meta,
+            StorageDtype::F32,
+        )
+        .expect("serialise");
+        // The algorithm is chosen when a layer is built.
+        std::env::set_var("PICKER_CONV", "gemm");
+        let gemm = load(&bytes).forward(&x).expect("forward");
+        std::env::remove_var("PICKER_CONV");
+        let wino = load(&bytes).forward(&x).expect("forward");
+        for ((name, a), (_, b)) in gemm.tensors.iter().zip(&wino.tensors) {
+            let d = a.max_abs_diff(b).expect("same shapes");
+            println!("{} {name}: max |winograd - gemm| = {d:.2e}", kind.as_str());
+        }
+    }
+}
