@@ -90,6 +90,20 @@ pub struct Aabb {
     pub max: Vec3,
 }
 
+/// The two ray parameters `t0 ≤ t1` where `o + t·d` (unit `d`) meets the sphere, if it does.
+#[inline]
+fn sphere_roots(o: Vec3, d: Vec3, center: Vec3, radius: f32) -> Option<(f32, f32)> {
+    let oc = o - center;
+    let b = oc.dot(d);
+    let c = oc.length_squared() - radius * radius;
+    let disc = b * b - c;
+    if disc < 0.0 {
+        return None;
+    }
+    let s = disc.sqrt();
+    Some((-b - s, -b + s))
+}
+
 impl Aabb {
     /// Whether the two boxes overlap after growing `self` by `margin` on every side.
     pub fn overlaps(&self, o: &Aabb, margin: f32) -> bool {
@@ -274,15 +288,8 @@ impl Shape {
                 best
             }
             Shape::Sphere { center, radius } => {
-                let oc = o - center;
-                let b = oc.dot(d);
-                let c = oc.length_squared() - radius * radius;
-                let disc = b * b - c;
-                if disc < 0.0 {
-                    return None;
-                }
-                let s = disc.sqrt();
-                let t = if -b - s > t_min { -b - s } else { -b + s };
+                let (t0, t1) = sphere_roots(o, d, center, radius)?;
+                let t = if t0 > t_min { t0 } else { t1 };
                 if !(t > t_min && t < t_max) {
                     return None;
                 }
@@ -321,15 +328,9 @@ impl Shape {
         match *self {
             Shape::Cuboid { min, max } => Aabb { min, max }.hit_by(o, inv, t_min, t_max),
             Shape::Sphere { center, radius } => {
-                let oc = o - center;
-                let b = oc.dot(d);
-                let c = oc.length_squared() - radius * radius;
-                let disc = b * b - c;
-                if disc < 0.0 {
+                let Some((t0, t1)) = sphere_roots(o, d, center, radius) else {
                     return false;
-                }
-                let s = disc.sqrt();
-                let (t0, t1) = (-b - s, -b + s);
+                };
                 (t0 > t_min && t0 < t_max) || (t1 > t_min && t1 < t_max)
             }
             _ => self.intersect(o, d, t_min, t_max).is_some(),

@@ -65,35 +65,28 @@ pub struct SeamScore {
     pub max_v: f32,
 }
 
+/// `w / m`, infinite when only `m` is zero, 0 when both are.
+fn ratio(w: f32, m: f32) -> f32 {
+    if m > 0.0 {
+        w / m
+    } else if w > 0.0 {
+        f32::INFINITY
+    } else {
+        0.0
+    }
+}
+
 impl SeamScore {
     /// `max(wrap_u/max_u, wrap_v/max_v)`: ≤ 1 when the wrap-around edge is no more visible
     /// than the most visible interior line (e.g. a grout line); a random non-tileable image
     /// scores well above 1.
     pub fn worst_ratio(&self) -> f32 {
-        let r = |w: f32, m: f32| {
-            if m > 0.0 {
-                w / m
-            } else if w > 0.0 {
-                f32::INFINITY
-            } else {
-                0.0
-            }
-        };
-        r(self.wrap_u, self.max_u).max(r(self.wrap_v, self.max_v))
+        ratio(self.wrap_u, self.max_u).max(ratio(self.wrap_v, self.max_v))
     }
 
     /// `max(wrap_u/mean_u, wrap_v/mean_v)`: about 1 for seamless noise-like textures.
     pub fn mean_ratio(&self) -> f32 {
-        let r = |w: f32, m: f32| {
-            if m > 0.0 {
-                w / m
-            } else if w > 0.0 {
-                f32::INFINITY
-            } else {
-                0.0
-            }
-        };
-        r(self.wrap_u, self.mean_u).max(r(self.wrap_v, self.mean_v))
+        ratio(self.wrap_u, self.mean_u).max(ratio(self.wrap_v, self.mean_v))
     }
 }
 
