@@ -3,6 +3,8 @@
 //! Subcommands (one module each, no numerics here — decoding and conventions
 //! live in `picker_nets::conventions`, kernels in `picker_tensor`):
 //!
+//! - `picker extract PHOTO --weights DIR --pick X,Y`: the material under a
+//!   point as a tileable texture + Phong parameters + exports ([`extract`]).
 //! - `picker infer PHOTO --weights DIR_OR_FILE --out DIR`: run IRN, MSN and/or
 //!   EnvMap on a photo and write every decoded output as EXR + PNG
 //!   ([`infer`]).
@@ -23,6 +25,8 @@ use clap::{Parser, Subcommand};
 
 mod args;
 mod bench;
+mod eval;
+mod extract;
 mod infer;
 mod output;
 mod photo;
@@ -42,6 +46,10 @@ struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
+    /// Extract the material under a picked point: tileable texture, Phong parameters, exports.
+    Extract(extract::Args),
+    /// Score extraction on synthetic scenes with ground truth (mask IoU, texture PSNR, ...).
+    Eval(eval::Args),
     /// Run the networks on a photo and write their decoded outputs (EXR + PNG).
     Infer(infer::Args),
     /// Create or describe weights files.
@@ -57,6 +65,8 @@ enum Command {
 
 fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
+        Command::Extract(a) => extract::run(a),
+        Command::Eval(a) => eval::run(a),
         Command::Infer(a) => infer::run(a),
         Command::Weights(c) => weights_cmd::run(c),
         Command::Bench(a) => bench::run(a),

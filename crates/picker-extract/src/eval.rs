@@ -1,1 +1,396 @@
-//! Work in progress.
+//! Evaluation metrics against synthetic ground truth (pure functions, no file I/O).
+//!
+//! - [`mask_iou`]: intersection over union of two masks.
+//! - [`aligned_texture_score`]: how close an extracted tileable texture is to
+//!   the true source texture when the offset and scale of the tiling are
+//!   unknown (best over cyclic shifts and a few scales, PSNR on sRGB values)
+//!   plus a colour-statistics distance that needs no alignment.
+//! - [`albedo_error`]: RMSE of linear albedos inside a mask.
+//! - [`normal_error_deg`]: mean angular error of normals inside a mask.
+//!
+//! **Alignment search** (no FFT): for each scale `s` in [`ALIGN_SCALES`],
+//! the (linear) truth is resampled with wrap-around to `round(s·h) × round(s·w)`
+//! (area average when shrinking, bilinear when enlarging), sRGB-encoded like
+//! the extracted texture, and treated as periodic, so at `s < 1` it is effectively tiled
+//! and at `s > 1` the extracted texture is compared with a window of it. The
+//! mean squared error over all cyclic shifts is minimised coarse-to-fine:
+//! both images are box-downsampled by 2 until the smaller side of the
+//! extracted one is below 32 texels, every shift is tried at that coarsest
+//! level, and the best [`ALIGN_CANDIDATES`] shifts are refined level by level
+//! in a ±[`ALIGN_REFINE_RADIUS`] window around their projection. A 256² pair
+//! takes a few tens of milliseconds. Rotations by 90° and mirror images are
+//! **not** searched (the extracted texture's orientation follows the
+//! recovered UVs, which keep the handedness and orientation of the truth in
+//! the synthetic data).
+
+use std::collections::HashSet;
+
+use picker_nets::conventions::srgb_encode;
+use picker_render::io::Image;
+use rayon::prelude::*;
+
+use crate::report::resize;
+
+/// Scales tried by [`aligned_texture_score`], in order (ties keep the first):
+/// the size of one period of the truth, in extracted texels, relative to the
+/// extracted texture's size.
+pub const ALIGN_SCALES: [f64; 7] = [1.0, 0.5, 2.0, 1.0 / 3.0, 0.25, 1.5, 2.0 / 3.0];
+/// Shifts kept from one pyramid level to the next.
+pub const ALIGN_CANDIDATES: usize = 8;
+/// Half-width of the refinement window (texels at each level).
+pub const ALIGN_REFINE_RADIUS: i64 = 2;
+/// The coarsest pyramid level's smaller side is below this many texels.
+const COARSEST_SIDE: usize = 32;
+/// Histogram bins per channel of the colour-statistics distance.
+pub const COLOUR_HISTOGRAM_BINS: usize = 8;
+
+/// Intersection over union of two masks of the same length.
+///
+/// Two empty masks (empty union) agree perfectly: 1.
+///
+/// # Panics
+/// If the lengths differ (a programming error, not a data error).
+pub fn mask_iou(a: &[bool], b: &[bool]) -> f64 {
+    assert_eq!(a.len(), b.len(), "mask_iou: masks of different lengths");
+    let (mut inter, mut union) = (0usize, 0usize);
+    for (&x, &y) in a.iter().zip(b) {
+        inter += usize::from(x && y);
+        union += usize::from(x || y);
+    }
+    if union == 0 {
+        1.0
+    } else {
+        inter as f64 / union as f64
+    }
+}
+
+/// The result of [`aligned_texture_score`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AlignedScore {
+    /// PSNR in dB of the sRGB-encoded textures (peak 1) at the best alignment;
+    /// `+inf` for an exact match, NaN for an empty image.
+    pub psnr_db: f64,
+    /// The best cyclic shift `(rows, cols)`: extracted texel `(r, c)` is
+    /// compared with texel `((r + rows) mod H, (c + cols) mod W)` of the truth
+    /// resampled to `H × W = round(scale·h) × round(scale·w)`.
+    pub shift: (usize, usize),
+    /// The best scale (one of [`ALIGN_SCALES`]): one period of the truth
+    /// spans `scale` times the extracted texture (0.5: the truth appears
+    /// tiled 2×2).
+    pub scale: f64,
+    /// Colour-statistics distance (alignment-free), see [`colour_distance`].
+    pub colour_distance: f64,
+}
+
+/// Scores an extracted tileable texture against the true source texture,
+/// ignoring the unknown offset and scale of the tiling (see the module docs).
+///
+/// Both images hold **linear** values (1 channel is treated as grey, only
+/// the first 3 channels are used) and are sRGB-encoded before comparing;
+/// their sizes may differ. An empty image gives NaN scores.
+pub fn aligned_texture_score(extracted: &Image, truth: &Image) -> AlignedScore {
+    let empty = |i: &Image| i.width == 0 || i.height == 0 || i.channels == 0;
+    if empty(extracted) || empty(truth) {
+        return AlignedScore {
+            psnr_db: f64::NAN,
+            shift: (0, 0),
+            scale: 1.0,
+            colour_distance: f64::NAN,
+        };
+    }
+    let e = srgb3(extracted);
+    let t = three(truth);
+    let e_pyr = pyramid(&e, levels(e.height, e.width));
+    let levels = e_pyr.len() - 1;
+
+    let mut best: Option<(f64, (usize, usize), f64)> = None;
+    for &s in &ALIGN_SCALES {
+        let hc = ((s * e.height as f64).round() as usize).max(1);
+        let wc = ((s * e.width as f64).round() as usize).max(1);
+        // Resample in linear light, then encode.
+        let cand = srgb3(&resize(&t, hc, wc, true));
+        let c_pyr = pyramid(&cand, levels);
+        let (mse, shift) = best_shift(&e_pyr, &c_pyr);
+        if best.is_none_or(|(b, _, _)| mse < b) {
+            best = Some((mse, shift, s));
+        }
+    }
+    let (mse, shift, scale) = best.unwrap_or((f64::NAN, (0, 0), 1.0));
+    AlignedScore {
+        psnr_db: psnr_from_mse(mse),
+        shift,
+        scale,
+        colour_distance: colour_distance_srgb(&e, &srgb3(&t)),
+    }
+}
+
+/// `10·log10(1 / mse)` (peak 1); `+inf` for 0.
+fn psnr_from_mse(mse: f64) -> f64 {
+    if mse <= 0.0 {
+        f64::INFINITY
+    } else {
+        -10.0 * mse.log10()
+    }
+}
+
+/// A colour-statistics distance between two images of **linear** values
+/// (any sizes; 1 channel treated as grey), computed on their sRGB encodings:
+///
+/// `d = (1/3) Σ_c (|μa,c − μb,c| + |σa,c − σb,c|) + (1/3) Σ_c ½ Σ_k |pa,c,k − pb,c,k|`
+///
+/// with μ, σ the per-channel mean and standard deviation and `p·,c,k` the
+/// fraction of texels in bin `k` of a [`COLOUR_HISTOGRAM_BINS`]-bin histogram
+/// of channel `c` over `[0, 1]`. 0 for identical statistics; the histogram
+/// term lies in `[0, 1]`, the moment term in `[0, 1.5]`. NaN for an empty image.
+pub fn colour_distance(a: &Image, b: &Image) -> f64 {
+    let empty = |i: &Image| i.width == 0 || i.height == 0 || i.channels == 0;
+    if empty(a) || empty(b) {
+        return f64::NAN;
+    }
+    colour_distance_srgb(&srgb3(a), &srgb3(b))
+}
+
+fn colour_distance_srgb(a: &Image, b: &Image) -> f64 {
+    let stats = |p: &[f32]| {
+        let n = p.len() as f64;
+        let mean = p.iter().map(|&v| f64::from(v)).sum::<f64>() / n;
+        let var = p
+            .iter()
+            .map(|&v| (f64::from(v) - mean).powi(2))
+            .sum::<f64>()
+            / n;
+        let mut hist = [0.0f64; COLOUR_HISTOGRAM_BINS];
+        for &v in p {
+            let k = ((v.clamp(0.0, 1.0) * COLOUR_HISTOGRAM_BINS as f32) as usize)
+                .min(COLOUR_HISTOGRAM_BINS - 1);
+            hist[k] += 1.0 / n;
+        }
+        (mean, var.sqrt(), hist)
+    };
+    let mut moments = 0.0;
+    let mut histogram = 0.0;
+    for c in 0..3 {
+        let (ma, sa, ha) = stats(a.plane(c));
+        let (mb, sb, hb) = stats(b.plane(c));
+        moments += (ma - mb).abs() + (sa - sb).abs();
+        histogram += 0.5 * ha.iter().zip(&hb).map(|(x, y)| (x - y).abs()).sum::<f64>();
+    }
+    (moments + histogram) / 3.0
+}
+
+/// RMSE of linear albedos over the texels where `mask` is true, over the
+/// first `min(channels)` channels. NaN for an empty mask.
+///
+/// # Panics
+/// If the image sizes or the mask length disagree.
+pub fn albedo_error(pred: &Image, truth: &Image, mask: &[bool]) -> f64 {
+    check_same(pred, truth, mask, "albedo_error");
+    let n = pred.plane_len();
+    let c = pred.channels.min(truth.channels);
+    let (mut sum, mut count) = (0.0f64, 0usize);
+    for (i, _) in mask.iter().enumerate().filter(|(_, &m)| m) {
+        for ch in 0..c {
+            let d = f64::from(pred.data[ch * n + i]) - f64::from(truth.data[ch * n + i]);
+            sum += d * d;
+            count += 1;
+        }
+    }
+    if count == 0 {
+        f64::NAN
+    } else {
+        (sum / count as f64).sqrt()
+    }
+}
+
+/// Mean angle in degrees between the normals of `pred` and `truth` (3-channel
+/// direction images; both are renormalised) over the texels where `mask` is
+/// true. A zero-length normal on either side counts as 90°. NaN for an empty mask.
+///
+/// # Panics
+/// If the image sizes or the mask length disagree, or an image has fewer than 3 channels.
+pub fn normal_error_deg(pred: &Image, truth: &Image, mask: &[bool]) -> f64 {
+    check_same(pred, truth, mask, "normal_error_deg");
+    assert!(
+        pred.channels >= 3 && truth.channels >= 3,
+        "normal_error_deg: normals need 3 channels"
+    );
+    let n = pred.plane_len();
+    let v = |img: &Image, i: usize| [0, 1, 2].map(|c| f64::from(img.data[c * n + i]));
+    let (mut sum, mut count) = (0.0f64, 0usize);
+    for (i, _) in mask.iter().enumerate().filter(|(_, &m)| m) {
+        let (a, b) = (v(pred, i), v(truth, i));
+        let la = a.iter().map(|x| x * x).sum::<f64>().sqrt();
+        let lb = b.iter().map(|x| x * x).sum::<f64>().sqrt();
+        let angle = if la > 0.0 && lb > 0.0 && la.is_finite() && lb.is_finite() {
+            let cos = (a[0] * b[0] + a[1] * b[1] + a[2] * b[2]) / (la * lb);
+            cos.clamp(-1.0, 1.0).acos().to_degrees()
+        } else {
+            90.0
+        };
+        sum += angle;
+        count += 1;
+    }
+    if count == 0 {
+        f64::NAN
+    } else {
+        sum / count as f64
+    }
+}
+
+fn check_same(a: &Image, b: &Image, mask: &[bool], what: &str) {
+    assert!(
+        a.height == b.height && a.width == b.width,
+        "{what}: images of different sizes ({}x{} vs {}x{})",
+        a.height,
+        a.width,
+        b.height,
+        b.width
+    );
+    assert_eq!(mask.len(), a.plane_len(), "{what}: mask length");
+}
+
+/// Three planes of sRGB-encoded values (grey repeated; extra channels dropped).
+fn srgb3(img: &Image) -> Image {
+    three(img).map(srgb_encode)
+}
+
+/// Three planes of the same values (grey repeated; extra channels dropped).
+fn three(img: &Image) -> Image {
+    let n = img.plane_len();
+    let mut data = Vec::with_capacity(3 * n);
+    for c in 0..3 {
+        data.extend_from_slice(img.plane(c.min(img.channels - 1)));
+    }
+    Image {
+        channels: 3,
+        height: img.height,
+        width: img.width,
+        data,
+    }
+}
+
+/// Number of halvings until the smaller side drops below [`COARSEST_SIDE`].
+fn levels(h: usize, w: usize) -> usize {
+    let mut side = h.min(w);
+    let mut l = 0;
+    while side >= COARSEST_SIDE {
+        side = side.div_ceil(2);
+        l += 1;
+    }
+    l
+}
+
+/// `img` and `levels` successive box-filtered halvings (sides rounded up).
+fn pyramid(img: &Image, levels: usize) -> Vec<Image> {
+    let mut out = vec![img.clone()];
+    for _ in 0..levels {
+        let last = &out[out.len() - 1];
+        let next = resize(last, last.height.div_ceil(2), last.width.div_ceil(2), true);
+        out.push(next);
+    }
+    out
+}
+
+/// A periodic image extended so that any `h × w` window at a cyclic shift is
+/// contiguous: `(H + h − 1) × (W + w − 1)` texels, `ext[R][C] = img[R mod H][C mod W]`.
+struct Extended {
+    planes: Vec<Vec<f32>>,
+    height: usize,
+    width: usize,
+    period: (usize, usize),
+}
+
+impl Extended {
+    fn new(img: &Image, h: usize, w: usize) -> Self {
+        let (ph, pw) = (img.height, img.width);
+        let (eh, ew) = (ph + h - 1, pw + w - 1);
+        let planes = (0..img.channels)
+            .map(|c| {
+                let p = img.plane(c);
+                let mut out = Vec::with_capacity(eh * ew);
+                for r in 0..eh {
+                    let row = &p[(r % ph) * pw..(r % ph + 1) * pw];
+                    out.extend((0..ew).map(|x| row[x % pw]));
+                }
+                out
+            })
+            .collect();
+        Self {
+            planes,
+            height: eh,
+            width: ew,
+            period: (ph, pw),
+        }
+    }
+
+    /// Mean squared difference between `e` and the window at shift `(dy, dx)`.
+    fn mse(&self, e: &Image, dy: usize, dx: usize) -> f64 {
+        let (h, w) = (e.height, e.width);
+        debug_assert!(dy + h <= self.height && dx + w <= self.width);
+        let mut total = 0.0f64;
+        for (c, plane) in self.planes.iter().enumerate() {
+            let ep = e.plane(c);
+            for r in 0..h {
+                let a = &ep[r * w..(r + 1) * w];
+                let start = (r + dy) * self.width + dx;
+                let b = &plane[start..start + w];
+                let row: f32 = a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum();
+                total += f64::from(row);
+            }
+        }
+        total / (self.planes.len() * h * w) as f64
+    }
+}
+
+/// The smallest mean squared error over cyclic shifts of the candidate
+/// pyramid `c_pyr` against `e_pyr` (coarse to fine), and its shift at level 0.
+fn best_shift(e_pyr: &[Image], c_pyr: &[Image]) -> (f64, (usize, usize)) {
+    let top = e_pyr.len() - 1;
+    let ext = Extended::new(&c_pyr[top], e_pyr[top].height, e_pyr[top].width);
+    let (ph, pw) = ext.period;
+    let mut scored: Vec<(f64, usize, usize)> = (0..ph)
+        .into_par_iter()
+        .flat_map_iter(|dy| {
+            let ext = &ext;
+            let e = &e_pyr[top];
+            (0..pw).map(move |dx| (ext.mse(e, dy, dx), dy, dx))
+        })
+        .collect();
+    keep_best(&mut scored);
+    for level in (0..top).rev() {
+        let e = &e_pyr[level];
+        let ext = Extended::new(&c_pyr[level], e.height, e.width);
+        let (ph, pw) = ext.period;
+        let (qh, qw) = (c_pyr[level + 1].height, c_pyr[level + 1].width);
+        let mut seen = HashSet::new();
+        let mut next = Vec::new();
+        for &(_, dy, dx) in &scored {
+            let cy = (dy as f64 * ph as f64 / qh as f64).round() as i64;
+            let cx = (dx as f64 * pw as f64 / qw as f64).round() as i64;
+            for oy in -ALIGN_REFINE_RADIUS..=ALIGN_REFINE_RADIUS {
+                for ox in -ALIGN_REFINE_RADIUS..=ALIGN_REFINE_RADIUS {
+                    let y = (cy + oy).rem_euclid(ph as i64) as usize;
+                    let x = (cx + ox).rem_euclid(pw as i64) as usize;
+                    if seen.insert((y, x)) {
+                        next.push((y, x));
+                    }
+                }
+            }
+        }
+        scored = next
+            .into_par_iter()
+            .map(|(y, x)| (ext.mse(e, y, x), y, x))
+            .collect();
+        keep_best(&mut scored);
+    }
+    scored
+        .first()
+        .map(|&(m, y, x)| (m, (y, x)))
+        .unwrap_or((f64::NAN, (0, 0)))
+}
+
+/// Sorts by error (then shift, for determinism) and keeps [`ALIGN_CANDIDATES`].
+fn keep_best(scored: &mut Vec<(f64, usize, usize)>) {
+    scored.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)));
+    scored.truncate(ALIGN_CANDIDATES);
+}

@@ -1,13 +1,30 @@
 //! `picker-extract`: from a photo's render elements and a pick to a material
-//! an artist can use (see `docs/contract-extract.md`). Work in progress.
+//! an artist can use (design.md §4–5, `docs/contract-extract.md`).
+//!
+//! The chain, one module per step:
+//! - [`resample`], [`guided`]: the network outputs at the working resolution
+//!   are brought to the photo's resolution guided by the photo.
+//! - [`mask`]: pick → mask from the segmentation colour.
+//! - [`plane`], [`reproject`]: texture coordinates (predicted UVs or a
+//!   rectified plane) and the scatter into the texture square with coverage.
+//! - inpainting ([`picker_inpaint`]) fills the unobserved texels, tileably.
+//! - [`pipeline`]: the whole extraction, material parameters and the
+//!   re-render self-check; [`export`], [`report`]: files; [`eval`]: metrics.
 
 #![warn(missing_docs)]
 
 pub mod error;
 pub mod eval;
 pub mod export;
+pub mod guided;
+pub mod mask;
 pub mod material;
+pub mod pipeline;
+pub mod plane;
 pub mod report;
+pub mod reproject;
+pub mod resample;
 
 pub use error::{Error, Result};
 pub use material::{Material, MaterialParams, TextureResult, UvMode};
+pub use pipeline::{extract, Inputs, Options, Prepared, UvChoice};

@@ -1,1 +1,389 @@
-//! Work in progress.
+//! Contact sheets for reports: labelled tiles on a grid ([`compose_sheet`]) and
+//! a pick marker ([`draw_marker`]).
+//!
+//! Every image here holds **display values** (sRGB-encoded, `[0, 1]`), with 1
+//! (grey) or 3 (RGB) channels; sheets are always RGB. Labels are drawn by a
+//! built-in 5×7 bitmap font (printable ASCII `' '..='~'`; any other character
+//! is drawn as `?`) scaled ×2, so no font file or dependency is needed.
+
+use picker_render::io::Image;
+
+/// Background of a sheet (display value, neutral dark grey).
+pub const SHEET_BACKGROUND: f32 = 0.2;
+/// Colour of the labels (display value, white).
+pub const LABEL_COLOUR: f32 = 1.0;
+/// Margin around and between cells, in pixels.
+pub const SHEET_MARGIN: usize = 8;
+/// Scale of the 5×7 font (each font pixel is a `FONT_SCALE × FONT_SCALE` block).
+pub const FONT_SCALE: usize = 2;
+/// Longest label drawn; longer ones are cut.
+pub const MAX_LABEL_CHARS: usize = 48;
+
+const GLYPH_W: usize = 5;
+const GLYPH_H: usize = 7;
+/// Horizontal advance of one character in font pixels (glyph + 1 blank column).
+const ADVANCE: usize = GLYPH_W + 1;
+/// Height of the label band above each tile: the scaled glyph plus 2 px above and below.
+const LABEL_BAND: usize = GLYPH_H * FONT_SCALE + 4;
+
+/// One tile of a sheet.
+#[derive(Clone, Debug)]
+pub struct Tile {
+    /// Text drawn above the tile (printable ASCII; other characters show as `?`).
+    pub label: String,
+    /// The picture: display-ready sRGB values in `[0, 1]`, 1 or 3 channels
+    /// (a 1-channel tile is shown as grey; channels beyond 3 are ignored).
+    pub image: Image,
+}
+
+/// The classic 5×7 LCD glyphs for ASCII 32..=126: five columns per glyph,
+/// left to right, bit 0 of each column byte is the top row.
+const FONT_5X7: [[u8; 5]; 95] = [
+    [0x00, 0x00, 0x00, 0x00, 0x00], // ' '
+    [0x00, 0x00, 0x5f, 0x00, 0x00], // !
+    [0x00, 0x07, 0x00, 0x07, 0x00], // "
+    [0x14, 0x7f, 0x14, 0x7f, 0x14], // #
+    [0x24, 0x2a, 0x7f, 0x2a, 0x12], // $
+    [0x23, 0x13, 0x08, 0x64, 0x62], // %
+    [0x36, 0x49, 0x55, 0x22, 0x50], // &
+    [0x00, 0x05, 0x03, 0x00, 0x00], // '
+    [0x00, 0x1c, 0x22, 0x41, 0x00], // (
+    [0x00, 0x41, 0x22, 0x1c, 0x00], // )
+    [0x14, 0x08, 0x3e, 0x08, 0x14], // *
+    [0x08, 0x08, 0x3e, 0x08, 0x08], // +
+    [0x00, 0x50, 0x30, 0x00, 0x00], // ,
+    [0x08, 0x08, 0x08, 0x08, 0x08], // -
+    [0x00, 0x60, 0x60, 0x00, 0x00], // .
+    [0x20, 0x10, 0x08, 0x04, 0x02], // /
+    [0x3e, 0x51, 0x49, 0x45, 0x3e], // 0
+    [0x00, 0x42, 0x7f, 0x40, 0x00], // 1
+    [0x42, 0x61, 0x51, 0x49, 0x46], // 2
+    [0x21, 0x41, 0x45, 0x4b, 0x31], // 3
+    [0x18, 0x14, 0x12, 0x7f, 0x10], // 4
+    [0x27, 0x45, 0x45, 0x45, 0x39], // 5
+    [0x3c, 0x4a, 0x49, 0x49, 0x30], // 6
+    [0x01, 0x71, 0x09, 0x05, 0x03], // 7
+    [0x36, 0x49, 0x49, 0x49, 0x36], // 8
+    [0x06, 0x49, 0x49, 0x29, 0x1e], // 9
+    [0x00, 0x36, 0x36, 0x00, 0x00], // :
+    [0x00, 0x56, 0x36, 0x00, 0x00], // ;
+    [0x08, 0x14, 0x22, 0x41, 0x00], // <
+    [0x14, 0x14, 0x14, 0x14, 0x14], // =
+    [0x00, 0x41, 0x22, 0x14, 0x08], // >
+    [0x02, 0x01, 0x51, 0x09, 0x06], // ?
+    [0x32, 0x49, 0x79, 0x41, 0x3e], // @
+    [0x7e, 0x11, 0x11, 0x11, 0x7e], // A
+    [0x7f, 0x49, 0x49, 0x49, 0x36], // B
+    [0x3e, 0x41, 0x41, 0x41, 0x22], // C
+    [0x7f, 0x41, 0x41, 0x22, 0x1c], // D
+    [0x7f, 0x49, 0x49, 0x49, 0x41], // E
+    [0x7f, 0x09, 0x09, 0x09, 0x01], // F
+    [0x3e, 0x41, 0x49, 0x49, 0x7a], // G
+    [0x7f, 0x08, 0x08, 0x08, 0x7f], // H
+    [0x00, 0x41, 0x7f, 0x41, 0x00], // I
+    [0x20, 0x40, 0x41, 0x3f, 0x01], // J
+    [0x7f, 0x08, 0x14, 0x22, 0x41], // K
+    [0x7f, 0x40, 0x40, 0x40, 0x40], // L
+    [0x7f, 0x02, 0x0c, 0x02, 0x7f], // M
+    [0x7f, 0x04, 0x08, 0x10, 0x7f], // N
+    [0x3e, 0x41, 0x41, 0x41, 0x3e], // O
+    [0x7f, 0x09, 0x09, 0x09, 0x06], // P
+    [0x3e, 0x41, 0x51, 0x21, 0x5e], // Q
+    [0x7f, 0x09, 0x19, 0x29, 0x46], // R
+    [0x46, 0x49, 0x49, 0x49, 0x31], // S
+    [0x01, 0x01, 0x7f, 0x01, 0x01], // T
+    [0x3f, 0x40, 0x40, 0x40, 0x3f], // U
+    [0x1f, 0x20, 0x40, 0x20, 0x1f], // V
+    [0x3f, 0x40, 0x38, 0x40, 0x3f], // W
+    [0x63, 0x14, 0x08, 0x14, 0x63], // X
+    [0x07, 0x08, 0x70, 0x08, 0x07], // Y
+    [0x61, 0x51, 0x49, 0x45, 0x43], // Z
+    [0x00, 0x7f, 0x41, 0x41, 0x00], // [
+    [0x02, 0x04, 0x08, 0x10, 0x20], // backslash
+    [0x00, 0x41, 0x41, 0x7f, 0x00], // ]
+    [0x04, 0x02, 0x01, 0x02, 0x04], // ^
+    [0x40, 0x40, 0x40, 0x40, 0x40], // _
+    [0x00, 0x01, 0x02, 0x04, 0x00], // `
+    [0x20, 0x54, 0x54, 0x54, 0x78], // a
+    [0x7f, 0x48, 0x44, 0x44, 0x38], // b
+    [0x38, 0x44, 0x44, 0x44, 0x20], // c
+    [0x38, 0x44, 0x44, 0x48, 0x7f], // d
+    [0x38, 0x54, 0x54, 0x54, 0x18], // e
+    [0x08, 0x7e, 0x09, 0x01, 0x02], // f
+    [0x0c, 0x52, 0x52, 0x52, 0x3e], // g
+    [0x7f, 0x08, 0x04, 0x04, 0x78], // h
+    [0x00, 0x44, 0x7d, 0x40, 0x00], // i
+    [0x20, 0x40, 0x44, 0x3d, 0x00], // j
+    [0x7f, 0x10, 0x28, 0x44, 0x00], // k
+    [0x00, 0x41, 0x7f, 0x40, 0x00], // l
+    [0x7c, 0x04, 0x18, 0x04, 0x78], // m
+    [0x7c, 0x08, 0x04, 0x04, 0x78], // n
+    [0x38, 0x44, 0x44, 0x44, 0x38], // o
+    [0x7c, 0x14, 0x14, 0x14, 0x08], // p
+    [0x08, 0x14, 0x14, 0x18, 0x7c], // q
+    [0x7c, 0x08, 0x04, 0x04, 0x08], // r
+    [0x48, 0x54, 0x54, 0x54, 0x20], // s
+    [0x04, 0x3f, 0x44, 0x40, 0x20], // t
+    [0x3c, 0x40, 0x40, 0x20, 0x7c], // u
+    [0x1c, 0x20, 0x40, 0x20, 0x1c], // v
+    [0x3c, 0x40, 0x30, 0x40, 0x3c], // w
+    [0x44, 0x28, 0x10, 0x28, 0x44], // x
+    [0x0c, 0x50, 0x50, 0x50, 0x3c], // y
+    [0x44, 0x64, 0x54, 0x4c, 0x44], // z
+    [0x00, 0x08, 0x36, 0x41, 0x00], // {
+    [0x00, 0x00, 0x7f, 0x00, 0x00], // |
+    [0x00, 0x41, 0x36, 0x08, 0x00], // }
+    [0x10, 0x08, 0x08, 0x10, 0x08], // ~
+];
+
+/// The 5×7 glyph of `c` (`?` for anything outside printable ASCII).
+fn glyph(c: char) -> &'static [u8; 5] {
+    let code = c as u32;
+    let index = if (32..=126).contains(&code) {
+        (code - 32) as usize
+    } else {
+        ('?' as u32 - 32) as usize
+    };
+    &FONT_5X7[index]
+}
+
+/// Width in pixels of `text` drawn by [`draw_text`] (at most [`MAX_LABEL_CHARS`] characters).
+pub fn text_width(text: &str) -> usize {
+    let n = text.chars().take(MAX_LABEL_CHARS).count();
+    if n == 0 {
+        0
+    } else {
+        (n * ADVANCE - 1) * FONT_SCALE
+    }
+}
+
+/// Draws `text` (at most [`MAX_LABEL_CHARS`] characters) into `img` with its
+/// top-left corner at pixel `(x, y)` in colour `value` (every channel), in the
+/// 5×7 font scaled ×[`FONT_SCALE`]; clipped to the image and to `max_width` pixels.
+pub fn draw_text(img: &mut Image, x: usize, y: usize, text: &str, value: f32, max_width: usize) {
+    let (w, h, n) = (img.width, img.height, img.plane_len());
+    let right = x.saturating_add(max_width).min(w);
+    for (k, c) in text.chars().take(MAX_LABEL_CHARS).enumerate() {
+        let g = glyph(c);
+        let x0 = x + k * ADVANCE * FONT_SCALE;
+        if x0 >= right {
+            break;
+        }
+        for (gc, column) in g.iter().enumerate() {
+            for gr in 0..GLYPH_H {
+                if column >> gr & 1 == 0 {
+                    continue;
+                }
+                for dy in 0..FONT_SCALE {
+                    let row = y + gr * FONT_SCALE + dy;
+                    if row >= h {
+                        continue;
+                    }
+                    for dx in 0..FONT_SCALE {
+                        let col = x0 + gc * FONT_SCALE + dx;
+                        if col >= right {
+                            continue;
+                        }
+                        for ch in 0..img.channels {
+                            img.data[ch * n + row * w + col] = value;
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// A grid sheet of `tiles`, `columns` per row (clamped to `1..=tiles.len()`),
+/// on a neutral background ([`SHEET_BACKGROUND`]), always 3 channels.
+///
+/// Every tile is resized to `tile_height` rows (at least 1), keeping its
+/// aspect ratio (area-average filter when shrinking, bilinear when
+/// enlarging), and centred in a cell as wide as the widest resized tile or
+/// label; its label is drawn above it. A 1-channel tile is expanded to grey.
+/// Cells are separated by [`SHEET_MARGIN`] pixels.
+///
+/// **Empty input** gives an empty `3 × 0 × 0` image (nothing to show; the
+/// caller decides whether that is an error). A tile with no pixels leaves
+/// its cell blank.
+pub fn compose_sheet(tiles: &[Tile], columns: usize, tile_height: usize) -> Image {
+    if tiles.is_empty() {
+        return Image::zeros(3, 0, 0);
+    }
+    let tile_height = tile_height.max(1);
+    let columns = columns.clamp(1, tiles.len());
+    let rows = tiles.len().div_ceil(columns);
+    let resized_width = |img: &Image| -> usize {
+        if img.width == 0 || img.height == 0 {
+            0
+        } else {
+            ((img.width as f64 * tile_height as f64 / img.height as f64).round() as usize).max(1)
+        }
+    };
+    let cell_w = tiles
+        .iter()
+        .map(|t| resized_width(&t.image).max(text_width(&t.label)))
+        .max()
+        .unwrap_or(0)
+        .max(1);
+    let cell_h = LABEL_BAND + tile_height;
+    let width = SHEET_MARGIN + columns * (cell_w + SHEET_MARGIN);
+    let height = SHEET_MARGIN + rows * (cell_h + SHEET_MARGIN);
+    let mut sheet = Image {
+        channels: 3,
+        height,
+        width,
+        data: vec![SHEET_BACKGROUND; 3 * width * height],
+    };
+    let n = width * height;
+    for (k, tile) in tiles.iter().enumerate() {
+        let x0 = SHEET_MARGIN + (k % columns) * (cell_w + SHEET_MARGIN);
+        let y0 = SHEET_MARGIN + (k / columns) * (cell_h + SHEET_MARGIN);
+        draw_text(&mut sheet, x0, y0 + 2, &tile.label, LABEL_COLOUR, cell_w);
+        let tw = resized_width(&tile.image);
+        if tw == 0 || tile.image.channels == 0 {
+            continue;
+        }
+        let small = resize(&tile.image, tile_height, tw, false);
+        let xoff = x0 + (cell_w - tw) / 2;
+        let yoff = y0 + LABEL_BAND;
+        for ch in 0..3 {
+            let src = small.plane(ch.min(small.channels - 1));
+            for r in 0..tile_height {
+                let dst = ch * n + (yoff + r) * width + xoff;
+                sheet.data[dst..dst + tw].copy_from_slice(&src[r * tw..(r + 1) * tw]);
+            }
+        }
+    }
+    sheet
+}
+
+/// Draws a pick marker centred on `(x, y)` (pixels, x right, y down, pixel
+/// `(row, col)` centred at `(col + 0.5, row + 0.5)`): a ring of radius
+/// `radius` (at least 3) and four crosshair arms from `0.4·radius` to
+/// `1.6·radius`, white with a black outline, so it is visible on any
+/// background. The centre itself is left untouched so the picked pixel stays
+/// visible. Works on any channel count; clipped to the image.
+pub fn draw_marker(img: &mut Image, x: f32, y: f32, radius: f32) {
+    if !(x.is_finite() && y.is_finite()) {
+        return;
+    }
+    let r = if radius.is_finite() {
+        radius.max(3.0)
+    } else {
+        3.0
+    };
+    let (w, h, n) = (img.width, img.height, img.plane_len());
+    let (gap, arm) = (0.4 * r, 1.6 * r);
+    let (inner, outer) = (0.75f32, 1.75f32);
+    let reach = arm + outer + 1.0;
+    let c0 = ((x - reach).floor().max(0.0)) as usize;
+    let c1 = ((x + reach).ceil().max(0.0) as usize).min(w);
+    let r0 = ((y - reach).floor().max(0.0)) as usize;
+    let r1 = ((y + reach).ceil().max(0.0) as usize).min(h);
+    // Distance of a pixel centre to the marker's strokes.
+    let stroke_distance = |dx: f32, dy: f32| -> f32 {
+        let ring = ((dx * dx + dy * dy).sqrt() - r).abs();
+        let along = |a: f32, b: f32| {
+            let t = a.abs();
+            if t < gap {
+                f32::INFINITY
+            } else if t <= arm {
+                b.abs()
+            } else {
+                ((t - arm).powi(2) + b * b).sqrt()
+            }
+        };
+        ring.min(along(dx, dy)).min(along(dy, dx))
+    };
+    for row in r0..r1 {
+        for col in c0..c1 {
+            let d = stroke_distance(col as f32 + 0.5 - x, row as f32 + 0.5 - y);
+            let value = if d <= inner {
+                1.0
+            } else if d <= outer {
+                0.0
+            } else {
+                continue;
+            };
+            for ch in 0..img.channels {
+                img.data[ch * n + row * w + col] = value;
+            }
+        }
+    }
+}
+
+/// Resamples every plane of `img` to `height × width`: area average (box
+/// filter) along an axis that shrinks, bilinear interpolation (texel centres)
+/// along one that grows. `wrap` treats the image as periodic (bilinear
+/// neighbours wrap around); otherwise edge texels are repeated. An empty
+/// source gives zeros.
+pub(crate) fn resize(img: &Image, height: usize, width: usize, wrap: bool) -> Image {
+    let c = img.channels;
+    if img.width == 0 || img.height == 0 || width == 0 || height == 0 {
+        return Image::zeros(c, height, width);
+    }
+    let wx = axis_weights(img.width, width, wrap);
+    let wy = axis_weights(img.height, height, wrap);
+    let (sw, sh) = (img.width, img.height);
+    let mut out = Vec::with_capacity(c * width * height);
+    let mut tmp = vec![0.0f32; sh * width];
+    for ch in 0..c {
+        let p = img.plane(ch);
+        for r in 0..sh {
+            let src = &p[r * sw..(r + 1) * sw];
+            for (o, taps) in wx.iter().enumerate() {
+                tmp[r * width + o] = taps.iter().map(|&(i, wt)| src[i] * wt).sum();
+            }
+        }
+        for taps in &wy {
+            for col in 0..width {
+                out.push(taps.iter().map(|&(i, wt)| tmp[i * width + col] * wt).sum());
+            }
+        }
+    }
+    Image {
+        channels: c,
+        height,
+        width,
+        data: out,
+    }
+}
+
+/// Per output index, the source taps `(index, weight)` (weights sum to 1).
+fn axis_weights(src: usize, dst: usize, wrap: bool) -> Vec<Vec<(usize, f32)>> {
+    let scale = src as f64 / dst as f64;
+    (0..dst)
+        .map(|o| {
+            if scale > 1.0 {
+                // Area average over [o·scale, (o+1)·scale).
+                let (a, b) = (o as f64 * scale, (o as f64 + 1.0) * scale);
+                let mut taps = Vec::new();
+                let mut i = a.floor() as usize;
+                while (i as f64) < b && i < src {
+                    let lo = a.max(i as f64);
+                    let hi = b.min(i as f64 + 1.0);
+                    if hi > lo {
+                        taps.push((i, ((hi - lo) / scale) as f32));
+                    }
+                    i += 1;
+                }
+                taps
+            } else {
+                // Bilinear at the output texel centre.
+                let s = (o as f64 + 0.5) * scale - 0.5;
+                let f = s.floor();
+                let t = (s - f) as f32;
+                let i0 = f as i64;
+                let idx = |i: i64| -> usize {
+                    if wrap {
+                        i.rem_euclid(src as i64) as usize
+                    } else {
+                        i.clamp(0, src as i64 - 1) as usize
+                    }
+                };
+                vec![(idx(i0), 1.0 - t), (idx(i0 + 1), t)]
+            }
+        })
+        .collect()
+}

@@ -1,0 +1,289 @@
+//! `picker eval DIR`: extraction quality on synthetic scenes with ground truth.
+//!
+//! For every scene folder under DIR (as `picker synth` writes, with
+//! `materials/`), every material covering at least `--min-area` of the image
+//! is picked at its most interior pixel (largest chamfer distance to the
+//! material's border, ties to the lowest index) and extracted — from the
+//! ground-truth render elements by default, or from the networks with
+//! `--weights`. Scores per material:
+//! - mask IoU of the extracted mask against the true material mask;
+//! - albedo RMSE (linear) and mean normal error (degrees) of the elements over
+//!   the true mask (0 with ground-truth elements);
+//! - for textured materials, the texture score against the true source texture
+//!   ignoring the tiling's offset and scale ([`picker_extract::eval::aligned_texture_score`]:
+//!   best over cyclic shifts and a few scales, PSNR on sRGB values, plus a
+//!   colour-statistics distance) and the seam ratio of the result next to the
+//!   true texture's own;
+//! - for single-colour materials, the RMSE of the diffuse colour.
+//!
+//! Prints a table and writes the rows and their aggregates as JSON (`--json-out`).
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{anyhow, bail, Context, Result};
+use picker_extract::eval as metrics;
+use picker_extract::mask::Mask;
+use picker_extract::{pipeline, Inputs, Prepared, UvChoice};
+use picker_inpaint::{seam_score, PatchMatchInpainter};
+use picker_render::io as rio;
+use picker_render::{ElementImages, EnvMap};
+use serde::Serialize;
+use serde_json::json;
+
+/// Arguments of `picker eval`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// A folder of synthetic scenes (`picker synth --out DIR`), or one scene folder.
+    #[arg(value_name = "DIR")]
+    pub dir: PathBuf,
+    /// Smallest image fraction of a material to evaluate.
+    #[arg(long, default_value_t = 0.05)]
+    pub min_area: f64,
+    /// Network weights (else the ground-truth elements stand in for the networks).
+    #[arg(long, value_name = "DIR_OR_FILE")]
+    pub weights: Vec<PathBuf>,
+    /// Write the rows and aggregates as JSON here.
+    #[arg(long, value_name = "FILE")]
+    pub json_out: Option<PathBuf>,
+    /// Worker threads (default: one per logical core).
+    #[arg(long)]
+    pub threads: Option<usize>,
+}
+
+/// One evaluated material.
+#[derive(Clone, Debug, Serialize)]
+pub struct Row {
+    scene: String,
+    material_id: u32,
+    name: String,
+    family: String,
+    area: f64,
+    pick: [u32; 2],
+    textured_truth: bool,
+    textured_extracted: bool,
+    iou: f64,
+    albedo_rmse: f64,
+    normal_error_deg: f64,
+    texture_psnr_db: Option<f64>,
+    texture_colour_distance: Option<f64>,
+    texture_size: Option<usize>,
+    texture_scale: Option<f64>,
+    seam_ratio: Option<f64>,
+    truth_seam_ratio: Option<f64>,
+    coverage: Option<f64>,
+    uv_mode: Option<String>,
+    colour_rmse: Option<f64>,
+}
+
+fn scene_dirs(dir: &Path) -> Result<Vec<PathBuf>> {
+    if dir.join("scene.json").exists() {
+        return Ok(vec![dir.to_path_buf()]);
+    }
+    let mut v: Vec<PathBuf> = std::fs::read_dir(dir)
+        .with_context(|| format!("reading {}", dir.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.join("scene.json").exists())
+        .collect();
+    v.sort();
+    if v.is_empty() {
+        bail!("{}: no scene folders (with scene.json) found", dir.display());
+    }
+    Ok(v)
+}
+
+/// Chamfer (3-4) distance of every pixel of `mask` to the nearest pixel outside it (image border counts as outside).
+fn inner_distance(mask: &[bool], w: usize, h: usize) -> Vec<u32> {
+    let mut d: Vec<u32> = mask.iter().map(|&m| if m { u32::MAX / 2 } else { 0 }).collect();
+    let get = |d: &[u32], x: i64, y: i64| if x < 0 || y < 0 || x >= w as i64 || y >= h as i64 { 0 } else { d[y as usize * w + x as usize] };
+    for y in 0..h as i64 {
+        for x in 0..w as i64 {
+            let i = y as usize * w + x as usize;
+            let m = [(get(&d, x - 1, y), 3), (get(&d, x, y - 1), 3), (get(&d, x - 1, y - 1), 4), (get(&d, x + 1, y - 1), 4)];
+            for (v, c) in m {
+                d[i] = d[i].min(v + c);
+            }
+        }
+    }
+    for y in (0..h as i64).rev() {
+        for x in (0..w as i64).rev() {
+            let i = y as usize * w + x as usize;
+            let m = [(get(&d, x + 1, y), 3), (get(&d, x, y + 1), 3), (get(&d, x + 1, y + 1), 4), (get(&d, x - 1, y + 1), 4)];
+            for (v, c) in m {
+                d[i] = d[i].min(v + c);
+            }
+        }
+    }
+    d
+}
+
+fn f(v: &serde_json::Value) -> Option<f32> {
+    v.as_f64().map(|x| x as f32)
+}
+
+fn eval_scene(dir: &Path, a: &Args) -> Result<Vec<Row>> {
+    let scene: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("scene.json")).with_context(|| format!("reading {}", dir.join("scene.json").display()))?)
+        .with_context(|| format!("parsing {}", dir.join("scene.json").display()))?;
+    let ids_img = rio::read_png(&dir.join("material_id.png")).with_context(|| format!("reading {}", dir.join("material_id.png").display()))?;
+    let (w, h) = (ids_img.width, ids_img.height);
+    let ids: Vec<u32> = ids_img.plane(0).iter().map(|&v| (v * 65535.0).round() as u32).collect();
+    let photo_path = dir.join("image.png");
+    let truth = ElementImages::load(dir)?;
+    let inputs = if a.weights.is_empty() {
+        let env_path = dir.join("envmap.exr");
+        Inputs {
+            photo: rio::read_png(&photo_path)?,
+            elements: truth.clone(),
+            segmentation: rio::read_exr(&dir.join("segmentation.exr"))?,
+            envmap: Some(EnvMap::from_image(&rio::read_exr(&env_path)?).map_err(|e| anyhow!("{}: {e}", env_path.display()))?),
+        }
+    } else {
+        crate::extract::infer_inputs(&a.weights, &photo_path, 320)?.0
+    };
+    let prepared = Prepared::new(inputs)?;
+    let inpainter = PatchMatchInpainter::default();
+    let opts = pipeline::Options {
+        mask: Default::default(),
+        uv: UvChoice::Auto,
+        size: None,
+        max_size: pipeline::DEFAULT_MAX_SIZE,
+        fov_deg: None,
+        tileable: true,
+        seed: 0,
+        inpainter: &inpainter,
+    };
+    let mut rows = Vec::new();
+    for m in scene["materials"].as_array().cloned().unwrap_or_default() {
+        let id = m["id"].as_u64().unwrap_or(0) as u32;
+        let true_mask: Vec<bool> = ids.iter().map(|&i| i == id).collect();
+        let area = true_mask.iter().filter(|&&b| b).count() as f64 / (w * h) as f64;
+        if area < a.min_area {
+            continue;
+        }
+        let dist = inner_distance(&true_mask, w, h);
+        let best = (0..w * h).max_by_key(|&i| (dist[i], std::cmp::Reverse(i))).expect("non-empty");
+        let pick = [(best % w) as u32, (best / w) as u32];
+        let pm = prepared.pick_mask(pick, &opts.mask)?;
+        let (mat, diag) = pipeline::extract(&prepared, &format!("m{id}"), Some(pick), &pm, &opts)
+            .with_context(|| format!("{}: material {id}", dir.display()))?;
+        let got: Vec<bool> = mat.mask.data.iter().map(|&v| v > 0.5).collect();
+        let got = Mask { width: w, height: h, data: got };
+        let el = &prepared.inputs.elements;
+        let textured_truth = m["textured"].as_bool().unwrap_or(false);
+        let mut row = Row {
+            scene: dir.file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default(),
+            material_id: id,
+            name: m["name"].as_str().unwrap_or("").to_string(),
+            family: m["family"].as_str().unwrap_or("").to_string(),
+            area,
+            pick,
+            textured_truth,
+            textured_extracted: mat.textured,
+            iou: metrics::mask_iou(&got.data, &true_mask),
+            albedo_rmse: metrics::albedo_error(&el.diffuse, &truth.diffuse, &true_mask),
+            normal_error_deg: metrics::normal_error_deg(&el.normals, &truth.normals, &true_mask),
+            texture_psnr_db: None,
+            texture_colour_distance: None,
+            texture_size: diag.texture_size,
+            texture_scale: None,
+            seam_ratio: None,
+            truth_seam_ratio: None,
+            coverage: None,
+            uv_mode: diag.uv.as_ref().map(|u| format!("{:?}", u.mode).to_lowercase()),
+            colour_rmse: None,
+        };
+        if textured_truth {
+            let tex_path = dir.join("materials").join(id.to_string()).join("texture.exr");
+            let true_tex = rio::read_exr(&tex_path).with_context(|| format!("reading the true texture {}", tex_path.display()))?;
+            row.truth_seam_ratio = Some(seam_score(&true_tex).ratio);
+            if let Some(t) = &mat.texture {
+                let s = metrics::aligned_texture_score(&t.texture, &true_tex);
+                row.texture_psnr_db = Some(s.psnr_db);
+                row.texture_colour_distance = Some(s.colour_distance);
+                row.texture_scale = Some(s.scale);
+                row.seam_ratio = Some(t.seam.ratio);
+                row.coverage = Some(t.coverage_fraction);
+            }
+        } else if let Some(c) = m["diffuse_colour"].as_array() {
+            let c: Vec<f32> = c.iter().filter_map(f).collect();
+            if c.len() == 3 {
+                let e: f32 = (0..3).map(|k| (mat.params.diffuse[k] - c[k]).powi(2)).sum::<f32>() / 3.0;
+                row.colour_rmse = Some(e.sqrt() as f64);
+            }
+        }
+        rows.push(row);
+    }
+    Ok(rows)
+}
+
+fn mean(v: impl Iterator<Item = f64>) -> Option<f64> {
+    let v: Vec<f64> = v.filter(|x| x.is_finite()).collect();
+    (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
+}
+
+fn min(v: impl Iterator<Item = f64>) -> Option<f64> {
+    v.filter(|x| !x.is_nan()).min_by(|a, b| a.total_cmp(b))
+}
+
+fn opt(v: Option<f64>, prec: usize) -> String {
+    v.map(|x| format!("{x:.prec$}")).unwrap_or_else(|| "-".into())
+}
+
+/// Runs `picker eval`.
+pub fn run(a: Args) -> Result<()> {
+    crate::threads::init(a.threads)?;
+    let dirs = scene_dirs(&a.dir)?;
+    let mut rows = Vec::new();
+    for d in &dirs {
+        rows.extend(eval_scene(d, &a)?);
+    }
+    println!(
+        "{:<14} {:>3} {:<10} {:<14} {:>6} {:>6} {:>7} {:>7} {:>8} {:>6} {:>5} {:>6} {:>6} {:>5}",
+        "scene", "id", "name", "family", "area", "IoU", "alb", "nrm°", "tex dB", "cdist", "size", "seam", "tseam", "uv"
+    );
+    for r in &rows {
+        println!(
+            "{:<14} {:>3} {:<10} {:<14} {:>6.3} {:>6.3} {:>7.4} {:>7.2} {:>8} {:>6} {:>5} {:>6} {:>6} {:>5}",
+            r.scene,
+            r.material_id,
+            r.name.chars().take(10).collect::<String>(),
+            r.family.chars().take(14).collect::<String>(),
+            r.area,
+            r.iou,
+            r.albedo_rmse,
+            r.normal_error_deg,
+            opt(r.texture_psnr_db, 2),
+            opt(r.texture_colour_distance, 3),
+            r.texture_size.map(|s| s.to_string()).unwrap_or_else(|| "-".into()),
+            opt(r.seam_ratio, 2),
+            opt(r.truth_seam_ratio, 2),
+            r.uv_mode.as_deref().unwrap_or("-"),
+        );
+    }
+    let tex: Vec<&Row> = rows.iter().filter(|r| r.textured_truth).collect();
+    let agg = json!({
+        "materials": rows.len(),
+        "textured": tex.len(),
+        "mean_iou": mean(rows.iter().map(|r| r.iou)),
+        "min_iou": min(rows.iter().map(|r| r.iou)),
+        "mean_texture_psnr_db": mean(tex.iter().filter_map(|r| r.texture_psnr_db)),
+        "min_texture_psnr_db": min(tex.iter().filter_map(|r| r.texture_psnr_db)),
+        "mean_texture_colour_distance": mean(tex.iter().filter_map(|r| r.texture_colour_distance)),
+        "mean_seam_ratio": mean(tex.iter().filter_map(|r| r.seam_ratio)),
+        "mean_truth_seam_ratio": mean(tex.iter().filter_map(|r| r.truth_seam_ratio)),
+        "mean_albedo_rmse": mean(rows.iter().map(|r| r.albedo_rmse)),
+        "mean_normal_error_deg": mean(rows.iter().map(|r| r.normal_error_deg)),
+        "mean_colour_rmse_single_colour": mean(rows.iter().filter_map(|r| r.colour_rmse)),
+        "textured_detected": tex.iter().filter(|r| r.textured_extracted).count(),
+    });
+    println!("{}", serde_json::to_string_pretty(&agg)?);
+    if let Some(p) = &a.json_out {
+        let text = serde_json::to_string_pretty(&json!({
+            "format": "material-picker-eval", "format_version": 1,
+            "dir": a.dir.display().to_string(),
+            "elements": if a.weights.is_empty() { "ground truth" } else { "networks" },
+            "min_area": a.min_area, "aggregate": agg, "rows": rows,
+        }))?;
+        crate::output::write_atomic(p, format!("{text}\n").as_bytes())?;
+    }
+    Ok(())
+}

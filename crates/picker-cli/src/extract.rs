@@ -1,0 +1,602 @@
+//! `picker extract`: the product's main job — the material under a picked
+//! point as a tileable texture, Phong parameters and exports.
+//!
+//! The networks run once per photo (or `--elements DIR` supplies render
+//! elements, e.g. a synthetic scene's ground truth or a `picker infer` output);
+//! every pick (`--pick` repeated, or `--all`) shares that inference. With one
+//! pick the files go straight into `--out`; with several, each material gets
+//! `--out/<name>/` and the shared files (`envmap.exr`, `summary.json`,
+//! `palette_ids.png` for `--all`) stay at the top.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{anyhow, bail, Context, Result};
+use picker_extract::export::{self, ExportOptions};
+use picker_extract::mask::MaskOptions;
+use picker_extract::report::{self, Tile};
+use picker_extract::{pipeline, Inputs, Material, Prepared, UvChoice};
+use picker_inpaint::{DiffusionInpainter, Inpainter, LearnedInpainter, PatchMatchInpainter};
+use picker_nets::conventions as conv;
+use picker_nets::Net;
+use picker_render::io::{self as rio, Image};
+use picker_render::{ElementImages, EnvMap};
+use picker_tensor::Tensor;
+use serde_json::json;
+
+use crate::photo;
+
+/// `--uv` values.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum UvArg {
+    /// The predicted texture coordinates.
+    Net,
+    /// A plane fitted to the predicted normals, rectified by a homography.
+    Plane,
+    /// The more consistent of the two.
+    Auto,
+}
+
+/// Arguments of `picker extract`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// The photograph (PNG, JPEG, TIFF, WebP or BMP). Optional with --elements
+    /// (then DIR/image.png, or DIR/input.png for a `picker infer` folder).
+    #[arg(value_name = "PHOTO")]
+    pub photo: Option<PathBuf>,
+    /// A point on the material, `X,Y` in photo pixels (x right, y down, after EXIF
+    /// orientation). May be repeated.
+    #[arg(long, value_name = "X,Y", value_parser = parse_pick)]
+    pub pick: Vec<[u32; 2]>,
+    /// Extract every material covering at least --min-area of the image (a palette).
+    #[arg(long)]
+    pub all: bool,
+    /// Smallest image fraction of a material for --all.
+    #[arg(long, default_value_t = 0.02)]
+    pub min_area: f64,
+    /// Network weights: a directory with irn/msn[/envmap].safetensors, or files.
+    #[arg(long, value_name = "DIR_OR_FILE")]
+    pub weights: Vec<PathBuf>,
+    /// Render elements instead of the networks: a folder with diffuse_albedo.exr,
+    /// specular_albedo.exr, glossiness.exr, normals.exr, view_vector.exr, uv.exr,
+    /// segmentation.exr and optionally envmap.exr (as `picker synth` or `picker infer` write).
+    #[arg(long, value_name = "DIR", conflicts_with = "weights")]
+    pub elements: Option<PathBuf>,
+    /// Output directory (default: `<photo stem>.material/` next to the photo).
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+    /// Long side of the networks' working resolution.
+    #[arg(long, default_value_t = 320, value_parser = clap::value_parser!(u32).range(8..=4096))]
+    pub work_size: u32,
+    /// Keep only the connected region at the pick.
+    #[arg(long)]
+    pub connected: bool,
+    /// Segmentation-colour tolerance (RGB distance in [0,1]); default automatic.
+    #[arg(long)]
+    pub tolerance: Option<f32>,
+    /// Texture coordinates: predicted UVs, a rectified plane, or the more consistent.
+    #[arg(long, value_enum, default_value_t = UvArg::Auto)]
+    pub uv: UvArg,
+    /// Vertical field of view in degrees for --uv plane (default: from the view vectors).
+    #[arg(long)]
+    pub fov: Option<f32>,
+    /// Texture side in texels (default: the observed texel density, capped by --max-size).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=8192))]
+    pub size: Option<u32>,
+    /// Cap of the automatic texture side.
+    #[arg(long, default_value_t = 1024, value_parser = clap::value_parser!(u32).range(16..=8192))]
+    pub max_size: u32,
+    /// Do not make the texture tileable (no toroidal inpainting).
+    #[arg(long)]
+    pub no_tile: bool,
+    /// Inpainter: `patchmatch` (default), `diffusion`, or a learned inpainter's weights file.
+    #[arg(long, default_value = "patchmatch", value_name = "NAME_OR_FILE")]
+    pub inpainter: String,
+    /// Write texture.png with 16 bits per channel.
+    #[arg(long = "16bit")]
+    pub sixteen_bit: bool,
+    /// Seed of every random choice (inpainting).
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Print the summary as JSON on stdout.
+    #[arg(long)]
+    pub json: bool,
+    /// Worker threads (default: one per logical core).
+    #[arg(long)]
+    pub threads: Option<usize>,
+}
+
+fn parse_pick(s: &str) -> std::result::Result<[u32; 2], String> {
+    let (x, y) = s
+        .split_once(',')
+        .ok_or_else(|| format!("expected X,Y (e.g. 120,88), got {s:?}"))?;
+    let p = |v: &str| {
+        v.trim()
+            .parse::<u32>()
+            .map_err(|_| format!("{v:?} in {s:?} is not a pixel coordinate (a whole number ≥ 0)"))
+    };
+    Ok([p(x)?, p(y)?])
+}
+
+fn tensor_image(t: &Tensor) -> Image {
+    Image {
+        channels: t.c(),
+        height: t.h(),
+        width: t.w(),
+        data: t.image(0).to_vec(),
+    }
+}
+
+fn ms(t: Instant) -> f64 {
+    (t.elapsed().as_secs_f64() * 1e6).round() / 1e3
+}
+
+/// The photo as planar sRGB values.
+fn read_photo(path: &Path) -> Result<(Image, serde_json::Value)> {
+    let p = photo::load(path)?;
+    let (w, h) = p.rgb.dimensions();
+    let img = Image::new(3, h as usize, w as usize, photo::to_planar(&p.rgb))
+        .map_err(|e| anyhow!("{}: {e}", path.display()))?;
+    let info = json!({
+        "path": path.display().to_string(),
+        "width": w, "height": h,
+        "format": p.format.map(|f| format!("{f:?}")),
+        "exif_orientation": format!("{:?}", p.orientation),
+    });
+    Ok((img, info))
+}
+
+/// Runs the networks on the photo at the working resolution.
+fn run_nets(
+    a: &Args,
+    photo_path: &Path,
+    timings: &mut serde_json::Map<String, serde_json::Value>,
+) -> Result<(Inputs, serde_json::Value)> {
+    let (inputs, source, t) = infer_inputs(&a.weights, photo_path, a.work_size)?;
+    timings.extend(t);
+    Ok((inputs, source))
+}
+
+/// The inputs of an extraction, a description and per-network timings.
+type Inferred = (Inputs, serde_json::Value, serde_json::Map<String, serde_json::Value>);
+
+/// Runs the networks of `weights` on the photo at `work_size` (long side).
+pub fn infer_inputs(weights: &[PathBuf], photo_path: &Path, work_size: u32) -> Result<Inferred> {
+    let mut timings = serde_json::Map::new();
+    let chosen = crate::infer::resolve_weights(weights)?;
+    let p = photo::load(photo_path)?;
+    let (pw, ph) = p.rgb.dimensions();
+    let (ww, wh) = photo::working_size(pw, ph, work_size);
+    let work = photo::resize(&p.rgb, ww, wh);
+    let mut x = Tensor::new([1, 3, wh as usize, ww as usize], photo::to_planar(&work))
+        .map_err(|e| anyhow!("making the input tensor: {e}"))?;
+    conv::normalize_input(&mut x);
+    let (mut elements, mut seg, mut env) = (None, None, None);
+    let mut nets = Vec::new();
+    for c in &chosen {
+        let t = Instant::now();
+        let net = Net::load(&c.weights).with_context(|| format!("loading {}", c.path.display()))?;
+        let what = || {
+            format!(
+                "running the {} network ({})",
+                c.weights.kind(),
+                c.path.display()
+            )
+        };
+        match &net {
+            Net::Irn(irn) => {
+                let out = irn.forward(&x).with_context(what)?;
+                let re = conv::RenderElements::from_irn(&out).with_context(|| format!("decoding the IRN outputs of {}", c.path.display()))?;
+                elements = Some(
+                    ElementImages::new(
+                        tensor_image(&re.diffuse_albedo),
+                        tensor_image(&re.specular_albedo),
+                        tensor_image(&re.glossiness),
+                        tensor_image(&re.normals),
+                        tensor_image(&re.view_vector),
+                        Some(tensor_image(&re.uv)),
+                    )
+                    .map_err(|e| anyhow!("IRN outputs: {e}"))?,
+                );
+            }
+            Net::Msn(msn) => {
+                let out = msn.forward(&x).with_context(what)?;
+                seg = Some(tensor_image(&conv::decode_segmentation_tensor(&out.segmentation)));
+            }
+            Net::EnvMap(e) => {
+                let out = e.forward(&x).with_context(what)?;
+                let img = tensor_image(&conv::decode_envmap(&out.envmap));
+                env = Some(EnvMap::from_image(&img).map_err(|e| anyhow!("environment map: {e}"))?);
+            }
+            #[allow(unreachable_patterns)]
+            _ => bail!("{}: a {} network has no place in `picker extract --weights`; pass a learned inpainter with --inpainter", c.path.display(), c.weights.kind()),
+        }
+        timings.insert(format!("net_{}", c.weights.kind().as_str()), json!(ms(t)));
+        nets.push(json!({"net": c.weights.kind().as_str(), "weights": c.path.display().to_string(), "preset": c.weights.preset()}));
+    }
+    let elements = elements.ok_or_else(|| anyhow!("no IRN weights among --weights (picker extract needs irn.safetensors and msn.safetensors)"))?;
+    let segmentation = seg.ok_or_else(|| anyhow!("no MSN weights among --weights (picker extract needs irn.safetensors and msn.safetensors)"))?;
+    let (photo_img, _) = read_photo(photo_path)?;
+    Ok((
+        Inputs {
+            photo: photo_img,
+            elements,
+            segmentation,
+            envmap: env,
+        },
+        json!({"source": "networks", "nets": nets, "working_size": {"width": ww, "height": wh}}),
+        timings,
+    ))
+}
+
+/// Reads render elements from a folder.
+fn read_elements(dir: &Path, photo_path: &Path) -> Result<(Inputs, serde_json::Value)> {
+    let elements = ElementImages::load(dir)
+        .with_context(|| format!("reading render elements from {}", dir.display()))?;
+    let seg_path = dir.join(format!("{}.exr", conv::SEGMENTATION));
+    let segmentation =
+        rio::read_exr(&seg_path).with_context(|| format!("reading {}", seg_path.display()))?;
+    let env_path = dir.join(format!("{}.exr", conv::ENVMAP));
+    let envmap = if env_path.exists() {
+        let img =
+            rio::read_exr(&env_path).with_context(|| format!("reading {}", env_path.display()))?;
+        Some(EnvMap::from_image(&img).map_err(|e| anyhow!("{}: {e}", env_path.display()))?)
+    } else {
+        None
+    };
+    let (photo_img, _) = read_photo(photo_path)?;
+    Ok((
+        Inputs {
+            photo: photo_img,
+            elements,
+            segmentation,
+            envmap,
+        },
+        json!({"source": "elements", "elements": dir.display().to_string()}),
+    ))
+}
+
+fn inpainter(spec: &str) -> Result<Box<dyn Inpainter>> {
+    Ok(match spec {
+        "patchmatch" => Box::new(PatchMatchInpainter::default()),
+        "diffusion" => Box::new(DiffusionInpainter::default()),
+        path => {
+            let p = Path::new(path);
+            if !p.exists() {
+                bail!("--inpainter {path:?}: not `patchmatch`, `diffusion` or an existing weights file");
+            }
+            Box::new(
+                LearnedInpainter::load(p)
+                    .with_context(|| format!("loading the learned inpainter {}", p.display()))?,
+            )
+        }
+    })
+}
+
+/// Display (sRGB) values of a linear image.
+fn display(linear: &Image) -> Image {
+    linear.map(|v| conv::srgb_encode(v.clamp(0.0, 1.0)))
+}
+
+fn tone_mapped(linear: &Image) -> Image {
+    let n = linear.plane_len();
+    Image {
+        channels: 3,
+        height: linear.height,
+        width: linear.width,
+        data: conv::tone_map_rgb(&linear.data, n),
+    }
+}
+
+fn direction_colours(img: &Image) -> Image {
+    let n = img.plane_len();
+    let mut out = Image::zeros(3, img.height, img.width);
+    for i in 0..n {
+        let c = conv::encode_direction_color([img.at(0, i), img.at(1, i), img.at(2, i)]);
+        for k in 0..3 {
+            out.data[k * n + i] = c[k];
+        }
+    }
+    out
+}
+
+fn tiled(tex: &Image, k: usize) -> Image {
+    let (w, h) = (tex.width, tex.height);
+    let mut out = Image::zeros(tex.channels, h * k, w * k);
+    for c in 0..tex.channels {
+        for y in 0..h * k {
+            for x in 0..w * k {
+                out.data[c * h * w * k * k + y * w * k + x] =
+                    tex.data[c * h * w + (y % h) * w + x % w];
+            }
+        }
+    }
+    out
+}
+
+/// The report sheet (thesis fig. 6.7 and more).
+fn report_sheet(p: &Prepared, m: &Material, preview: &Image) -> Image {
+    let el = &p.inputs.elements;
+    let mut photo = p.inputs.photo.clone();
+    if let Some([x, y]) = m.pick {
+        let r = (photo.width.max(photo.height) as f32 / 40.0).max(4.0);
+        report::draw_marker(&mut photo, x as f32 + 0.5, y as f32 + 0.5, r);
+    }
+    let mut overlay = p.inputs.photo.clone();
+    let n = overlay.plane_len();
+    for i in 0..n {
+        let inside = m.mask.data[i] > 0.5;
+        for c in 0..3 {
+            let v = overlay.data[c * n + i];
+            overlay.data[c * n + i] = if inside { v } else { v * 0.25 };
+        }
+    }
+    let mut tiles = vec![
+        Tile {
+            label: "photo + pick".into(),
+            image: photo,
+        },
+        Tile {
+            label: "diffuse albedo".into(),
+            image: display(&el.diffuse),
+        },
+        Tile {
+            label: "specular albedo".into(),
+            image: display(&el.specular),
+        },
+        Tile {
+            label: "glossiness".into(),
+            image: el.glossiness.clone(),
+        },
+        Tile {
+            label: "normals".into(),
+            image: direction_colours(&el.normals),
+        },
+        Tile {
+            label: "segmentation".into(),
+            image: p.inputs.segmentation.clone(),
+        },
+        Tile {
+            label: "mask".into(),
+            image: overlay,
+        },
+    ];
+    if let Some(e) = &p.inputs.envmap {
+        tiles.push(Tile {
+            label: "lighting (envmap)".into(),
+            image: tone_mapped(&e.to_image()),
+        });
+    }
+    if let Some(t) = &m.texture {
+        tiles.push(Tile {
+            label: "reprojected".into(),
+            image: display(&t.raw),
+        });
+        tiles.push(Tile {
+            label: "coverage".into(),
+            image: t.coverage.clone(),
+        });
+        tiles.push(Tile {
+            label: format!("texture ({})", t.inpainter),
+            image: display(&t.texture),
+        });
+        tiles.push(Tile {
+            label: "texture tiled 2x2".into(),
+            image: display(&tiled(&t.texture, 2)),
+        });
+    }
+    tiles.push(Tile {
+        label: "preview".into(),
+        image: preview.clone(),
+    });
+    report::compose_sheet(&tiles, 4, 192)
+}
+
+/// Runs `picker extract`.
+pub fn run(a: Args) -> Result<()> {
+    let t_total = Instant::now();
+    let threads = crate::threads::init(a.threads)?;
+    if a.pick.is_empty() && !a.all {
+        bail!("nothing to extract: give --pick X,Y (may be repeated) or --all");
+    }
+    if !(0.0..1.0).contains(&a.min_area) {
+        bail!("--min-area {} must be in [0, 1)", a.min_area);
+    }
+    let photo_path = match (&a.photo, &a.elements) {
+        (Some(p), _) => p.clone(),
+        (None, Some(d)) => {
+            let img = d.join("image.png");
+            if img.exists() {
+                img
+            } else {
+                d.join("input.png")
+            }
+        }
+        (None, None) => bail!("give a PHOTO (or --elements DIR holding image.png)"),
+    };
+    if a.elements.is_none() && a.weights.is_empty() {
+        bail!("give --weights DIR (irn.safetensors + msn.safetensors [+ envmap.safetensors]) or --elements DIR");
+    }
+    let inpainter = inpainter(&a.inpainter)?;
+    let out_dir = match &a.out {
+        Some(o) => o.clone(),
+        None => {
+            let stem = photo_path
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_else(|| "photo".into());
+            photo_path.with_file_name(format!("{stem}.material"))
+        }
+    };
+    let mut timings = serde_json::Map::new();
+    let t = Instant::now();
+    let (inputs, source) = match &a.elements {
+        Some(dir) => read_elements(dir, &photo_path)?,
+        None => run_nets(&a, &photo_path, &mut timings)?,
+    };
+    let (_, photo_info) = read_photo(&photo_path)?;
+    timings.insert("inputs".into(), json!(ms(t)));
+    let prepared =
+        Prepared::new(inputs).with_context(|| format!("preparing {}", photo_path.display()))?;
+    for &pk in &a.pick {
+        prepared
+            .check_pick(pk)
+            .with_context(|| format!("{}", photo_path.display()))?;
+    }
+    std::fs::create_dir_all(&out_dir)
+        .with_context(|| format!("creating output directory {}", out_dir.display()))?;
+
+    let mask_opts = MaskOptions {
+        connected: a.connected,
+        tolerance: a.tolerance,
+    };
+    let mut jobs = Vec::new();
+    for (k, &pk) in a.pick.iter().enumerate() {
+        let pm = prepared
+            .pick_mask(pk, &mask_opts)
+            .with_context(|| format!("pick {},{} in {}", pk[0], pk[1], photo_path.display()))?;
+        jobs.push((format!("material_{k}"), Some(pk), pm));
+    }
+    let mut palette_ids = None;
+    if a.all {
+        let pal = prepared.palette(a.min_area, 64);
+        if pal.is_empty() {
+            bail!(
+                "{}: no material covers --min-area {} of the image",
+                photo_path.display(),
+                a.min_area
+            );
+        }
+        let (w, h) = prepared.work_size();
+        let mut ids = Image::zeros(1, h, w);
+        let base = jobs.len();
+        for (k, (pk, pm)) in pal.into_iter().enumerate() {
+            for (i, &m) in pm.mask.data.iter().enumerate() {
+                if m && ids.data[i] == 0.0 {
+                    ids.data[i] = (k + 1) as f32 / 65535.0;
+                }
+            }
+            jobs.push((format!("material_{}", base + k), Some(pk), pm));
+        }
+        palette_ids = Some(ids);
+    }
+    let opts = pipeline::Options {
+        mask: mask_opts,
+        uv: match a.uv {
+            UvArg::Net => UvChoice::Net,
+            UvArg::Plane => UvChoice::Plane,
+            UvArg::Auto => UvChoice::Auto,
+        },
+        size: a.size.map(|s| s as usize),
+        max_size: a.max_size as usize,
+        fov_deg: a.fov,
+        tileable: !a.no_tile,
+        seed: a.seed,
+        inpainter: inpainter.as_ref(),
+    };
+    let env = prepared.inputs.envmap.clone();
+    let preview_env = env
+        .clone()
+        .unwrap_or_else(|| EnvMap::uniform(64, 32, glam::Vec3::ONE));
+    let single = jobs.len() == 1;
+    let mut summaries = Vec::new();
+    for (name, pick, pm) in &jobs {
+        let t = Instant::now();
+        let (m, diag) = pipeline::extract(&prepared, name, *pick, pm, &opts)
+            .with_context(|| format!("extracting {name} from {}", photo_path.display()))?;
+        let extract_ms = ms(t);
+        let dir = if single {
+            out_dir.clone()
+        } else {
+            out_dir.join(name)
+        };
+        std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+        let t = Instant::now();
+        let preview = tone_mapped(&pipeline::preview_sphere(&m, &preview_env, 256, 2.0));
+        rio::write_png(&dir.join("preview.png"), &preview)?;
+        let sheet = report_sheet(&prepared, &m, &preview);
+        rio::write_png(&dir.join("report.png"), &sheet)?;
+        let report_ms = ms(t);
+        let extra = json!({
+            "photo": photo_info,
+            "inputs": source,
+            "diagnostics": diag,
+            "timings_ms": {"extract": extract_ms, "preview_and_report": report_ms, "steps": diag.timings_ms},
+            "picker_version": env!("CARGO_PKG_VERSION"),
+            "seed": a.seed,
+            "preview": {"file": "preview.png", "envmap": if env.is_some() { "estimated" } else { "uniform white (no envmap network given)" }, "texture_repeats": 2.0},
+            "report": "report.png",
+        });
+        let files = export::write_material_files(
+            &dir,
+            &m,
+            &extra,
+            &ExportOptions {
+                sixteen_bit: a.sixteen_bit,
+            },
+        )
+        .with_context(|| format!("writing {name} to {}", dir.display()))?;
+        let mut s = export::material_json(
+            &m,
+            &serde_json::Value::Null,
+            &ExportOptions {
+                sixteen_bit: a.sixteen_bit,
+            },
+        )?;
+        if let Some(o) = s.as_object_mut() {
+            o.insert("dir".into(), json!(dir.display().to_string()));
+            o.insert(
+                "files".into(),
+                json!(files
+                    .iter()
+                    .map(|f| f.file_name().map(|n| n.to_string_lossy().into_owned()))
+                    .collect::<Vec<_>>()),
+            );
+        }
+        summaries.push(s);
+    }
+    if let Some(e) = &env {
+        e.write_exr(&out_dir.join("envmap.exr"))
+            .with_context(|| format!("writing {}", out_dir.join("envmap.exr").display()))?;
+    }
+    if let Some(ids) = &palette_ids {
+        rio::write_png16(&out_dir.join("palette_ids.png"), ids)?;
+    }
+    timings.insert("total".into(), json!(ms(t_total)));
+    let summary = json!({
+        "format": "material-picker-extract",
+        "format_version": 1,
+        "picker_version": env!("CARGO_PKG_VERSION"),
+        "photo": photo_info,
+        "inputs": source,
+        "out": out_dir.display().to_string(),
+        "materials": summaries,
+        "envmap": env.as_ref().map(|_| "envmap.exr"),
+        "palette_ids": palette_ids.as_ref().map(|_| "palette_ids.png (16-bit: 0 = none, k = material_{k-1})"),
+        "threads": threads,
+        "timings_ms": timings,
+    });
+    let text = serde_json::to_string_pretty(&summary).context("serialising summary.json")?;
+    crate::output::write_atomic(
+        &out_dir.join("summary.json"),
+        format!("{text}\n").as_bytes(),
+    )?;
+    if a.json {
+        println!("{text}");
+    } else {
+        for s in &summary["materials"].as_array().cloned().unwrap_or_default() {
+            println!(
+                "{}: {} -> {}",
+                s["name"].as_str().unwrap_or("?"),
+                if s["textured"].as_bool().unwrap_or(false) {
+                    "textured"
+                } else {
+                    "single colour"
+                },
+                s["dir"].as_str().unwrap_or("?")
+            );
+        }
+        println!("done in {:.2} s", t_total.elapsed().as_secs_f64());
+    }
+    Ok(())
+}

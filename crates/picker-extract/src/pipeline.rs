@@ -1,0 +1,624 @@
+//! The whole extraction (design.md §4): render elements at the working
+//! resolution + the photo → for each pick, a [`Material`].
+//!
+//! Decisions the issue leaves open, stated once:
+//! - **De-lighting** is a detail transfer: at the working resolution, where the
+//!   photo and the network's albedo describe the same pixels, the ratio
+//!   `ρd / photo` (per channel, linear) is the inverse shading; it is
+//!   upsampled within the material (mask-aware bilinear) and multiplied by the
+//!   full-resolution photo. The texture therefore has the photo's detail and
+//!   the network's albedo level. Clipped (saturated) and black pixels get a low
+//!   confidence. With ground-truth elements at the photo's size the ratio is
+//!   exact and the de-lit colour is the true albedo.
+//! - **UV mode `auto`** reprojects with the predicted UVs when their
+//!   cross-validated consistency ([`reproject::consistency`]) reaches
+//!   [`AUTO_MIN_R2`], otherwise rectifies a plane when the picked normals agree
+//!   within [`AUTO_MAX_PLANE_SPREAD_DEG`], otherwise keeps the UVs.
+//! - **Material parameters**: ρs and g are per-channel medians over the mask at
+//!   the working resolution; n = 2^(13g); the diffuse colour is the mean of the
+//!   final texture (textured) or the median de-lit colour (single colour).
+//! - **Re-render self-check**: the masked pixels are re-rendered at the working
+//!   resolution from the extracted material (texture looked up through the
+//!   predicted UVs in UV mode, the mean colour otherwise), the predicted
+//!   normals and view vectors and the estimated environment map (fast path),
+//!   and compared with the photo (PSNR on sRGB values). Interreflections,
+//!   shadows and lamps are not in eq. 3.7, so this is a consistency score, not
+//!   an accuracy.
+
+use std::time::Instant;
+
+use glam::Vec3;
+use picker_inpaint::{seam_score, InpaintOptions, Inpainter};
+use picker_nets::conventions as conv;
+use picker_render::io::Image;
+use picker_render::{ElementImages, EnvMap, Quality, Shader};
+use serde::Serialize;
+
+use crate::mask::{Mask, MaskOptions, PickMask};
+use crate::reproject::{self, Coords};
+use crate::{
+    guided, mask, plane, resample, Error, Material, MaterialParams, Result, TextureResult, UvMode,
+};
+
+/// Smallest cross-validated R² for which `auto` trusts the predicted UVs.
+pub const AUTO_MIN_R2: f64 = 0.5;
+/// Largest median normal deviation (degrees) for which `auto` rectifies a plane.
+pub const AUTO_MAX_PLANE_SPREAD_DEG: f32 = 20.0;
+/// Default cap of the texture side.
+pub const DEFAULT_MAX_SIZE: usize = 1024;
+/// sRGB value from which a photo pixel counts as clipped.
+pub const CLIPPED_SRGB: f32 = 0.995;
+
+/// Which texture coordinates to use.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum UvChoice {
+    /// The predicted UVs.
+    Net,
+    /// A rectified plane.
+    Plane,
+    /// The more consistent of the two (see the module docs).
+    #[default]
+    Auto,
+}
+
+/// Everything the extraction reads.
+#[derive(Clone, Debug)]
+pub struct Inputs {
+    /// The photo at full resolution: sRGB-encoded display values in [0,1], 3 channels.
+    pub photo: Image,
+    /// The render elements at the working resolution (UVs needed for textures).
+    pub elements: ElementImages,
+    /// The segmentation at the working resolution (3 channels).
+    pub segmentation: Image,
+    /// The estimated environment map (camera space), if any.
+    pub envmap: Option<EnvMap>,
+}
+
+/// Options of one extraction.
+pub struct Options<'a> {
+    /// How picks become masks.
+    pub mask: MaskOptions,
+    /// Texture coordinate source.
+    pub uv: UvChoice,
+    /// Fixed texture side (else from the observed texel density).
+    pub size: Option<usize>,
+    /// Cap of the automatic texture side.
+    pub max_size: usize,
+    /// Vertical field of view (degrees) for the plane mode (else from the view vectors).
+    pub fov_deg: Option<f32>,
+    /// Make the texture tileable (toroidal inpainting).
+    pub tileable: bool,
+    /// Seed of the inpainter.
+    pub seed: u64,
+    /// The inpainter.
+    pub inpainter: &'a dyn Inpainter,
+}
+
+/// The inputs prepared once for any number of picks.
+pub struct Prepared {
+    /// The inputs.
+    pub inputs: Inputs,
+    /// The photo, linear RGB, full resolution.
+    pub photo_linear: Image,
+    /// The photo, linear RGB, area-downsampled to the working resolution.
+    pub photo_work: Image,
+    /// Luma of the sRGB photo (the guide), full resolution.
+    pub luma: Vec<f32>,
+    /// Pixels with a surface at the working resolution.
+    pub valid: Vec<bool>,
+    /// Time spent preparing, ms.
+    pub prepare_ms: f64,
+}
+
+fn check_size(what: &str, img: &Image, c: usize, w: usize, h: usize) -> Result<()> {
+    if img.channels != c || img.width != w || img.height != h {
+        return Err(Error::Shape {
+            what: what.into(),
+            expected: format!("{c} channels at {w}x{h}"),
+            found: format!("{} channels at {}x{}", img.channels, img.width, img.height),
+        });
+    }
+    Ok(())
+}
+
+impl Prepared {
+    /// Checks and prepares `inputs`.
+    pub fn new(inputs: Inputs) -> Result<Self> {
+        let t = Instant::now();
+        let (w, h) = (inputs.elements.width(), inputs.elements.height());
+        let (fw, fh) = (inputs.photo.width, inputs.photo.height);
+        if fw == 0 || fh == 0 || w == 0 || h == 0 {
+            return Err(Error::Invalid("empty photo or render elements".into()));
+        }
+        check_size("photo", &inputs.photo, 3, fw, fh)?;
+        check_size("segmentation", &inputs.segmentation, 3, w, h)?;
+        let photo_linear = inputs.photo.map(picker_render::io::srgb_decode);
+        let photo_work = resample::area(&photo_linear, w, h);
+        let luma = guided::luma(&inputs.photo);
+        let valid = (0..w * h).map(|i| inputs.elements.is_valid(i)).collect();
+        Ok(Self {
+            inputs,
+            photo_linear,
+            photo_work,
+            luma,
+            valid,
+            prepare_ms: t.elapsed().as_secs_f64() * 1e3,
+        })
+    }
+
+    /// Photo size `(width, height)`.
+    pub fn photo_size(&self) -> (usize, usize) {
+        (self.inputs.photo.width, self.inputs.photo.height)
+    }
+
+    /// Working size `(width, height)`.
+    pub fn work_size(&self) -> (usize, usize) {
+        (self.inputs.elements.width(), self.inputs.elements.height())
+    }
+
+    /// The working-resolution pixel under photo pixel position `(x, y)`.
+    pub fn to_work(&self, x: f32, y: f32) -> (usize, usize) {
+        let (fw, fh) = self.photo_size();
+        let (w, h) = self.work_size();
+        (
+            ((x * w as f32 / fw as f32) as usize).min(w - 1),
+            ((y * h as f32 / fh as f32) as usize).min(h - 1),
+        )
+    }
+
+    /// Checks a pick given in photo pixels.
+    pub fn check_pick(&self, pick: [u32; 2]) -> Result<()> {
+        let (fw, fh) = self.photo_size();
+        if pick[0] as usize >= fw || pick[1] as usize >= fh {
+            return Err(Error::Invalid(format!(
+                "pick ({}, {}) is outside the {fw}x{fh} photo (x must be < {fw}, y < {fh})",
+                pick[0], pick[1]
+            )));
+        }
+        Ok(())
+    }
+
+    /// The mask of the material at `pick` (photo pixels), at the working resolution.
+    pub fn pick_mask(&self, pick: [u32; 2], opts: &MaskOptions) -> Result<PickMask> {
+        self.check_pick(pick)?;
+        let (x, y) = self.to_work(pick[0] as f32 + 0.5, pick[1] as f32 + 0.5);
+        mask::pick_mask(&self.inputs.segmentation, &self.valid, x, y, opts)
+    }
+
+    /// The material palette: masks of every material covering at least
+    /// `min_fraction` of the image (greedy, largest segmentation-colour
+    /// cluster first; a pixel belongs to at most one material), at most `max`.
+    pub fn palette(&self, min_fraction: f64, max: usize) -> Vec<([u32; 2], PickMask)> {
+        let (w, h) = self.work_size();
+        let (fw, fh) = self.photo_size();
+        let seg = &self.inputs.segmentation;
+        let mut remaining = self.valid.clone();
+        let mut out = Vec::new();
+        while out.len() < max {
+            let mut bins = std::collections::HashMap::<u32, Vec<usize>>::new();
+            for i in (0..w * h).filter(|&i| remaining[i]) {
+                let q = |c: usize| (seg.at(c, i).clamp(0.0, 1.0) * 15.999) as u32;
+                bins.entry(q(0) << 8 | q(1) << 4 | q(2))
+                    .or_default()
+                    .push(i);
+            }
+            let Some((_, members)) = bins
+                .into_iter()
+                .max_by_key(|(k, v)| (v.len(), std::cmp::Reverse(*k)))
+            else {
+                break;
+            };
+            if (members.len() as f64) < min_fraction * (w * h) as f64 {
+                break;
+            }
+            // The member nearest to the bin's median colour seeds the mask.
+            let med: Vec<f32> = (0..3)
+                .map(|c| {
+                    let mut v: Vec<f32> = members.iter().map(|&i| seg.at(c, i)).collect();
+                    let mid = v.len() / 2;
+                    v.select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
+                    v[mid]
+                })
+                .collect();
+            let seed = *members
+                .iter()
+                .min_by(|&&a, &&b| {
+                    let d = |i: usize| (0..3).map(|c| (seg.at(c, i) - med[c]).powi(2)).sum::<f32>();
+                    d(a).total_cmp(&d(b)).then(a.cmp(&b))
+                })
+                .expect("non-empty bin");
+            let (x, y) = (seed % w, seed / w);
+            let Ok(pm) = mask::pick_mask(seg, &remaining, x, y, &MaskOptions::default()) else {
+                remaining[seed] = false;
+                continue;
+            };
+            let got = pm.mask.count();
+            for (r, &m) in remaining.iter_mut().zip(&pm.mask.data) {
+                if m {
+                    *r = false;
+                }
+            }
+            remaining[seed] = false;
+            if (got as f64) < min_fraction * (w * h) as f64 {
+                continue;
+            }
+            let pick = [
+                (((x as f32 + 0.5) * fw as f32 / w as f32) as u32).min(fw as u32 - 1),
+                (((y as f32 + 0.5) * fh as f32 / h as f32) as u32).min(fh as u32 - 1),
+            ];
+            out.push((pick, pm));
+        }
+        out
+    }
+}
+
+/// How the UV mode was decided (for material.json).
+#[derive(Clone, Debug, Serialize)]
+pub struct UvDecision {
+    /// The mode used.
+    pub mode: UvMode,
+    /// What was asked.
+    pub requested: UvChoice,
+    /// Cross-validated R² of the predicted UVs, when measurable.
+    pub net_r2: Option<f64>,
+    /// Median deviation of the picked normals from the fitted plane (degrees).
+    pub plane_spread_deg: Option<f32>,
+    /// Focal length used by the plane mode (photo pixels).
+    pub focal_px: Option<f32>,
+}
+
+/// Diagnostics of one extraction, beyond the [`Material`].
+#[derive(Clone, Debug, Serialize)]
+pub struct Diagnostics {
+    /// Segmentation colour of the material.
+    pub segmentation_colour: [f32; 3],
+    /// Segmentation-colour tolerance used.
+    pub tolerance: f32,
+    /// Median `t` (textured flag) over the mask.
+    pub textured_flag: f32,
+    /// UV decision, for textured materials.
+    pub uv: Option<UvDecision>,
+    /// Texels per unit of texture square at the median observed density.
+    pub texture_size: Option<usize>,
+    /// Timings, ms.
+    pub timings_ms: std::collections::BTreeMap<String, f64>,
+}
+
+fn median(mut v: Vec<f32>) -> f32 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    let mid = v.len() / 2;
+    v.select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
+    v[mid]
+}
+
+/// Bilinear, wrapped lookup of an RGB texture at `(u, v)` ∈ [0,1)².
+pub fn sample_wrapped(tex: &Image, u: f32, v: f32) -> Vec3 {
+    let (w, h) = (tex.width as i64, tex.height as i64);
+    let x = u * w as f32 - 0.5;
+    let y = v * h as f32 - 0.5;
+    let (x0, y0) = (x.floor(), y.floor());
+    let (fx, fy) = (x - x0, y - y0);
+    let at = |xx: i64, yy: i64| tex.rgb((yy.rem_euclid(h) * w + xx.rem_euclid(w)) as usize);
+    let (x0, y0) = (x0 as i64, y0 as i64);
+    let a = at(x0, y0).lerp(at(x0 + 1, y0), fx);
+    let b = at(x0, y0 + 1).lerp(at(x0 + 1, y0 + 1), fx);
+    a.lerp(b, fy)
+}
+
+/// Extracts the material of the mask `pm` (working resolution), picked at `pick`.
+pub fn extract(
+    p: &Prepared,
+    name: &str,
+    pick: Option<[u32; 2]>,
+    pm: &PickMask,
+    opts: &Options,
+) -> Result<(Material, Diagnostics)> {
+    let mut timings = std::collections::BTreeMap::new();
+    let mut lap = {
+        let mut t = Instant::now();
+        move |what: &str, timings: &mut std::collections::BTreeMap<String, f64>| {
+            timings.insert(
+                what.to_string(),
+                (t.elapsed().as_secs_f64() * 1e6).round() / 1e3,
+            );
+            t = Instant::now();
+        }
+    };
+    let el = &p.inputs.elements;
+    let (w, h) = p.work_size();
+    let (fw, fh) = p.photo_size();
+    let mw = &pm.mask.data;
+    if pm.mask.count() == 0 {
+        return Err(Error::Invalid("the picked material has no pixels".into()));
+    }
+    let full = mask::refine(&pm.mask, &p.luma, fw, fh);
+    let full = if full.count() == 0 {
+        // A material thinner than a photo-resolution edge: keep the coarse mask.
+        let up = resample::bilinear_plane(&pm.mask.to_image().data, w, h, fw, fh);
+        Mask {
+            width: fw,
+            height: fh,
+            data: up.iter().map(|&v| v >= 0.5).collect(),
+        }
+    } else {
+        full
+    };
+    lap("mask", &mut timings);
+
+    // Parameters over the working-resolution mask.
+    let idx: Vec<usize> = (0..w * h).filter(|&i| mw[i]).collect();
+    let spec: Vec<f32> = (0..3)
+        .map(|c| median(idx.iter().map(|&i| el.specular.at(c, i)).collect()))
+        .collect();
+    let gloss = median(idx.iter().map(|&i| el.glossiness.at(0, i)).collect()).clamp(0.0, 1.0);
+    let t_flag = el
+        .uv
+        .as_ref()
+        .map(|uv| median(idx.iter().map(|&i| uv.at(2, i)).collect()))
+        .unwrap_or(0.0);
+
+    // De-lit colours at full resolution.
+    let mut ratio = Image::zeros(3, h, w);
+    let mut rw = vec![0.0f32; w * h];
+    for &i in &idx {
+        let ph = p.photo_work.rgb(i);
+        let alb = el.diffuse.rgb(i);
+        if ph.min_element() > 0.004 {
+            ratio.set_rgb(i, (alb / ph).min(Vec3::splat(100.0)));
+            rw[i] = 1.0;
+        }
+    }
+    let delit = if rw.iter().any(|&v| v > 0.0) {
+        let r = resample::masked_bilinear(&ratio, &rw, fw, fh);
+        let mut d = Image::zeros(3, fh, fw);
+        for i in 0..fw * fh {
+            d.set_rgb(i, p.photo_linear.rgb(i) * r.rgb(i));
+        }
+        d
+    } else {
+        resample::masked_bilinear(
+            &el.diffuse,
+            &mw.iter().map(|&b| b as u8 as f32).collect::<Vec<_>>(),
+            fw,
+            fh,
+        )
+    };
+    let interior = full.eroded();
+    let confidence: Vec<f32> = (0..fw * fh)
+        .map(|i| {
+            if !full.data[i] {
+                return 0.0;
+            }
+            let mut c = if interior.data[i] { 1.0 } else { 0.25 };
+            let s = (0..3)
+                .map(|k| p.inputs.photo.at(k, i))
+                .fold(0.0f32, f32::max);
+            if s >= CLIPPED_SRGB {
+                c *= 0.05;
+            }
+            c
+        })
+        .collect();
+    lap("delight", &mut timings);
+
+    let textured_by_flag = t_flag >= conv::TEXTURED_THRESHOLD && el.uv.is_some();
+    let textured = textured_by_flag || opts.uv == UvChoice::Plane;
+    let mut diag = Diagnostics {
+        segmentation_colour: pm.colour,
+        tolerance: pm.tolerance,
+        textured_flag: t_flag,
+        uv: None,
+        texture_size: None,
+        timings_ms: Default::default(),
+    };
+    let mut texture = None;
+    let mut uv_work: Option<&Image> = None;
+    let diffuse_mean;
+    if textured {
+        // Coordinates.
+        let mwf: Vec<f32> = mw.iter().map(|&b| b as u8 as f32).collect();
+        let net_coords = el.uv.as_ref().map(|uv| {
+            let up = resample::upsample_uv(uv, &mwf, fw, fh);
+            Coords {
+                width: fw,
+                height: fh,
+                u: up.plane(0).to_vec(),
+                v: up.plane(1).to_vec(),
+                wrap: true,
+            }
+        });
+        let normal = plane::plane_normal(&el.normals, mw);
+        let spread = normal.map(|n| plane::normal_spread_deg(&el.normals, mw, n));
+        let plane_coords = |diag_focal: &mut Option<f32>| -> Option<Coords> {
+            let n = normal?;
+            let f_work = match opts.fov_deg {
+                Some(fov) => plane::focal_from_fov(h, fov),
+                None => plane::focal_from_view(&el.view, mw)
+                    .unwrap_or_else(|| plane::focal_from_fov(h, plane::DEFAULT_FOV_Y_DEG)),
+            };
+            let f = f_work * fh as f32 / h as f32;
+            *diag_focal = Some(f);
+            Some(plane::plane_coords(fw, fh, &full.data, n, f))
+        };
+        let mut focal = None;
+        let probe_size = reproject::texture_size(
+            net_coords.as_ref().and_then(|c| c.median_area(&full.data)),
+            opts.max_size,
+        );
+        let net_r2 = match (&net_coords, opts.uv) {
+            (Some(c), UvChoice::Auto) => {
+                reproject::consistency(c, &full.data, &delit, probe_size).map(|r| r.0)
+            }
+            _ => None,
+        };
+        let (mode, coords) =
+            match opts.uv {
+                UvChoice::Net => match net_coords {
+                    Some(c) => (UvMode::Net, c),
+                    None => return Err(Error::Invalid(
+                        "--uv net needs predicted texture coordinates (uv), which the inputs lack"
+                            .into(),
+                    )),
+                },
+                UvChoice::Plane => match plane_coords(&mut focal) {
+                    Some(c) => (UvMode::Plane, c),
+                    None => {
+                        return Err(Error::Invalid(
+                            "--uv plane: the picked pixels have no usable normals".into(),
+                        ))
+                    }
+                },
+                UvChoice::Auto => {
+                    let net_ok = net_r2.is_some_and(|r| r >= AUTO_MIN_R2);
+                    let planar = spread.is_some_and(|s| s <= AUTO_MAX_PLANE_SPREAD_DEG);
+                    if net_ok || !planar {
+                        match net_coords {
+                            Some(c) => (UvMode::Net, c),
+                            None => (
+                                UvMode::Plane,
+                                plane_coords(&mut focal).ok_or_else(|| {
+                                    Error::Invalid(
+                                        "no texture coordinates and no usable normals".into(),
+                                    )
+                                })?,
+                            ),
+                        }
+                    } else {
+                        match plane_coords(&mut focal) {
+                            Some(c) => (UvMode::Plane, c),
+                            None => (
+                                UvMode::Net,
+                                net_coords.ok_or_else(|| {
+                                    Error::Invalid(
+                                        "no texture coordinates and no usable normals".into(),
+                                    )
+                                })?,
+                            ),
+                        }
+                    }
+                }
+            };
+        diag.uv = Some(UvDecision {
+            mode,
+            requested: opts.uv,
+            net_r2,
+            plane_spread_deg: spread,
+            focal_px: focal,
+        });
+        lap("coordinates", &mut timings);
+        let size = opts.size.unwrap_or_else(|| {
+            reproject::texture_size(coords.median_area(&full.data), opts.max_size)
+        });
+        diag.texture_size = Some(size);
+        let r = reproject::reproject(&coords, &full.data, &delit, &confidence, size);
+        lap("reproject", &mut timings);
+        let known_fraction = r.known_fraction();
+        if known_fraction == 0.0 {
+            return Err(Error::Invalid(
+                "no picked pixel landed in the texture square (texture coordinates unusable); try --uv plane or --uv net".into(),
+            ));
+        }
+        let final_tex = opts.inpainter.inpaint(
+            &r.texture,
+            &r.known,
+            &InpaintOptions {
+                toroidal: opts.tileable,
+                seed: opts.seed,
+                ..InpaintOptions::default()
+            },
+        )?;
+        lap("inpaint", &mut timings);
+        let mut mean = Vec3::ZERO;
+        for i in 0..size * size {
+            mean += final_tex.rgb(i);
+        }
+        diffuse_mean = mean / (size * size) as f32;
+        if mode == UvMode::Net {
+            uv_work = el.uv.as_ref();
+        }
+        texture = Some(TextureResult {
+            seam: seam_score(&final_tex),
+            texture: final_tex,
+            raw: r.texture,
+            coverage: r.coverage,
+            coverage_fraction: known_fraction,
+            uv_mode: mode,
+            inpainter: opts.inpainter.name().to_string(),
+        });
+    } else {
+        let fi: Vec<usize> = (0..fw * fh)
+            .filter(|&i| full.data[i] && confidence[i] > 0.0)
+            .collect();
+        diffuse_mean = Vec3::from_array(std::array::from_fn(|c| {
+            median(fi.iter().map(|&i| delit.at(c, i)).collect())
+        }));
+    }
+    let params = MaterialParams {
+        diffuse: diffuse_mean.to_array(),
+        specular: [spec[0], spec[1], spec[2]],
+        glossiness: gloss,
+        exponent: conv::phong_exponent(gloss),
+    };
+
+    // Re-render self-check at the working resolution.
+    let rerender_psnr = p.inputs.envmap.as_ref().and_then(|env| {
+        let shader = Shader::new(env, Quality::Fast);
+        let mut render = Image::zeros(3, h, w);
+        let mut phong = params.phong();
+        for &i in &idx {
+            if let (Some(uv), Some(t)) = (uv_work, texture.as_ref()) {
+                phong.diffuse = sample_wrapped(&t.texture, uv.at(0, i), uv.at(1, i));
+            }
+            render.set_rgb(i, shader.shade(el.normals.rgb(i), el.view.rgb(i), &phong));
+        }
+        picker_render::compare(&render, &p.photo_work, Some(mw))
+            .ok()
+            .map(|s| s.psnr_srgb)
+    });
+    lap("rerender", &mut timings);
+    diag.timings_ms = timings;
+    let area_fraction = full.fraction();
+    Ok((
+        Material {
+            name: name.to_string(),
+            pick,
+            params,
+            textured: texture.is_some(),
+            texture,
+            mask: full.to_image(),
+            area_fraction,
+            rerender_psnr,
+        },
+        diag,
+    ))
+}
+
+/// A textured preview sphere (orthographic, `size × size`, linear RGB; the
+/// texture wraps `repeats` times around the equator with the sphere's
+/// longitude/latitude mapping), shaded by eq. 3.7 with the fast path.
+pub fn preview_sphere(m: &Material, env: &EnvMap, size: usize, repeats: f32) -> Image {
+    let shader = Shader::new(env, Quality::Fast);
+    let mut out = Image::zeros(3, size, size);
+    let mut phong = m.params.phong();
+    for row in 0..size {
+        for col in 0..size {
+            let x = (col as f32 + 0.5) / size as f32 * 2.0 - 1.0;
+            let y = 1.0 - (row as f32 + 0.5) / size as f32 * 2.0;
+            let r2 = x * x + y * y;
+            if r2 >= 1.0 {
+                continue;
+            }
+            let n = Vec3::new(x, y, (1.0 - r2).sqrt());
+            if let Some(t) = &m.texture {
+                let u = (n.x.atan2(n.z) / std::f32::consts::TAU + 0.5) * repeats;
+                let v = n.y.clamp(-1.0, 1.0).acos() / std::f32::consts::PI * repeats / 2.0;
+                phong.diffuse = sample_wrapped(&t.texture, u.rem_euclid(1.0), v.rem_euclid(1.0));
+            }
+            out.set_rgb(row * size + col, shader.shade(n, Vec3::Z, &phong));
+        }
+    }
+    out
+}

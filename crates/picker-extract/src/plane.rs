@@ -1,0 +1,233 @@
+//! The plane mode of the reprojection: a plane fitted to the picked pixels'
+//! predicted normals, and the rectification of the photo onto it.
+//!
+//! The camera is a pinhole with square pixels and the principal point at the
+//! image centre; its focal length comes from the predicted view vectors (a
+//! view vector is the unit vector from the surface to the camera, so at pixel
+//! centre `(x, y)`, `v ∝ ((c_x − x)/f, (y − c_y)/f, 1)` and `f = (c_x − x)·v_z/v_x`,
+//! likewise in y; the median over the picked pixels), or from a given vertical
+//! field of view. The plane's normal `N` is the normalised per-component median
+//! of the predicted normals. A pixel's ray `d` meets the plane `N·P = −1` at
+//! `P = −d/(N·d)` (the scale is unknowable from one image and irrelevant to a
+//! texture). With an in-plane basis `e₁` (the camera's x axis projected on the
+//! plane) and `e₂ = N × e₁`, the plane coordinates `(P·e₁, −P·e₂)` are a
+//! homography of the pixel coordinates: the rectified view. The texture
+//! square is centred on the picked region's robust bounding box (2nd–98th
+//! percentiles) with the geometric mean of its sides.
+
+use glam::Vec3;
+use picker_render::io::Image;
+
+use crate::reproject::Coords;
+
+/// Focal length used when neither view vectors nor a field of view give one:
+/// a 60° vertical field of view.
+pub const DEFAULT_FOV_Y_DEG: f32 = 60.0;
+
+fn median(v: &mut [f32]) -> Option<f32> {
+    if v.is_empty() {
+        return None;
+    }
+    let mid = v.len() / 2;
+    v.select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
+    Some(v[mid])
+}
+
+/// Focal length in pixels of a `w×h` image from its view vectors at the picked (or any) pixels.
+pub fn focal_from_view(view: &Image, mask: &[bool]) -> Option<f32> {
+    let (w, h) = (view.width, view.height);
+    let (cx, cy) = (w as f32 / 2.0, h as f32 / 2.0);
+    let mut est = Vec::new();
+    for i in 0..w * h {
+        if !mask[i] {
+            continue;
+        }
+        let v = view.rgb(i);
+        if !(v.z > 0.05) {
+            continue;
+        }
+        let (x, y) = ((i % w) as f32 + 0.5, (i / w) as f32 + 0.5);
+        if v.x.abs() > 0.02 && (cx - x).abs() > 0.05 * w as f32 {
+            let f = (cx - x) * v.z / v.x;
+            if f > 0.0 {
+                est.push(f);
+            }
+        }
+        if v.y.abs() > 0.02 && (y - cy).abs() > 0.05 * h as f32 {
+            let f = (y - cy) * v.z / v.y;
+            if f > 0.0 {
+                est.push(f);
+            }
+        }
+    }
+    if est.len() < 8 {
+        return None;
+    }
+    median(&mut est)
+}
+
+/// Focal length in pixels of an image `h` pixels tall with vertical field of view `fov_y_deg`.
+pub fn focal_from_fov(h: usize, fov_y_deg: f32) -> f32 {
+    (h as f32 / 2.0) / (fov_y_deg.to_radians() / 2.0).tan()
+}
+
+/// The plane normal: normalised per-component median of `normals` over `mask`.
+pub fn plane_normal(normals: &Image, mask: &[bool]) -> Option<Vec3> {
+    let mut comp = [Vec::new(), Vec::new(), Vec::new()];
+    for (i, &m) in mask.iter().enumerate() {
+        if m {
+            let n = normals.rgb(i);
+            if n.is_finite() && n.length() > 1e-6 {
+                let n = n.normalize();
+                for c in 0..3 {
+                    comp[c].push(n[c]);
+                }
+            }
+        }
+    }
+    let [a, b, c] = &mut comp;
+    let n = Vec3::new(median(a)?, median(b)?, median(c)?);
+    (n.length() > 1e-6).then(|| n.normalize())
+}
+
+/// Angular spread (degrees) of the picked normals around `n`: the median angle.
+pub fn normal_spread_deg(normals: &Image, mask: &[bool], n: Vec3) -> f32 {
+    let mut ang: Vec<f32> = mask
+        .iter()
+        .enumerate()
+        .filter(|(_, &m)| m)
+        .filter_map(|(i, _)| {
+            let v = normals.rgb(i);
+            (v.length() > 1e-6).then(|| v.normalize().dot(n).clamp(-1.0, 1.0).acos().to_degrees())
+        })
+        .collect();
+    median(&mut ang).unwrap_or(180.0)
+}
+
+/// The rectified plane coordinates of the picked pixels of a `w×h` photo
+/// (focal `focal` in photo pixels), mapped into the texture square; pixels
+/// whose ray misses the plane's front get `NaN`.
+pub fn plane_coords(w: usize, h: usize, mask: &[bool], n: Vec3, focal: f32) -> Coords {
+    let e1 = {
+        let x = Vec3::X - Vec3::X.dot(n) * n;
+        if x.length() > 1e-3 {
+            x.normalize()
+        } else {
+            (Vec3::Y - Vec3::Y.dot(n) * n).normalize()
+        }
+    };
+    let e2 = n.cross(e1);
+    let (cx, cy) = (w as f32 / 2.0, h as f32 / 2.0);
+    let mut s = vec![f32::NAN; w * h];
+    let mut t = vec![f32::NAN; w * h];
+    for i in 0..w * h {
+        if !mask[i] {
+            continue;
+        }
+        let (x, y) = ((i % w) as f32 + 0.5, (i / w) as f32 + 0.5);
+        let d = Vec3::new((x - cx) / focal, -(y - cy) / focal, -1.0);
+        let nd = n.dot(d);
+        if nd >= -1e-4 {
+            continue;
+        }
+        let p = -d / nd;
+        s[i] = p.dot(e1);
+        t[i] = -p.dot(e2);
+    }
+    let pct = |v: &[f32], q: f32| -> Option<f32> {
+        let mut f: Vec<f32> = v.iter().copied().filter(|x| x.is_finite()).collect();
+        if f.is_empty() {
+            return None;
+        }
+        let k = ((f.len() - 1) as f32 * q) as usize;
+        f.select_nth_unstable_by(k, |a, b| a.total_cmp(b));
+        Some(f[k])
+    };
+    let mut coords = Coords {
+        width: w,
+        height: h,
+        u: vec![f32::NAN; w * h],
+        v: vec![f32::NAN; w * h],
+        wrap: false,
+    };
+    let (Some(s0), Some(s1), Some(t0), Some(t1)) =
+        (pct(&s, 0.02), pct(&s, 0.98), pct(&t, 0.02), pct(&t, 0.98))
+    else {
+        return coords;
+    };
+    let side = ((s1 - s0).max(1e-9) * (t1 - t0).max(1e-9)).sqrt();
+    let (sc, tc) = ((s0 + s1) / 2.0 - side / 2.0, (t0 + t1) / 2.0 - side / 2.0);
+    for i in 0..w * h {
+        if s[i].is_finite() {
+            let (u, v) = ((s[i] - sc) / side, (t[i] - tc) / side);
+            if (0.0..1.0).contains(&u) && (0.0..1.0).contains(&v) {
+                coords.u[i] = u;
+                coords.v[i] = v;
+            }
+        }
+    }
+    coords
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn focal_is_recovered_from_exact_view_vectors() {
+        let (w, h, f) = (64, 48, 55.0f32);
+        let mut view = Image::zeros(3, h, w);
+        for i in 0..w * h {
+            let (x, y) = ((i % w) as f32 + 0.5, (i / w) as f32 + 0.5);
+            let v = Vec3::new((32.0 - x) / f, (y - 24.0) / f, 1.0).normalize();
+            view.set_rgb(i, v);
+        }
+        let est = focal_from_view(&view, &vec![true; w * h]).unwrap();
+        assert!((est - f).abs() < 0.01, "{est}");
+        assert!((focal_from_fov(48, 90.0) - 24.0).abs() < 1e-4);
+    }
+
+    #[test]
+    fn a_frontal_plane_is_an_affine_grid() {
+        // Normal towards the camera: plane coordinates are proportional to pixels.
+        let (w, h) = (40, 30);
+        let c = plane_coords(w, h, &vec![true; w * h], Vec3::Z, 50.0);
+        let mid = (h / 2) * w + w / 2;
+        let du = c.u[mid + 1] - c.u[mid];
+        assert!(du > 0.0);
+        for y in 2..h - 2 {
+            for x in 2..w - 3 {
+                let i = y * w + x;
+                if c.u[i].is_finite() && c.u[i + 1].is_finite() {
+                    assert!(((c.u[i + 1] - c.u[i]) - du).abs() < 1e-5);
+                }
+            }
+        }
+        // rows go down in v
+        assert!(c.v[(h / 2 + 1) * w + w / 2] > c.v[(h / 2) * w + w / 2]);
+    }
+
+    #[test]
+    fn a_receding_floor_is_rectified() {
+        // A floor seen at an angle: equal steps on the floor are unequal in the
+        // image; after rectification, the texel density along a column
+        // grows towards the horizon but the coordinates stay monotone.
+        let (w, h) = (64, 64);
+        let mut mask = vec![false; w * h];
+        for y in 40..h {
+            for x in 0..w {
+                mask[y * w + x] = true;
+            }
+        }
+        let n = Vec3::new(0.0, 1.0, 0.2).normalize();
+        let c = plane_coords(w, h, &mask, n, 60.0);
+        let col: Vec<f32> = (40..h)
+            .map(|y| c.v[y * w + w / 2])
+            .filter(|v| v.is_finite())
+            .collect();
+        assert!(col.len() > 10);
+        assert!(col.windows(2).all(|p| p[1] > p[0]));
+        let steps: Vec<f32> = col.windows(2).map(|p| p[1] - p[0]).collect();
+        assert!(steps[0] > steps[steps.len() - 1] * 1.5, "{steps:?}");
+    }
+}

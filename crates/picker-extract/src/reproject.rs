@@ -1,0 +1,392 @@
+//! Reprojection of the picked pixels into the texture square (thesis §3.3).
+//!
+//! Every picked pixel carries texture coordinates `(u, v)` (the IRN's wrapped
+//! UVs, or plane coordinates from [`crate::plane`]) and a de-lit colour. The
+//! colours are splatted into a `size × size` texture with a tent kernel whose
+//! radius follows the pixel's footprint in the texture (so pixels seen from
+//! afar cover the texels between them), accumulating per-texel weights. The
+//! texel colour is the weighted mean; one reweighting pass downweights samples
+//! far from their texel's mean (Cauchy weights), which rejects misplaced UVs
+//! and highlights that survived de-lighting. Coverage is `W/(W + ½)` of the
+//! accumulated weight `W` (0 never observed, → 1 well observed); texels with
+//! `W ≥` [`KNOWN_WEIGHT`] count as known for the inpainter.
+
+use glam::Vec3;
+use picker_render::io::Image;
+
+/// Accumulated weight from which a texel counts as observed.
+pub const KNOWN_WEIGHT: f32 = 0.05;
+/// Largest splat radius in texels (very distant pixels are blurred, not spread further).
+pub const MAX_SPLAT_RADIUS: f32 = 4.0;
+
+/// Texture coordinates of pixels: per-pixel `(u, v)` on a `width × height`
+/// grid, `NaN` where a pixel has none.
+#[derive(Clone, Debug)]
+pub struct Coords {
+    /// Columns.
+    pub width: usize,
+    /// Rows.
+    pub height: usize,
+    /// `u` per pixel.
+    pub u: Vec<f32>,
+    /// `v` per pixel.
+    pub v: Vec<f32>,
+    /// Whether the coordinates wrap (periodic texture; `false`: outside [0,1) is dropped).
+    pub wrap: bool,
+}
+
+impl Coords {
+    fn delta(&self, a: f32, b: f32) -> f32 {
+        let d = b - a;
+        if self.wrap {
+            d - d.round()
+        } else {
+            d
+        }
+    }
+
+    /// The texture-square area covered by pixel `i` (|Jacobian| of the
+    /// coordinates by forward differences), if its right and lower neighbours
+    /// are in `mask` too.
+    pub fn pixel_area(&self, mask: &[bool], i: usize) -> Option<f32> {
+        let w = self.width;
+        let (x, y) = (i % w, i / w);
+        if x + 1 >= w || y + 1 >= self.height || !mask[i] || !mask[i + 1] || !mask[i + w] {
+            return None;
+        }
+        let (u0, v0) = (self.u[i], self.v[i]);
+        let (ux, vx) = (self.delta(u0, self.u[i + 1]), self.delta(v0, self.v[i + 1]));
+        let (uy, vy) = (self.delta(u0, self.u[i + w]), self.delta(v0, self.v[i + w]));
+        let a = (ux * vy - uy * vx).abs();
+        a.is_finite().then_some(a)
+    }
+
+    /// Median texture-square area per picked pixel.
+    pub fn median_area(&self, mask: &[bool]) -> Option<f32> {
+        let mut a: Vec<f32> = (0..mask.len())
+            .filter_map(|i| self.pixel_area(mask, i))
+            .filter(|&a| a > 0.0)
+            .collect();
+        if a.is_empty() {
+            return None;
+        }
+        let mid = a.len() / 2;
+        a.select_nth_unstable_by(mid, |x, y| x.total_cmp(y));
+        Some(a[mid])
+    }
+}
+
+/// The texture side that gives about one texel per picked pixel at the
+/// median observed density, rounded to a multiple of 4 and clamped to
+/// `[16, max]` (`max ≥ 16`).
+pub fn texture_size(median_area: Option<f32>, max: usize) -> usize {
+    let max = max.max(16);
+    let side = match median_area {
+        Some(a) if a > 0.0 => (1.0 / a.sqrt()) as f64,
+        _ => 256.0,
+    };
+    let side = ((side / 4.0).round() as usize * 4).clamp(16, max);
+    side
+}
+
+/// The reprojected texture.
+#[derive(Clone, Debug)]
+pub struct Reprojected {
+    /// Weighted mean colour per texel (linear RGB; 0 where unobserved).
+    pub texture: Image,
+    /// Accumulated weight per texel (1 channel).
+    pub weight: Image,
+    /// Coverage `W/(W+½)` per texel (1 channel, [0,1)).
+    pub coverage: Image,
+    /// Texels with `W ≥ KNOWN_WEIGHT`.
+    pub known: Vec<bool>,
+}
+
+impl Reprojected {
+    /// Fraction of texels observed.
+    pub fn known_fraction(&self) -> f64 {
+        self.known.iter().filter(|&&b| b).count() as f64 / self.known.len().max(1) as f64
+    }
+}
+
+/// One picked pixel to splat.
+struct Sample {
+    u: f32,
+    v: f32,
+    colour: Vec3,
+    weight: f32,
+    radius: f32,
+}
+
+fn splat(
+    samples: &[Sample],
+    size: usize,
+    wrap: bool,
+    reference: Option<&[Vec3]>,
+    scale: f32,
+) -> (Vec<Vec3>, Vec<f32>) {
+    let mut sum = vec![Vec3::ZERO; size * size];
+    let mut wsum = vec![0.0f32; size * size];
+    let n = size as i64;
+    for s in samples {
+        let px = s.u * size as f32 - 0.5;
+        let py = s.v * size as f32 - 0.5;
+        let r = s.radius;
+        let (x0, x1) = ((px - r).ceil() as i64, (px + r).floor() as i64);
+        let (y0, y1) = ((py - r).ceil() as i64, (py + r).floor() as i64);
+        for ty in y0..=y1 {
+            let wy = 1.0 - (ty as f32 - py).abs() / r;
+            if wy <= 0.0 {
+                continue;
+            }
+            let yy = if wrap { ty.rem_euclid(n) } else { ty };
+            if yy < 0 || yy >= n {
+                continue;
+            }
+            for tx in x0..=x1 {
+                let wx = 1.0 - (tx as f32 - px).abs() / r;
+                if wx <= 0.0 {
+                    continue;
+                }
+                let xx = if wrap { tx.rem_euclid(n) } else { tx };
+                if xx < 0 || xx >= n {
+                    continue;
+                }
+                let t = yy as usize * size + xx as usize;
+                let mut w = s.weight * wx * wy;
+                if let Some(mean) = reference {
+                    let d = (s.colour - mean[t]).length() / scale;
+                    w /= 1.0 + d * d;
+                }
+                sum[t] += s.colour * w;
+                wsum[t] += w;
+            }
+        }
+    }
+    (sum, wsum)
+}
+
+/// Splats the picked pixels (`mask`, colours `colour` (3 channels), per-pixel
+/// confidence `confidence`) through `coords` into a `size × size` texture.
+pub fn reproject(
+    coords: &Coords,
+    mask: &[bool],
+    colour: &Image,
+    confidence: &[f32],
+    size: usize,
+) -> Reprojected {
+    let n = coords.width * coords.height;
+    assert_eq!(mask.len(), n, "mask size");
+    assert_eq!(colour.plane_len(), n, "colour size");
+    let mut samples = Vec::new();
+    for i in 0..n {
+        if !mask[i] || confidence[i] <= 0.0 {
+            continue;
+        }
+        let (u, v) = (coords.u[i], coords.v[i]);
+        let c = colour.rgb(i);
+        if !u.is_finite() || !v.is_finite() || !c.is_finite() {
+            continue;
+        }
+        // Footprint: the side of the pixel's area in texels (½ a texel at least).
+        let side = coords
+            .pixel_area(mask, i)
+            .map(|a| a.sqrt() * size as f32)
+            .unwrap_or(1.0);
+        let radius = side.clamp(1.0, MAX_SPLAT_RADIUS);
+        samples.push(Sample {
+            u,
+            v,
+            colour: c,
+            weight: confidence[i] / (radius * radius),
+            radius,
+        });
+    }
+    let (sum, wsum) = splat(&samples, size, coords.wrap, None, 1.0);
+    let mean: Vec<Vec3> = sum
+        .iter()
+        .zip(&wsum)
+        .map(|(s, &w)| if w > 0.0 { *s / w } else { Vec3::ZERO })
+        .collect();
+    // Robust pass: Cauchy weights on the distance to the first-pass texel mean,
+    // scale = 2 × the median deviation (at least 0.02).
+    let mut dev: Vec<f32> = samples
+        .iter()
+        .map(|s| {
+            let px = ((s.u * size as f32) as i64).rem_euclid(size as i64) as usize;
+            let py = ((s.v * size as f32) as i64).rem_euclid(size as i64) as usize;
+            (s.colour - mean[py * size + px]).length()
+        })
+        .collect();
+    let scale = if dev.is_empty() {
+        1.0
+    } else {
+        let mid = dev.len() / 2;
+        dev.select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
+        (2.0 * dev[mid]).max(0.02)
+    };
+    let (sum, wsum) = splat(&samples, size, coords.wrap, Some(&mean), scale);
+    let mut texture = Image::zeros(3, size, size);
+    let mut weight = Image::zeros(1, size, size);
+    let mut coverage = Image::zeros(1, size, size);
+    let mut known = vec![false; size * size];
+    for t in 0..size * size {
+        let w = wsum[t];
+        weight.data[t] = w;
+        coverage.data[t] = w / (w + 0.5);
+        if w >= KNOWN_WEIGHT {
+            known[t] = true;
+            texture.set_rgb(t, sum[t] / w);
+        }
+    }
+    Reprojected {
+        texture,
+        weight,
+        coverage,
+        known,
+    }
+}
+
+/// Cross-validated consistency of the coordinates: the picked pixels are
+/// split into two halves by 16×16-pixel blocks assigned by a hash of the
+/// block index (so the split cannot alias with a texture period), each half is
+/// reprojected alone, and the two textures are compared on the texels both
+/// observe. Returns `(R², overlap fraction)` where `R² = 1 − MSE/(2·var)`
+/// (1: the halves agree perfectly; ≤ 0: no better than chance), or `None`
+/// when fewer than 5% of the texels are seen by both halves.
+pub fn consistency(
+    coords: &Coords,
+    mask: &[bool],
+    colour: &Image,
+    size: usize,
+) -> Option<(f64, f64)> {
+    let w = coords.width;
+    let half = |parity: usize| -> Vec<f32> {
+        (0..mask.len())
+            .map(|i| {
+                let (bx, by) = ((i % w) / 16, (i / w) / 16);
+                let mut hsh = (bx as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+                    ^ (by as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F);
+                hsh ^= hsh >> 29;
+                hsh = hsh.wrapping_mul(0xBF58_476D_1CE4_E5B9);
+                hsh ^= hsh >> 32;
+                ((hsh & 1) as usize == parity) as u8 as f32
+            })
+            .collect()
+    };
+    let size = size.min(128);
+    let a = reproject(coords, mask, colour, &half(0), size);
+    let b = reproject(coords, mask, colour, &half(1), size);
+    let both: Vec<usize> = (0..size * size)
+        .filter(|&t| a.known[t] && b.known[t])
+        .collect();
+    let overlap = both.len() as f64 / (size * size) as f64;
+    if overlap < 0.05 {
+        return None;
+    }
+    let mut mse = 0.0f64;
+    let mut mean = [0.0f64; 3];
+    for &t in &both {
+        let (x, y) = (a.texture.rgb(t), b.texture.rgb(t));
+        mse += (x - y).length_squared() as f64;
+        for c in 0..3 {
+            mean[c] += (x[c] + y[c]) as f64 / 2.0;
+        }
+    }
+    let k = both.len() as f64;
+    mse /= k;
+    let m = Vec3::new(
+        (mean[0] / k) as f32,
+        (mean[1] / k) as f32,
+        (mean[2] / k) as f32,
+    );
+    let mut var = 0.0f64;
+    for &t in &both {
+        var += ((a.texture.rgb(t) - m).length_squared() + (b.texture.rgb(t) - m).length_squared())
+            as f64
+            / 2.0;
+    }
+    var /= k;
+    let r2 = if var > 1e-12 {
+        1.0 - mse / (2.0 * var)
+    } else if mse < 1e-12 {
+        1.0
+    } else {
+        0.0
+    };
+    Some((r2, overlap))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A picture of a periodic texture seen frontally: pixel (x, y) has
+    /// u = x/p, v = y/p (wrapped) and the texture's colour there.
+    fn frontal(w: usize, h: usize, p: f32, tex: impl Fn(f32, f32) -> Vec3) -> (Coords, Image) {
+        let mut u = vec![0.0; w * h];
+        let mut v = vec![0.0; w * h];
+        let mut img = Image::zeros(3, h, w);
+        for y in 0..h {
+            for x in 0..w {
+                let i = y * w + x;
+                u[i] = ((x as f32 + 0.5) / p).fract();
+                v[i] = ((y as f32 + 0.5) / p).fract();
+                img.set_rgb(i, tex(u[i], v[i]));
+            }
+        }
+        (
+            Coords {
+                width: w,
+                height: h,
+                u,
+                v,
+                wrap: true,
+            },
+            img,
+        )
+    }
+
+    #[test]
+    fn frontal_texture_is_recovered_and_sized_by_density() {
+        let tex = |u: f32, v: f32| Vec3::new(u, v, 0.5);
+        let (coords, img) = frontal(96, 64, 32.0, tex);
+        let mask = vec![true; 96 * 64];
+        let area = coords.median_area(&mask).unwrap();
+        assert!((area - 1.0 / 1024.0).abs() < 1e-5, "{area}");
+        let size = texture_size(Some(area), 1024);
+        assert_eq!(size, 32);
+        let r = reproject(&coords, &mask, &img, &vec![1.0; 96 * 64], size);
+        assert_eq!(r.known_fraction(), 1.0);
+        for y in 1..size - 1 {
+            for x in 1..size - 1 {
+                let c = r.texture.rgb(y * size + x);
+                let t = tex((x as f32 + 0.5) / 32.0, (y as f32 + 0.5) / 32.0);
+                assert!((c - t).abs().max_element() < 0.02, "{x},{y}: {c} vs {t}");
+            }
+        }
+        let (r2, overlap) = consistency(&coords, &mask, &img, size).unwrap();
+        assert!(r2 > 0.95 && overlap > 0.5, "{r2} {overlap}");
+    }
+
+    #[test]
+    fn scrambled_coordinates_are_inconsistent() {
+        let tex = |u: f32, v: f32| Vec3::splat(((u * 8.0) as i32 + (v * 8.0) as i32) as f32 % 2.0);
+        let (mut coords, img) = frontal(128, 128, 32.0, tex);
+        let mut rng = picker_tensor::Rng::new(1);
+        for i in 0..coords.u.len() {
+            coords.u[i] = rng.uniform(0.0, 1.0);
+            coords.v[i] = rng.uniform(0.0, 1.0);
+        }
+        let (r2, _) = consistency(&coords, &vec![true; 128 * 128], &img, 32).unwrap();
+        assert!(r2 < 0.3, "{r2}");
+    }
+
+    #[test]
+    fn texture_size_bounds() {
+        assert_eq!(texture_size(None, 1024), 256);
+        assert_eq!(texture_size(Some(1e-9), 1024), 1024);
+        assert_eq!(texture_size(Some(0.5), 1024), 16);
+        assert_eq!(texture_size(Some(1e-4), 8), 16);
+    }
+}

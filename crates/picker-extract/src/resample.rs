@@ -1,0 +1,278 @@
+//! Resampling planar images between the working and the photo resolution.
+//!
+//! Pixel centres follow the conventions (`design.md` §2): pixel `(x, y)` covers
+//! `[x, x+1) × [y, y+1)`, so a position `p` in an image of `n` pixels maps to
+//! `(p + 0.5)·m/n − 0.5` in one of `m` pixels (PyTorch's `align_corners=False`).
+
+use picker_render::io::Image;
+
+/// Source coordinate of destination index `i` when `src` pixels become `dst`
+/// pixels (half-pixel centres), clamped to the source.
+#[inline]
+fn src_coord(i: usize, src: usize, dst: usize) -> (usize, usize, f32) {
+    let p = ((i as f32 + 0.5) * src as f32 / dst as f32 - 0.5).max(0.0);
+    let i0 = (p.floor() as usize).min(src - 1);
+    let i1 = (i0 + 1).min(src - 1);
+    (i0, i1, p - i0 as f32)
+}
+
+/// Bilinear resize of one plane (`w×h` → `dw×dh`), half-pixel centres, edges clamped.
+pub fn bilinear_plane(src: &[f32], w: usize, h: usize, dw: usize, dh: usize) -> Vec<f32> {
+    assert_eq!(src.len(), w * h, "plane length");
+    let xs: Vec<_> = (0..dw).map(|x| src_coord(x, w, dw)).collect();
+    let mut out = vec![0.0; dw * dh];
+    for y in 0..dh {
+        let (y0, y1, fy) = src_coord(y, h, dh);
+        let (r0, r1) = (&src[y0 * w..(y0 + 1) * w], &src[y1 * w..(y1 + 1) * w]);
+        let row = &mut out[y * dw..(y + 1) * dw];
+        for (o, &(x0, x1, fx)) in row.iter_mut().zip(&xs) {
+            let a = r0[x0] + (r0[x1] - r0[x0]) * fx;
+            let b = r1[x0] + (r1[x1] - r1[x0]) * fx;
+            *o = a + (b - a) * fy;
+        }
+    }
+    out
+}
+
+/// Bilinear resize of every plane of `img` to `dw × dh`.
+pub fn bilinear(img: &Image, dw: usize, dh: usize) -> Image {
+    if (img.width, img.height) == (dw, dh) {
+        return img.clone();
+    }
+    let mut data = Vec::with_capacity(img.channels * dw * dh);
+    for c in 0..img.channels {
+        data.extend(bilinear_plane(img.plane(c), img.width, img.height, dw, dh));
+    }
+    Image {
+        channels: img.channels,
+        height: dh,
+        width: dw,
+        data,
+    }
+}
+
+/// Area (box) downsampling of one plane: each destination pixel is the
+/// coverage-weighted mean of the source pixels it overlaps. Works for any
+/// ratio (upsampling degenerates to nearest-like sampling).
+pub fn area_plane(src: &[f32], w: usize, h: usize, dw: usize, dh: usize) -> Vec<f32> {
+    assert_eq!(src.len(), w * h, "plane length");
+    let spans = |n: usize, dn: usize| -> Vec<Vec<(usize, f32)>> {
+        (0..dn)
+            .map(|i| {
+                let a = i as f64 * n as f64 / dn as f64;
+                let b = (i + 1) as f64 * n as f64 / dn as f64;
+                let mut v = Vec::new();
+                let mut k = a.floor() as usize;
+                while (k as f64) < b && k < n {
+                    let lo = a.max(k as f64);
+                    let hi = b.min((k + 1) as f64);
+                    if hi > lo {
+                        v.push((k, ((hi - lo) / (b - a)) as f32));
+                    }
+                    k += 1;
+                }
+                v
+            })
+            .collect()
+    };
+    let (sx, sy) = (spans(w, dw), spans(h, dh));
+    let mut out = vec![0.0; dw * dh];
+    for (y, ry) in sy.iter().enumerate() {
+        for (x, rx) in sx.iter().enumerate() {
+            let mut s = 0.0;
+            for &(yy, wy) in ry {
+                for &(xx, wx) in rx {
+                    s += src[yy * w + xx] * wx * wy;
+                }
+            }
+            out[y * dw + x] = s;
+        }
+    }
+    out
+}
+
+/// Area downsampling of every plane of `img`.
+pub fn area(img: &Image, dw: usize, dh: usize) -> Image {
+    if (img.width, img.height) == (dw, dh) {
+        return img.clone();
+    }
+    let mut data = Vec::with_capacity(img.channels * dw * dh);
+    for c in 0..img.channels {
+        data.extend(area_plane(img.plane(c), img.width, img.height, dw, dh));
+    }
+    Image {
+        channels: img.channels,
+        height: dh,
+        width: dw,
+        data,
+    }
+}
+
+/// Mask-aware (normalised) bilinear upsampling: only source pixels with
+/// weight `> 0` contribute, `value = Σ wᵢ·m_i·vᵢ / Σ wᵢ·m_i`. Destination
+/// pixels with no contributing source get the value of the nearest source
+/// pixel with weight (found by growing the search), so every output is
+/// defined as long as some weight is positive; with no weight at all the
+/// plain bilinear result is returned.
+pub fn masked_bilinear(img: &Image, weight: &[f32], dw: usize, dh: usize) -> Image {
+    let (w, h) = (img.width, img.height);
+    assert_eq!(weight.len(), w * h, "weight length");
+    if !weight.iter().any(|&m| m > 0.0) {
+        return bilinear(img, dw, dh);
+    }
+    let den = bilinear_plane(weight, w, h, dw, dh);
+    let mut out = Image::zeros(img.channels, dh, dw);
+    let nearest = nearest_weighted(weight, w, h);
+    for c in 0..img.channels {
+        let p = img.plane(c);
+        let prod: Vec<f32> = p.iter().zip(weight).map(|(v, m)| v * m).collect();
+        let num = bilinear_plane(&prod, w, h, dw, dh);
+        let o = &mut out.data[c * dw * dh..(c + 1) * dw * dh];
+        for y in 0..dh {
+            for x in 0..dw {
+                let i = y * dw + x;
+                o[i] = if den[i] > 1e-6 {
+                    num[i] / den[i]
+                } else {
+                    let sx = ((x as f32 + 0.5) * w as f32 / dw as f32) as usize;
+                    let sy = ((y as f32 + 0.5) * h as f32 / dh as f32) as usize;
+                    p[nearest[sy.min(h - 1) * w + sx.min(w - 1)]]
+                };
+            }
+        }
+    }
+    out
+}
+
+/// For every pixel, the index of a nearest pixel (chamfer 3-4 distance) whose
+/// weight is positive. Requires at least one positive weight.
+pub fn nearest_weighted(weight: &[f32], w: usize, h: usize) -> Vec<usize> {
+    const INF: u32 = u32::MAX / 2;
+    let mut dist = vec![INF; w * h];
+    let mut idx = vec![usize::MAX; w * h];
+    for i in 0..w * h {
+        if weight[i] > 0.0 {
+            dist[i] = 0;
+            idx[i] = i;
+        }
+    }
+    let relax = |dist: &mut [u32], idx: &mut [usize], i: usize, j: usize, cost: u32| {
+        if dist[j] != INF && dist[j] + cost < dist[i] {
+            dist[i] = dist[j] + cost;
+            idx[i] = idx[j];
+        }
+    };
+    for y in 0..h {
+        for x in 0..w {
+            let i = y * w + x;
+            if x > 0 {
+                relax(&mut dist, &mut idx, i, i - 1, 3);
+            }
+            if y > 0 {
+                relax(&mut dist, &mut idx, i, i - w, 3);
+                if x > 0 {
+                    relax(&mut dist, &mut idx, i, i - w - 1, 4);
+                }
+                if x + 1 < w {
+                    relax(&mut dist, &mut idx, i, i - w + 1, 4);
+                }
+            }
+        }
+    }
+    for y in (0..h).rev() {
+        for x in (0..w).rev() {
+            let i = y * w + x;
+            if x + 1 < w {
+                relax(&mut dist, &mut idx, i, i + 1, 3);
+            }
+            if y + 1 < h {
+                relax(&mut dist, &mut idx, i, i + w, 3);
+                if x + 1 < w {
+                    relax(&mut dist, &mut idx, i, i + w + 1, 4);
+                }
+                if x > 0 {
+                    relax(&mut dist, &mut idx, i, i + w - 1, 4);
+                }
+            }
+        }
+    }
+    idx
+}
+
+/// Upsamples wrapped texture coordinates `(u, v, t)` without averaging across
+/// the wrap: `u` and `v` go through their circular encoding
+/// `(cos 2πu, sin 2πu)`, are resampled with [`masked_bilinear`] and decoded
+/// with `atan2`; `t` is resampled as is.
+pub fn upsample_uv(uv: &Image, weight: &[f32], dw: usize, dh: usize) -> Image {
+    use std::f32::consts::TAU;
+    let n = uv.plane_len();
+    let mut enc = Image::zeros(5, uv.height, uv.width);
+    for i in 0..n {
+        let (u, v) = (uv.at(0, i), uv.at(1, i));
+        enc.data[i] = (TAU * u).cos();
+        enc.data[n + i] = (TAU * u).sin();
+        enc.data[2 * n + i] = (TAU * v).cos();
+        enc.data[3 * n + i] = (TAU * v).sin();
+        enc.data[4 * n + i] = uv.at(2, i);
+    }
+    let up = masked_bilinear(&enc, weight, dw, dh);
+    let m = dw * dh;
+    let mut out = Image::zeros(3, dh, dw);
+    for i in 0..m {
+        let u = up.data[m + i].atan2(up.data[i]) / TAU;
+        let v = up.data[3 * m + i].atan2(up.data[2 * m + i]) / TAU;
+        out.data[i] = picker_nets::conventions::wrap_unit(u);
+        out.data[m + i] = picker_nets::conventions::wrap_unit(v);
+        out.data[2 * m + i] = up.data[4 * m + i];
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bilinear_identity_and_constant() {
+        let src: Vec<f32> = (0..12).map(|v| v as f32).collect();
+        assert_eq!(bilinear_plane(&src, 4, 3, 4, 3), src);
+        let c = vec![0.25f32; 35];
+        assert!(bilinear_plane(&c, 7, 5, 23, 11)
+            .iter()
+            .all(|&v| (v - 0.25).abs() < 1e-7));
+    }
+
+    #[test]
+    fn area_preserves_mean_and_constants() {
+        let src: Vec<f32> = (0..60).map(|v| (v % 7) as f32).collect();
+        let d = area_plane(&src, 10, 6, 5, 3);
+        let m0: f32 = src.iter().sum::<f32>() / 60.0;
+        let m1: f32 = d.iter().sum::<f32>() / 15.0;
+        assert!((m0 - m1).abs() < 1e-5);
+        let d = area_plane(&src, 10, 6, 3, 4);
+        let m2: f32 = d.iter().sum::<f32>() / 12.0;
+        assert!((m0 - m2).abs() < 1e-4, "{m0} {m2}");
+    }
+
+    #[test]
+    fn uv_upsampling_does_not_average_across_the_wrap() {
+        // u = 0.95 | 0.05 side by side: the middle must be near 0 (wrapped), never 0.5.
+        let uv = Image::new(3, 1, 2, vec![0.95, 0.05, 0.5, 0.5, 1.0, 1.0]).unwrap();
+        let up = upsample_uv(&uv, &[1.0, 1.0], 4, 1);
+        for x in 0..4 {
+            let u = up.at(0, x);
+            assert!(!(0.2..0.8).contains(&u), "u = {u}");
+        }
+    }
+
+    #[test]
+    fn masked_bilinear_ignores_unweighted_pixels() {
+        let img = Image::new(1, 1, 4, vec![1.0, 1.0, 9.0, 9.0]).unwrap();
+        let up = masked_bilinear(&img, &[1.0, 1.0, 0.0, 0.0], 8, 1);
+        assert!(
+            up.data.iter().all(|&v| (v - 1.0).abs() < 1e-6),
+            "{:?}",
+            up.data
+        );
+    }
+}

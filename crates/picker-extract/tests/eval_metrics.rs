@@ -1,0 +1,230 @@
+//! Tests of `picker_extract::eval`: mask IoU, aligned texture score, albedo and normal errors.
+
+use std::time::Instant;
+
+use picker_extract::eval::{
+    albedo_error, aligned_texture_score, colour_distance, mask_iou, normal_error_deg,
+};
+use picker_render::io::Image;
+use picker_tensor::Rng;
+
+/// A tileable linear-RGB texture: a few random integer-frequency waves per
+/// channel plus a little white noise (so no shift but 0 matches it).
+fn texture(h: usize, w: usize, seed: u64) -> Image {
+    let mut rng = Rng::new(seed);
+    let n = h * w;
+    let mut data = vec![0.0f32; 3 * n];
+    for c in 0..3 {
+        let waves: Vec<(f32, f32, f32, f32)> = (0..4)
+            .map(|_| {
+                (
+                    rng.range(1, 6) as f32,
+                    rng.range(0, 5) as f32,
+                    rng.uniform(0.0, std::f32::consts::TAU),
+                    rng.uniform(0.05, 0.15),
+                )
+            })
+            .collect();
+        for r in 0..h {
+            for col in 0..w {
+                let (u, v) = (col as f32 / w as f32, r as f32 / h as f32);
+                let mut x = 0.45;
+                for &(fu, fv, ph, a) in &waves {
+                    x += a * (std::f32::consts::TAU * (fu * u + fv * v) + ph).sin();
+                }
+                x += rng.uniform(-0.04, 0.04);
+                data[c * n + r * w + col] = x.clamp(0.02, 0.98);
+            }
+        }
+    }
+    Image::new(3, h, w, data).unwrap()
+}
+
+/// `out(r, c) = img((r + dy) mod h, (c + dx) mod w)`.
+fn shifted(img: &Image, dy: usize, dx: usize) -> Image {
+    let (h, w, n) = (img.height, img.width, img.plane_len());
+    let mut out = img.clone();
+    for c in 0..img.channels {
+        for r in 0..h {
+            for x in 0..w {
+                out.data[c * n + r * w + x] = img.data[c * n + ((r + dy) % h) * w + (x + dx) % w];
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn identical_textures_score_perfectly() {
+    let t = texture(48, 64, 1);
+    let s = aligned_texture_score(&t, &t);
+    assert_eq!(s.psnr_db, f64::INFINITY);
+    assert_eq!(s.shift, (0, 0));
+    assert_eq!(s.scale, 1.0);
+    assert_eq!(s.colour_distance, 0.0);
+    assert_eq!(colour_distance(&t, &t), 0.0);
+}
+
+#[test]
+fn cyclic_shift_is_found_exactly() {
+    for (h, w, dy, dx) in [(64, 96, 5, 17), (40, 40, 39, 1), (33, 50, 16, 25)] {
+        let t = texture(h, w, 2 + dy as u64);
+        let e = shifted(&t, dy, dx);
+        let s = aligned_texture_score(&e, &t);
+        assert_eq!(s.shift, (dy, dx), "{h}x{w}");
+        assert_eq!(s.scale, 1.0);
+        assert!(s.psnr_db > 100.0, "{}", s.psnr_db);
+        assert!(s.colour_distance < 1e-9, "{}", s.colour_distance);
+    }
+}
+
+#[test]
+fn cyclic_shift_256_is_fast() {
+    let t = texture(256, 256, 7);
+    let e = shifted(&t, 100, 37);
+    let start = Instant::now();
+    let s = aligned_texture_score(&e, &t);
+    let took = start.elapsed();
+    eprintln!("aligned_texture_score 256x256: {took:?}");
+    assert_eq!(s.shift, (100, 37));
+    assert!(s.psnr_db > 100.0);
+    // Well under a second on an idle core; generous for shared CI machines.
+    assert!(took.as_secs_f64() < 3.0, "{took:?}");
+}
+
+#[test]
+fn half_scale_tiled_copy_is_found_at_half_scale() {
+    let (h, w) = (64, 64);
+    let t = texture(h, w, 11);
+    // Box-downsample by 2 (in linear light) and tile 2×2, then shift.
+    let (hh, hw) = (h / 2, w / 2);
+    let n = h * w;
+    let mut small = vec![0.0f32; 3 * hh * hw];
+    for c in 0..3 {
+        for r in 0..hh {
+            for x in 0..hw {
+                let at = |rr: usize, xx: usize| t.data[c * n + rr * w + xx];
+                small[c * hh * hw + r * hw + x] = 0.25
+                    * (at(2 * r, 2 * x)
+                        + at(2 * r + 1, 2 * x)
+                        + at(2 * r, 2 * x + 1)
+                        + at(2 * r + 1, 2 * x + 1));
+            }
+        }
+    }
+    let mut tiled = Image::zeros(3, h, w);
+    for c in 0..3 {
+        for r in 0..h {
+            for x in 0..w {
+                tiled.data[c * n + r * w + x] = small[c * hh * hw + (r % hh) * hw + x % hw];
+            }
+        }
+    }
+    let e = shifted(&tiled, 3, 9);
+    let s = aligned_texture_score(&e, &t);
+    assert_eq!(s.scale, 0.5, "{s:?}");
+    assert_eq!(s.shift, (3, 9));
+    assert!(s.psnr_db > 60.0, "{s:?}");
+}
+
+#[test]
+fn noise_lowers_psnr_monotonically() {
+    let t = texture(64, 64, 5);
+    let mut rng = Rng::new(99);
+    let noise = rng.normal_vec(t.data.len(), 1.0);
+    let mut last = f64::INFINITY;
+    for sigma in [0.005f32, 0.01, 0.02, 0.05, 0.1] {
+        let mut e = t.clone();
+        for (v, z) in e.data.iter_mut().zip(&noise) {
+            *v = (*v + sigma * z).clamp(0.0, 1.0);
+        }
+        let s = aligned_texture_score(&e, &t);
+        assert!(s.psnr_db < last, "sigma {sigma}: {} !< {last}", s.psnr_db);
+        assert!(s.psnr_db.is_finite() && s.psnr_db > 5.0);
+        last = s.psnr_db;
+    }
+}
+
+#[test]
+fn colour_distance_sees_colour_changes() {
+    let t = texture(32, 32, 3);
+    let darker = t.map(|v| v * 0.5);
+    let d = colour_distance(&darker, &t);
+    assert!(d > 0.05, "{d}");
+    let slightly = t.map(|v| v * 0.95);
+    assert!(colour_distance(&slightly, &t) < d);
+    // Grey against its own RGB expansion is 0.
+    let grey = Image::new(1, 4, 4, (0..16).map(|i| i as f32 / 16.0).collect()).unwrap();
+    let mut rgb = Vec::new();
+    for _ in 0..3 {
+        rgb.extend_from_slice(&grey.data);
+    }
+    let rgb = Image::new(3, 4, 4, rgb).unwrap();
+    assert_eq!(colour_distance(&grey, &rgb), 0.0);
+}
+
+#[test]
+fn empty_images_give_nan() {
+    let t = texture(8, 8, 1);
+    let s = aligned_texture_score(&Image::zeros(3, 0, 0), &t);
+    assert!(s.psnr_db.is_nan() && s.colour_distance.is_nan());
+}
+
+#[test]
+fn mask_iou_cases() {
+    let a = [true, true, false, false];
+    let b = [false, true, true, false];
+    assert_eq!(mask_iou(&a, &a), 1.0);
+    assert!((mask_iou(&a, &b) - 1.0 / 3.0).abs() < 1e-12);
+    assert_eq!(mask_iou(&a, &[false, false, true, true]), 0.0);
+    assert_eq!(mask_iou(&[false; 4], &[false; 4]), 1.0);
+    assert_eq!(mask_iou(&[], &[]), 1.0);
+    assert_eq!(mask_iou(&a, &[false; 4]), 0.0);
+}
+
+fn constant(c: usize, h: usize, w: usize, v: [f32; 3]) -> Image {
+    let n = h * w;
+    let mut data = vec![0.0; c * n];
+    for ch in 0..c {
+        data[ch * n..(ch + 1) * n].fill(v[ch.min(2)]);
+    }
+    Image::new(c, h, w, data).unwrap()
+}
+
+#[test]
+fn normal_error_analytic_cases() {
+    let z = constant(3, 4, 4, [0.0, 0.0, 1.0]);
+    let x = constant(3, 4, 4, [2.0, 0.0, 0.0]); // not unit: renormalised
+    let minus_z = constant(3, 4, 4, [0.0, 0.0, -1.0]);
+    let all = vec![true; 16];
+    assert!((normal_error_deg(&z, &x, &all) - 90.0).abs() < 1e-9);
+    assert_eq!(normal_error_deg(&z, &z, &all), 0.0);
+    assert!((normal_error_deg(&z, &minus_z, &all) - 180.0).abs() < 1e-9);
+    // 45° between +z and (1, 0, 1).
+    let diag = constant(3, 4, 4, [1.0, 0.0, 1.0]);
+    assert!((normal_error_deg(&z, &diag, &all) - 45.0).abs() < 1e-6);
+    // Only masked texels count: half at 90°, half at 0° → 45° mean.
+    let mut mixed = z.clone();
+    for i in 0..8 {
+        mixed.data[i] = 1.0;
+        mixed.data[32 + i] = 0.0;
+    }
+    assert!((normal_error_deg(&mixed, &z, &all) - 45.0).abs() < 1e-9);
+    let first_half: Vec<bool> = (0..16).map(|i| i < 8).collect();
+    assert!((normal_error_deg(&mixed, &z, &first_half) - 90.0).abs() < 1e-9);
+    assert!(normal_error_deg(&z, &x, &[false; 16]).is_nan());
+}
+
+#[test]
+fn albedo_error_is_rmse_inside_the_mask() {
+    let a = constant(3, 2, 2, [0.5, 0.5, 0.5]);
+    let b = constant(3, 2, 2, [0.6, 0.4, 0.5]);
+    let all = [true; 4];
+    let expected = ((0.01 + 0.01 + 0.0) / 3.0f64).sqrt();
+    assert!((albedo_error(&a, &b, &all) - expected).abs() < 1e-6);
+    let mut c = a.clone();
+    c.data[0] = 1.0; // outside the mask below
+    let mask = [false, true, true, true];
+    assert_eq!(albedo_error(&c, &a, &mask), 0.0);
+    assert!(albedo_error(&a, &b, &[false; 4]).is_nan());
+}
