@@ -2,7 +2,6 @@
 
 use picker_render::io::Image;
 
-
 /// The seam score of a texture (see [`seam_score`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SeamScore {

@@ -1,0 +1,762 @@
+//! Multi-scale exemplar-based completion: Wexler, Shechtman & Irani 2007,
+//! "Space-time completion of video" (global coherence energy, eq. 1, solved by
+//! alternating nearest-neighbour search and patch voting, eq. 3, coarse to
+//! fine), with the nearest-neighbour field (NNF) found by PatchMatch (Barnes,
+//! Shechtman, Finkelstein & Goldman 2009: random initialisation, propagation,
+//! random search).
+//!
+//! Per pyramid level:
+//! 1. *Targets* are the positions whose `p × p` patch overlaps an unknown texel;
+//!    *sources* are positions whose patch is fully known (or, when too few
+//!    exist, has the fewest unknown texels) and, unless toroidal, lies inside
+//!    the image.
+//! 2. PatchMatch improves `NNF(target) → source` under the SSD patch distance
+//!    against the current estimate.
+//! 3. Voting: every unknown texel `q` becomes the weighted mean over the target
+//!    patches `P ∋ q` of the texel of `NNF(P)` at the same offset, with weight
+//!    `exp(−d(P)/2σ²)` (`d` the mean squared patch difference, `σ²` its 75th
+//!    percentile over the level, as in Wexler et al.). Source texels that are
+//!    observed are preferred: estimated ones only vote where no observed one does.
+//!
+//! The pyramid halves the resolution (a coarse texel is the mean of its known
+//! children, known when at least half of them are) until the coarsest level
+//! reaches [`PatchMatchInpainter::min_size`] or, with
+//! [`PatchMatchInpainter::adaptive_levels`], until every hole texel is within
+//! half a patch of a known texel.
+//!
+//! The coarsest level starts from the harmonic fill of
+//! [`DiffusionInpainter`](crate::DiffusionInpainter); each finer level starts from the upsampled NNF of the
+//! level below, voted once. In toroidal mode every coordinate wraps, so target
+//! and source patches may straddle the edges and the result tiles seamlessly.
+//!
+//! Determinism: PatchMatch runs on fixed bands of rows in parallel, each band
+//! with its own seeded random stream; propagation inside a band is sequential,
+//! across bands it reads the previous pass (Jacobi style). Voting and
+//! distances are per texel. So the output depends only on the seed and the
+//! configuration, never on the number of threads.
+
+use rayon::prelude::*;
+
+use crate::diffusion::diffuse_planes;
+use crate::{stream, validate, Image, InpaintOptions, Inpainter, Plan, Result};
+
+/// Multi-scale PatchMatch inpainting with patch voting (see the [module docs](self)).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PatchMatchInpainter {
+    /// The shorter side of the coarsest pyramid level is at least this
+    /// (and at least twice the patch size).
+    pub min_size: usize,
+    /// At most this many pyramid levels (1 = no pyramid).
+    pub max_levels: usize,
+    /// EM iterations (search + vote) per level, coarser levels.
+    pub em_iterations: usize,
+    /// EM iterations at the finest level (the most expensive one).
+    pub em_iterations_finest: usize,
+    /// PatchMatch passes (propagation + random search) per EM iteration.
+    pub pm_iterations: usize,
+    /// Rows per parallel PatchMatch band. Part of the result's definition
+    /// (changing it changes the output); the thread count is not.
+    pub band_rows: usize,
+    /// Sources should be fully known patches; when fewer than this fraction
+    /// of the candidate positions are, patches with a few unknown texels are
+    /// admitted, fewest first.
+    pub min_source_fraction: f32,
+    /// An EM loop at a level stops early once no texel moves by more than this.
+    pub tolerance: f32,
+    /// Stop coarsening once every unknown texel of a level is within half a
+    /// patch of a known texel (coarser levels would only lose detail).
+    pub adaptive_levels: bool,
+}
+
+impl Default for PatchMatchInpainter {
+    fn default() -> Self {
+        Self {
+            min_size: 8,
+            max_levels: 8,
+            em_iterations: 4,
+            em_iterations_finest: 2,
+            pm_iterations: 2,
+            band_rows: 16,
+            min_source_fraction: 0.05,
+            tolerance: 1e-3,
+            adaptive_levels: true,
+        }
+    }
+}
+
+impl Inpainter for PatchMatchInpainter {
+    fn name(&self) -> &str {
+        "patchmatch"
+    }
+
+    fn inpaint(&self, image: &Image, known: &[bool], opts: &InpaintOptions) -> Result<Image> {
+        if let Plan::Done(img) = validate(image, known, opts)? {
+            return Ok(img);
+        }
+        let (c, h, w) = (image.channels, image.height, image.width);
+        let p = opts.patch_size;
+        let mut out = image.clone();
+        if h < p || w < p {
+            // Smaller than a patch: nothing to match, the harmonic fill it is.
+            diffuse_planes(&mut out.data, known, c, h, w, opts.toroidal, 60, 1e-5);
+            return Ok(out);
+        }
+        // Interleaved copy (unknown texels zeroed: never read the input there).
+        let n = h * w;
+        let mut img = vec![0.0f32; n * c];
+        for i in 0..n {
+            if known[i] {
+                for ch in 0..c {
+                    img[i * c + ch] = image.data[ch * n + i];
+                }
+            }
+        }
+        let mut levels = vec![Level {
+            h,
+            w,
+            known: known.to_vec(),
+            img,
+        }];
+        let min_side = self.min_size.max(2 * p);
+        while levels.len() < self.max_levels.max(1) {
+            let f = levels.last().expect("one level");
+            if f.h.min(f.w) / 2 < min_side {
+                break;
+            }
+            if self.adaptive_levels && hole_radius(&f.known, f.h, f.w) <= p / 2 {
+                // Patches from the border already reach every hole texel.
+                break;
+            }
+            let co = f.downsample(c);
+            let frac =
+                |l: &Level| l.known.iter().filter(|&&k| k).count() as f64 / l.known.len() as f64;
+            if frac(&co) == 0.0 || frac(&co) < 0.5 * frac(f) {
+                break;
+            }
+            levels.push(co);
+        }
+        let top = levels.len() - 1;
+        // Coarsest level: harmonic initialisation.
+        {
+            let lv = &mut levels[top];
+            let ln = lv.h * lv.w;
+            let mut planar = vec![0.0f32; ln * c];
+            for i in 0..ln {
+                for ch in 0..c {
+                    planar[ch * ln + i] = lv.img[i * c + ch];
+                }
+            }
+            diffuse_planes(
+                &mut planar,
+                &lv.known,
+                c,
+                lv.h,
+                lv.w,
+                opts.toroidal,
+                60,
+                1e-5,
+            );
+            for i in 0..ln {
+                for ch in 0..c {
+                    lv.img[i * c + ch] = planar[ch * ln + i];
+                }
+            }
+        }
+        let mut nnf: Option<Vec<u32>> = None;
+        for l in (0..=top).rev() {
+            if l < top {
+                let (lower, upper) = levels.split_at_mut(l + 1);
+                lower[l].upsample_unknown(&upper[0], c);
+            }
+            let em = if l == 0 {
+                self.em_iterations_finest
+            } else {
+                self.em_iterations
+            };
+            let prev = nnf.take().and_then(|nnf| {
+                levels.get(l + 1).map(|u| CoarseField {
+                    nnf,
+                    h: u.h,
+                    w: u.w,
+                })
+            });
+            nnf = Some(self.solve_level(&mut levels[l], c, l, em, prev, opts));
+        }
+        let lv = &levels[0];
+        for (i, _) in known.iter().enumerate().filter(|(_, k)| !**k) {
+            for ch in 0..c {
+                out.data[ch * n + i] = lv.img[i * c + ch];
+            }
+        }
+        Ok(out)
+    }
+}
+
+/// The NNF of the next coarser level (`h × w` positions), to initialise a level.
+struct CoarseField {
+    nnf: Vec<u32>,
+    h: usize,
+    w: usize,
+}
+
+/// One pyramid level: interleaved values (`img[(row·w + col)·c + ch]`) and the
+/// mask of texels that are fixed at this level.
+struct Level {
+    h: usize,
+    w: usize,
+    known: Vec<bool>,
+    img: Vec<f32>,
+}
+
+impl Level {
+    /// Half resolution: a coarse texel is the mean of its known children and
+    /// is known when at least half of its children are.
+    fn downsample(&self, c: usize) -> Level {
+        let (h2, w2) = (self.h.div_ceil(2), self.w.div_ceil(2));
+        let mut known = vec![false; h2 * w2];
+        let mut img = vec![0.0f32; h2 * w2 * c];
+        let mut acc = vec![0.0f32; c];
+        for y in 0..h2 {
+            for x in 0..w2 {
+                acc.fill(0.0);
+                let (mut k, mut total) = (0usize, 0usize);
+                for fy in 2 * y..(2 * y + 2).min(self.h) {
+                    for fx in 2 * x..(2 * x + 2).min(self.w) {
+                        total += 1;
+                        let i = fy * self.w + fx;
+                        if self.known[i] {
+                            k += 1;
+                            for (a, v) in acc.iter_mut().zip(&self.img[i * c..(i + 1) * c]) {
+                                *a += v;
+                            }
+                        }
+                    }
+                }
+                let j = y * w2 + x;
+                if k > 0 {
+                    for ch in 0..c {
+                        img[j * c + ch] = acc[ch] / k as f32;
+                    }
+                }
+                known[j] = k > 0 && 2 * k >= total;
+            }
+        }
+        Level {
+            h: h2,
+            w: w2,
+            known,
+            img,
+        }
+    }
+
+    /// Unknown texels take the value of their parent in the coarser level.
+    fn upsample_unknown(&mut self, coarse: &Level, c: usize) {
+        for i in 0..self.h * self.w {
+            if !self.known[i] {
+                let j = ((i / self.w) / 2).min(coarse.h - 1) * coarse.w
+                    + ((i % self.w) / 2).min(coarse.w - 1);
+                self.img[i * c..(i + 1) * c].copy_from_slice(&coarse.img[j * c..(j + 1) * c]);
+            }
+        }
+    }
+}
+
+/// Read-only facts about one level shared by the search and the vote.
+struct Ctx<'a> {
+    h: usize,
+    w: usize,
+    c: usize,
+    p: usize,
+    r: usize,
+    toroidal: bool,
+    /// Position is a target (its patch overlaps an unknown texel).
+    target: &'a [bool],
+    /// Position is an admissible source.
+    valid: &'a [bool],
+    /// Rows (and columns) where non-toroidal source centres may lie.
+    src_rows: (usize, usize),
+    src_cols: (usize, usize),
+}
+
+impl Ctx<'_> {
+    /// The padded estimate: `(h+2r) × (w+2r)` texels, wrapped (toroidal) or
+    /// clamped at the borders, so every patch is `p` contiguous row slices.
+    fn pad(&self, img: &[f32]) -> Vec<f32> {
+        let (h, w, c, r) = (self.h, self.w, self.c, self.r);
+        let (ph, pw) = (h + 2 * r, w + 2 * r);
+        let mut out = vec![0.0f32; ph * pw * c];
+        let map = |v: isize, n: usize| -> usize {
+            if self.toroidal {
+                v.rem_euclid(n as isize) as usize
+            } else {
+                v.clamp(0, n as isize - 1) as usize
+            }
+        };
+        for py in 0..ph {
+            let sy = map(py as isize - r as isize, h);
+            for px in 0..pw {
+                let sx = map(px as isize - r as isize, w);
+                let s = (sy * w + sx) * c;
+                out[(py * pw + px) * c..(py * pw + px + 1) * c].copy_from_slice(&img[s..s + c]);
+            }
+        }
+        out
+    }
+
+    /// SSD between the patches centred at positions `t` and `s` of the padded
+    /// estimate; stops early (returning a value ≥ `bound`) once past `bound`.
+    #[inline]
+    fn dist(&self, pad: &[f32], t: usize, s: usize, bound: f32) -> f32 {
+        let pw = self.w + 2 * self.r;
+        let row = self.p * self.c;
+        let (ty, tx) = (t / self.w, t % self.w);
+        let (sy, sx) = (s / self.w, s % self.w);
+        let mut acc = 0.0f32;
+        for dy in 0..self.p {
+            let a = ((ty + dy) * pw + tx) * self.c;
+            let b = ((sy + dy) * pw + sx) * self.c;
+            acc += ssd(&pad[a..a + row], &pad[b..b + row]);
+            if acc >= bound {
+                return acc;
+            }
+        }
+        acc
+    }
+
+    /// Position `(y + dy, x + dx)`, wrapped or `None` outside the image.
+    #[inline]
+    fn offset(&self, y: usize, x: usize, dy: isize, dx: isize) -> Option<usize> {
+        let (ny, nx) = (y as isize + dy, x as isize + dx);
+        if self.toroidal {
+            let ny = ny.rem_euclid(self.h as isize) as usize;
+            let nx = nx.rem_euclid(self.w as isize) as usize;
+            Some(ny * self.w + nx)
+        } else if ny < 0 || nx < 0 || ny >= self.h as isize || nx >= self.w as isize {
+            None
+        } else {
+            Some(ny as usize * self.w + nx as usize)
+        }
+    }
+}
+
+/// Sum of squared differences, in 8 independent lanes (vectorises, and the
+/// summation order is fixed).
+#[inline]
+fn ssd(a: &[f32], b: &[f32]) -> f32 {
+    let mut lanes = [0.0f32; 8];
+    let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
+    let (ra, rb) = (ca.remainder(), cb.remainder());
+    for (x, y) in ca.zip(cb) {
+        for k in 0..8 {
+            let d = x[k] - y[k];
+            lanes[k] += d * d;
+        }
+    }
+    let mut s = 0.0f32;
+    for (x, y) in ra.iter().zip(rb) {
+        s += (x - y) * (x - y);
+    }
+    s + lanes.iter().sum::<f32>()
+}
+
+/// The largest chessboard distance from an unknown texel to the nearest known
+/// one (two-pass chamfer transform, not wrapping).
+fn hole_radius(known: &[bool], h: usize, w: usize) -> usize {
+    let big = (h + w) as u32;
+    let mut d: Vec<u32> = known.iter().map(|&k| if k { 0 } else { big }).collect();
+    for y in 0..h {
+        for x in 0..w {
+            let i = y * w + x;
+            let mut v = d[i];
+            if x > 0 {
+                v = v.min(d[i - 1] + 1);
+            }
+            if y > 0 {
+                v = v.min(d[i - w] + 1);
+                if x > 0 {
+                    v = v.min(d[i - w - 1] + 1);
+                }
+                if x + 1 < w {
+                    v = v.min(d[i - w + 1] + 1);
+                }
+            }
+            d[i] = v;
+        }
+    }
+    for y in (0..h).rev() {
+        for x in (0..w).rev() {
+            let i = y * w + x;
+            let mut v = d[i];
+            if x + 1 < w {
+                v = v.min(d[i + 1] + 1);
+            }
+            if y + 1 < h {
+                v = v.min(d[i + w] + 1);
+                if x + 1 < w {
+                    v = v.min(d[i + w + 1] + 1);
+                }
+                if x > 0 {
+                    v = v.min(d[i + w - 1] + 1);
+                }
+            }
+            d[i] = v;
+        }
+    }
+    d.into_iter().max().unwrap_or(0) as usize
+}
+
+/// Number of unknown texels in the patch centred at every position.
+fn unknown_counts(known: &[bool], h: usize, w: usize, r: usize, toroidal: bool) -> Vec<u32> {
+    let map = |v: isize, n: usize| -> Option<usize> {
+        if toroidal {
+            Some(v.rem_euclid(n as isize) as usize)
+        } else if v < 0 || v >= n as isize {
+            None
+        } else {
+            Some(v as usize)
+        }
+    };
+    // Horizontal window sums, then vertical ones (out-of-image texels count
+    // as known: they are never voted and non-toroidal sources lie inside).
+    let mut horiz = vec![0u32; h * w];
+    for y in 0..h {
+        for x in 0..w {
+            let mut s = 0;
+            for dx in -(r as isize)..=r as isize {
+                if let Some(xx) = map(x as isize + dx, w) {
+                    s += (!known[y * w + xx]) as u32;
+                }
+            }
+            horiz[y * w + x] = s;
+        }
+    }
+    let mut out = vec![0u32; h * w];
+    for y in 0..h {
+        for dy in -(r as isize)..=r as isize {
+            if let Some(yy) = map(y as isize + dy, h) {
+                for x in 0..w {
+                    out[y * w + x] += horiz[yy * w + x];
+                }
+            }
+        }
+    }
+    out
+}
+
+impl PatchMatchInpainter {
+    /// Runs the EM loop at one level; returns its NNF (every position, the
+    /// identity at non-targets).
+    fn solve_level(
+        &self,
+        lv: &mut Level,
+        c: usize,
+        level: usize,
+        em_iterations: usize,
+        prev: Option<CoarseField>,
+        opts: &InpaintOptions,
+    ) -> Vec<u32> {
+        let (h, w) = (lv.h, lv.w);
+        let n = h * w;
+        let p = opts.patch_size;
+        let r = p / 2;
+        let counts = unknown_counts(&lv.known, h, w, r, opts.toroidal);
+        let target: Vec<bool> = counts.iter().map(|&k| k > 0).collect();
+        let (src_rows, src_cols) = if opts.toroidal {
+            ((0, h - 1), (0, w - 1))
+        } else {
+            ((r, h - 1 - r), (r, w - 1 - r))
+        };
+        let eligible = |i: usize| {
+            let (y, x) = (i / w, i % w);
+            (src_rows.0..=src_rows.1).contains(&y) && (src_cols.0..=src_cols.1).contains(&x)
+        };
+        // Admit the fewest-unknown patches until there are enough sources.
+        let mut hist = vec![0usize; p * p + 1];
+        let mut n_eligible = 0usize;
+        for i in (0..n).filter(|&i| eligible(i)) {
+            hist[counts[i] as usize] += 1;
+            n_eligible += 1;
+        }
+        let want =
+            ((n_eligible as f32 * self.min_source_fraction) as usize).clamp(1, n_eligible.max(1));
+        let (mut limit, mut have) = (0usize, hist[0]);
+        while have < want && limit < p * p {
+            limit += 1;
+            have += hist[limit];
+        }
+        let valid: Vec<bool> = (0..n)
+            .map(|i| eligible(i) && counts[i] as usize <= limit)
+            .collect();
+        let sources: Vec<u32> = (0..n as u32).filter(|&i| valid[i as usize]).collect();
+        let mut nnf: Vec<u32> = (0..n as u32).collect();
+        if !target.iter().any(|&t| t) || sources.is_empty() {
+            return nnf;
+        }
+        let ctx = Ctx {
+            h,
+            w,
+            c,
+            p,
+            r,
+            toroidal: opts.toroidal,
+            target: &target,
+            valid: &valid,
+            src_rows,
+            src_cols,
+        };
+        // Initial field: the upsampled coarse one where admissible, else random.
+        let upsampled = prev.is_some();
+        let init_rng_key = [level as u64, u64::MAX];
+        nnf.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+            let mut rng = stream(opts.seed, &[init_rng_key[0], init_rng_key[1], y as u64]);
+            for (x, slot) in row.iter_mut().enumerate() {
+                let i = y * w + x;
+                if !target[i] {
+                    continue;
+                }
+                let mut cand = None;
+                if let Some(CoarseField {
+                    nnf: coarse,
+                    h: ch,
+                    w: cw,
+                }) = prev.as_ref()
+                {
+                    let j = (y / 2).min(ch - 1) * cw + (x / 2).min(cw - 1);
+                    let s = coarse[j] as usize;
+                    let (sy, sx) = (2 * (s / cw) + y % 2, 2 * (s % cw) + x % 2);
+                    let s = if opts.toroidal {
+                        (sy % h) * w + sx % w
+                    } else {
+                        sy.min(h - 1) * w + sx.min(w - 1)
+                    };
+                    if valid[s] && s != i {
+                        cand = Some(s as u32);
+                    }
+                }
+                *slot = match cand {
+                    Some(s) => s,
+                    None => loop {
+                        let s = sources[rng.range(0, sources.len() - 1)];
+                        if s as usize != i || sources.len() == 1 {
+                            break s;
+                        }
+                    },
+                };
+            }
+        });
+        let mut pad = ctx.pad(&lv.img);
+        let mut dist = vec![0.0f32; n];
+        compute_distances(&ctx, &pad, &nnf, &mut dist);
+        if upsampled {
+            let change = vote(&ctx, &lv.img, &lv.known, &nnf, &dist);
+            lv.img = change.0;
+            pad = ctx.pad(&lv.img);
+            compute_distances(&ctx, &pad, &nnf, &mut dist);
+        }
+        let mut pass = 0u64;
+        for em in 0..em_iterations {
+            for _ in 0..self.pm_iterations {
+                self.pm_pass(
+                    &ctx,
+                    &pad,
+                    &mut nnf,
+                    &mut dist,
+                    stream(opts.seed, &[level as u64, em as u64, pass]).next_u64(),
+                    pass % 2 == 1,
+                );
+                pass += 1;
+            }
+            let (img, change) = vote(&ctx, &lv.img, &lv.known, &nnf, &dist);
+            lv.img = img;
+            pad = ctx.pad(&lv.img);
+            compute_distances(&ctx, &pad, &nnf, &mut dist);
+            if change <= self.tolerance {
+                break;
+            }
+        }
+        nnf
+    }
+
+    /// One PatchMatch pass (propagation + random search) over every target.
+    fn pm_pass(
+        &self,
+        ctx: &Ctx,
+        pad: &[f32],
+        nnf: &mut [u32],
+        dist: &mut [f32],
+        key: u64,
+        reverse: bool,
+    ) {
+        let (h, w) = (ctx.h, ctx.w);
+        let snapshot = nnf.to_vec();
+        let band = self.band_rows.max(1) * w;
+        let max_radius = h.max(w) as isize;
+        nnf.par_chunks_mut(band)
+            .zip(dist.par_chunks_mut(band))
+            .enumerate()
+            .for_each(|(b, (nb, db))| {
+                let base = b * band;
+                let rows = nb.len() / w;
+                let mut rng = stream(key, &[b as u64]);
+                let step: isize = if reverse { 1 } else { -1 };
+                for yy in 0..rows {
+                    let y = if reverse { rows - 1 - yy } else { yy } + base / w;
+                    for xx in 0..w {
+                        let x = if reverse { w - 1 - xx } else { xx };
+                        let i = y * w + x;
+                        if !ctx.target[i] {
+                            continue;
+                        }
+                        let li = i - base;
+                        let (mut best, mut bd) = (nb[li] as usize, db[li]);
+                        let try_cand = |s: usize, best: &mut usize, bd: &mut f32| {
+                            if s != i && s != *best && ctx.valid[s] {
+                                let d = ctx.dist(pad, i, s, *bd);
+                                if d < *bd {
+                                    *best = s;
+                                    *bd = d;
+                                }
+                            }
+                        };
+                        // Propagation from the neighbours already visited.
+                        for (dy, dx) in [(0, step), (step, 0)] {
+                            let Some(j) = ctx.offset(y, x, dy, dx) else {
+                                continue;
+                            };
+                            let s = if (base..base + nb.len()).contains(&j) {
+                                nb[j - base]
+                            } else {
+                                snapshot[j]
+                            } as usize;
+                            if let Some(cand) = ctx.offset(s / w, s % w, -dy, -dx) {
+                                try_cand(cand, &mut best, &mut bd);
+                            }
+                        }
+                        // Random search in shrinking windows around the best.
+                        let mut radius = max_radius;
+                        while radius >= 1 {
+                            let (by, bx) = ((best / w) as isize, (best % w) as isize);
+                            let sy = by + rng.range(0, 2 * radius as usize) as isize - radius;
+                            let sx = bx + rng.range(0, 2 * radius as usize) as isize - radius;
+                            let s = if ctx.toroidal {
+                                sy.rem_euclid(h as isize) as usize * w
+                                    + sx.rem_euclid(w as isize) as usize
+                            } else {
+                                let sy = sy.clamp(ctx.src_rows.0 as isize, ctx.src_rows.1 as isize);
+                                let sx = sx.clamp(ctx.src_cols.0 as isize, ctx.src_cols.1 as isize);
+                                sy as usize * w + sx as usize
+                            };
+                            try_cand(s, &mut best, &mut bd);
+                            radius /= 2;
+                        }
+                        nb[li] = best as u32;
+                        db[li] = bd;
+                    }
+                }
+            });
+    }
+}
+
+/// Full patch distances of every target to its NNF entry.
+fn compute_distances(ctx: &Ctx, pad: &[f32], nnf: &[u32], dist: &mut [f32]) {
+    let w = ctx.w;
+    dist.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+        for (x, d) in row.iter_mut().enumerate() {
+            let i = y * w + x;
+            *d = if ctx.target[i] {
+                ctx.dist(pad, i, nnf[i] as usize, f32::INFINITY)
+            } else {
+                0.0
+            };
+        }
+    });
+}
+
+/// Patch voting: every unknown texel becomes the weighted mean of the texels
+/// that the overlapping target patches' nearest neighbours put there.
+/// Returns the new estimate and the largest change.
+fn vote(ctx: &Ctx, img: &[f32], known: &[bool], nnf: &[u32], dist: &[f32]) -> (Vec<f32>, f32) {
+    let (h, w, c, r) = (ctx.h, ctx.w, ctx.c, ctx.r as isize);
+    // σ² = 75th percentile of the mean squared patch differences.
+    let norm = 1.0 / (ctx.p * ctx.p * c) as f32;
+    let mut ds: Vec<f32> = (0..h * w)
+        .filter(|&i| ctx.target[i])
+        .map(|i| dist[i] * norm)
+        .collect();
+    let sigma2 = if ds.is_empty() {
+        0.0
+    } else {
+        let k = (ds.len() * 3 / 4).min(ds.len() - 1);
+        *ds.select_nth_unstable_by(k, |a, b| a.total_cmp(b)).1
+    };
+    let weight: Vec<f32> = (0..h * w)
+        .map(|i| {
+            if !ctx.target[i] {
+                0.0
+            } else if sigma2 > 0.0 {
+                (-(dist[i] * norm / (2.0 * sigma2)).min(50.0)).exp()
+            } else {
+                1.0
+            }
+        })
+        .collect();
+    let mut out = img.to_vec();
+    let change = out
+        .par_chunks_mut(w * c)
+        .enumerate()
+        .map(|(y, row)| {
+            let mut change = 0.0f32;
+            let (mut acc, mut kacc) = ([0.0f32; 4], [0.0f32; 4]);
+            for x in 0..w {
+                let q = y * w + x;
+                if known[q] {
+                    continue;
+                }
+                acc.fill(0.0);
+                kacc.fill(0.0);
+                let (mut wsum, mut ksum) = (0.0f32, 0.0f32);
+                for dy in -r..=r {
+                    for dx in -r..=r {
+                        // Target patch centred at q − (dy, dx) sees q at offset (dy, dx).
+                        let Some(t) = ctx.offset(y, x, -dy, -dx) else {
+                            continue;
+                        };
+                        let wt = weight[t];
+                        if wt <= 0.0 {
+                            continue;
+                        }
+                        let s = nnf[t] as usize;
+                        let Some(src) = ctx.offset(s / w, s % w, dy, dx) else {
+                            continue;
+                        };
+                        let a = if known[src] {
+                            ksum += wt;
+                            &mut kacc
+                        } else {
+                            wsum += wt;
+                            &mut acc
+                        };
+                        for ch in 0..c {
+                            a[ch] += wt * img[src * c + ch];
+                        }
+                    }
+                }
+                // Observed source texels only, when there are any.
+                let (acc, wsum) = if ksum > 0.0 {
+                    (&kacc, ksum)
+                } else {
+                    (&acc, wsum)
+                };
+                if wsum > 0.0 {
+                    for ch in 0..c {
+                        let v = acc[ch] / wsum;
+                        change = change.max((v - row[x * c + ch]).abs());
+                        row[x * c + ch] = v;
+                    }
+                }
+            }
+            change
+        })
+        .reduce(|| 0.0, f32::max);
+    (out, change)
+}
