@@ -4,6 +4,9 @@ All network outputs are tanh values y ∈ [-1, 1], channels on axis -3 ([N, C, H
 
 =================  ===========================================================================
 input              x = 2·srgb − 1, sRGB values in [0, 1]
+inpaint input      [texture planes, mask]: x = 2·srgb − 1 at known texels, 0 at unknown ones; mask plane
+                   +1 known, −1 unknown (:func:`inpaint_input`)
+inpainted          the whole texture, sRGB (y + 1) / 2 (known texels are kept from the input by callers)
 diffuse/specular   linear RGB albedo (y + 1) / 2
 glossiness         g = (y + 1) / 2 ∈ [0, 1]; Phong exponent n = 2^(13·g) ∈ [1, 8192]
 normals            y renormalised to unit length; camera space: +x right, +y up, +z towards the
@@ -35,6 +38,24 @@ _UNIT_EPS = 1e-12
 def encode_input(srgb):
     """Network input x = 2·srgb − 1 from sRGB values in [0, 1]."""
     return 2.0 * srgb - 1.0
+
+
+INPAINT_KNOWN = 1.0
+"""Mask-plane value of a known texel in the inpainter's input."""
+
+INPAINT_UNKNOWN = -1.0
+"""Mask-plane value of an unknown texel (its texture planes are 0)."""
+
+
+def inpaint_input(srgb, known):
+    """The inpainter's input [N, C + 1, H, W] from sRGB values [N, C, H, W] in [0, 1] and a boolean mask
+    ``known`` [H, W] (or broadcastable to [N, 1, H, W]): texture planes 2·srgb − 1 where known, 0 elsewhere;
+    then the mask plane, +1 known / −1 unknown."""
+    known = torch.as_tensor(known, dtype=torch.bool, device=srgb.device)
+    known = known.expand(srgb.shape[0], 1, *srgb.shape[-2:])
+    texture = torch.where(known, encode_input(srgb), torch.zeros((), dtype=srgb.dtype))
+    mask = torch.where(known, INPAINT_KNOWN, INPAINT_UNKNOWN).to(srgb.dtype)
+    return torch.cat([texture, mask], dim=1)
 
 
 def to_unit(y):

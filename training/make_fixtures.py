@@ -2,7 +2,10 @@
 
 Run from the repository root (about 2 s; the output is byte-identical on every run)::
 
-    /tmp/venv/bin/python -m training.make_fixtures [--out fixtures/parity]
+    /tmp/venv/bin/python -m training.make_fixtures [--out fixtures/parity] [--only NAME ...]
+
+(``--only inpaint_tiny`` writes just that fixture; every fixture has its own seeds, so the others' bytes do
+not depend on which are written.)
 
 For each fixture ``<name>`` it writes
 
@@ -12,6 +15,8 @@ For each fixture ``<name>`` it writes
   activations ``act.<module path>``; ``input_odd`` with ``out_odd.<output name>`` run through
   :func:`forward_any`; for some nets ``input_small`` (pads larger than the image: periodic mirror, n = 1)
   and, for EnvMap, ``input_large`` (a tail output larger than 1×1, so the bilinear resize interpolates).
+  Inpaint inputs are :func:`inpaint_image`: a smooth texture with a random blobby hole mask, in the layout of
+  :func:`training.conventions.inpaint_input`.
 
 References are computed in eval mode in float64 from the exact stored weight values (F16/BF16 weights are
 upcast), on one thread, then rounded to float32.
@@ -27,6 +32,7 @@ import torch
 from safetensors.torch import load_file
 from torch import nn
 
+from training.conventions import inpaint_input
 from training.picker_nets import (
     Decoder,
     ResBlock,
@@ -60,6 +66,7 @@ class Fixture:
 IRN_ACTS = ("enc", "heads.normals.blocks.0", "heads.normals.dec.up.0")
 MSN_ACTS = ("enc", "blocks.1")
 ENVMAP_ACTS = ("enc", "blocks.0", "tail.1")
+INPAINT_ACTS = ("enc.conv_in", "enc", "blocks.1", "dec.up.1")
 
 FIXTURES = (
     Fixture("irn_tiny", "irn", 1, torch.float32, (1, 3, 24, 32), (1, 3, 21, 27), IRN_ACTS),
@@ -70,6 +77,8 @@ FIXTURES = (
     Fixture("msn_tiny_f16", "msn", 4, torch.float16, (2, 3, 20, 28), (1, 3, 21, 27), MSN_ACTS),
     Fixture("envmap_tiny_bf16", "envmap", 6, torch.bfloat16, (1, 3, 40, 56), (1, 3, 13, 30), ENVMAP_ACTS,
             {"large": (1, 3, 72, 136)}),
+    Fixture("inpaint_tiny", "inpaint", 7, torch.float32, (2, 4, 20, 28), (1, 4, 21, 27), INPAINT_ACTS,
+            {"small": (1, 4, 2, 3)}),
 )
 
 
@@ -86,6 +95,26 @@ def smooth_image(rng, shape):
                 img[i, ch] += amplitude * np.sin(2 * np.pi * (fy * yy + fx * xx) + phase)
     img += rng.normal(0, 0.05, size=shape)
     return torch.from_numpy(np.clip(img, -1, 1).astype(np.float32))
+
+
+def inpaint_image(rng, shape):
+    """An inpainter input [N, C + 1, H, W]: a :func:`smooth_image` texture (as sRGB (x + 1) / 2) with a
+    random hole mask per image (a smooth random field thresholded so that about 60% is known, at least one
+    texel known and one unknown), through :func:`training.conventions.inpaint_input`."""
+    n, c, h, w = shape
+    texture = (smooth_image(rng, (n, c - 1, h, w)) + 1) / 2
+    items = []
+    for i in range(n):
+        field = smooth_image(rng, (1, 1, h, w))[0, 0]
+        known = field > torch.quantile(field.flatten(), 0.4)
+        known.view(-1)[0], known.view(-1)[-1] = True, False
+        items.append(inpaint_input(texture[i:i + 1], known))
+    return torch.cat(items)
+
+
+def test_input(rng, net, shape):
+    """The reference input of ``net``: :func:`smooth_image`, or :func:`inpaint_image` for the inpainter."""
+    return inpaint_image(rng, shape) if net == "inpaint" else smooth_image(rng, shape)
 
 
 def init_weights(model):
@@ -175,8 +204,8 @@ def make_fixture(fx, out_dir):
     config = preset(fx.net, "tiny")
     model = build(fx.net, config)
     init_weights(model)
-    inputs = {"": smooth_image(rng, fx.input_shape), "_odd": smooth_image(rng, fx.odd_shape)}
-    inputs.update({f"_{k}": smooth_image(rng, shape) for k, shape in fx.extra_inputs.items()})
+    inputs = {"": test_input(rng, fx.net, fx.input_shape), "_odd": test_input(rng, fx.net, fx.odd_shape)}
+    inputs.update({f"_{k}": test_input(rng, fx.net, shape) for k, shape in fx.extra_inputs.items()})
     model.double().eval()
     calibrate_tanh_outputs(model, inputs.values())
 
@@ -215,10 +244,14 @@ def main():
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--out", default=os.path.join(root, "fixtures", "parity"), help="output folder")
+    ap.add_argument("--only", nargs="+", metavar="NAME", choices=[fx.name for fx in FIXTURES],
+                    help="write only these fixtures (default: all)")
     args = ap.parse_args()
     os.makedirs(args.out, exist_ok=True)
     torch.set_num_threads(1)  # one summation order, whatever the machine
     for fx in FIXTURES:
+        if args.only and fx.name not in args.only:
+            continue
         print(f"{fx.name} ({fx.net}, seed {fx.seed}, {str(fx.dtype).removeprefix('torch.')})")
         check_conditioning(fx.name, make_fixture(fx, args.out))
 

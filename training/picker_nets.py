@@ -1,4 +1,4 @@
-"""IRN, MSN and EnvMap as PyTorch modules: the reference the Rust crate `picker-nets` is tested against.
+"""IRN, MSN, EnvMap and the learned inpainter as PyTorch modules: the reference the Rust crate `picker-nets` is tested against.
 
 Everything here follows docs/contract.md to the letter: the modules are built from the contract's config
 dicts (see :mod:`training.presets`), ``model.state_dict()`` keys are exactly the contract's keys, and
@@ -21,6 +21,7 @@ from training.presets import (  # noqa: F401  (preset and count_params_folded ar
     NETS,
     config_json,
     count_params_folded,
+    in_channels,
     preset,
     validate_config,
 )
@@ -83,12 +84,13 @@ class ResBlock(nn.Module):
 
 
 class Encoder(nn.Module):
-    """ReflectionPad(3) → ``conv_in`` 7×7 (stride ``stride0``) → ``down.0``, ``down.1`` 3×3 stride 2."""
+    """ReflectionPad(3) → ``conv_in`` 7×7 (stride ``stride0``, ``cin`` inputs) → ``down.0``, ``down.1``
+    3×3 stride 2."""
 
-    def __init__(self, widths, stride0, bias, eps):
+    def __init__(self, widths, stride0, bias, eps, cin=3):
         super().__init__()
         w0, w1, w2 = widths
-        self.conv_in = ConvBn(3, w0, 7, stride0, 0, bias, eps)
+        self.conv_in = ConvBn(cin, w0, 7, stride0, 0, bias, eps)
         self.down = nn.ModuleList([ConvBn(w0, w1, 3, 2, 1, bias, eps), ConvBn(w1, w2, 3, 2, 1, bias, eps)])
 
     def forward(self, x):
@@ -205,11 +207,35 @@ class EnvMap(nn.Module):
         return F.interpolate(y, size=out_size, mode="bilinear", align_corners=False)
 
 
-MODELS = {"irn": Irn, "msn": Msn, "envmap": EnvMap}
+class Inpaint(nn.Module):
+    """Learned texture inpainter (pix2pix ResnetGenerator-style, the MSN's structure): ``enc`` (stride 1,
+    ``channels + 1`` inputs) → ``blocks.<i>`` → ``dec`` (``channels`` tanh outputs).
+
+    Input (:func:`training.conventions.inpaint_input`): planes ``0..channels`` = 2·srgb − 1 at known texels
+    and 0 at unknown ones, plane ``channels`` = +1 known / −1 unknown. Output: the whole texture in [-1, 1]
+    (sRGB (y + 1) / 2); callers keep their known texels.
+    """
+
+    net = "inpaint"
+
+    def __init__(self, config):
+        super().__init__()
+        validate_config(self.net, config)
+        self.config = config
+        bias, eps = config["conv_bias"], config["bn_eps"]
+        self.enc = Encoder(config["widths"], 1, bias, eps, cin=in_channels(self.net, config))
+        self.blocks = _blocks(config)
+        self.dec = Decoder(config["widths"], config["channels"], bias, eps)
+
+    def forward(self, x):
+        return self.dec(_run(self.blocks, self.enc(x)))
+
+
+MODELS = {"irn": Irn, "msn": Msn, "envmap": EnvMap, "inpaint": Inpaint}
 
 
 def build(net, config):
-    """The model for ``net`` (``irn`` | ``msn`` | ``envmap``) with freshly initialised parameters."""
+    """The model for ``net`` (``irn`` | ``msn`` | ``envmap`` | ``inpaint``) with fresh parameters."""
     if net not in MODELS:
         raise ValueError(f"unknown net {net!r}; expected one of {NETS}")
     return MODELS[net](config)
@@ -221,7 +247,8 @@ def envmap_size(h, w):
 
 
 def padded_size(net, h, w):
-    """Size the contract pads an h×w input to: IRN/MSN max(8, ceil4(·)) per axis, EnvMap max(16, ·)."""
+    """Size the contract pads an h×w input to: IRN/MSN/inpaint max(8, ceil4(·)) per axis, EnvMap
+    max(16, ·)."""
     if net == "envmap":
         return max(16, h), max(16, w)
     return max(8, -(-h // 4) * 4), max(8, -(-w // 4) * 4)
@@ -249,7 +276,8 @@ def mirror_pad(x, top, bottom, left, right):
 
 
 def forward_any(model, x):
-    """Runs ``model`` on an input of any size [N, 3, H, W], following the contract's padding policy.
+    """Runs ``model`` on an input of any size [N, C, H, W] (C = 3; inpaint: channels + 1), following the
+    contract's padding policy.
 
     The input is mirror-padded to :func:`padded_size` (top = (Hp−H)//2, bottom = the rest, likewise left and
     right). IRN/MSN outputs are cropped back to H×W; the EnvMap output has the size of the unpadded input.
@@ -268,8 +296,8 @@ def forward_any(model, x):
     return {k: crop(v) for k, v in out.items()} if isinstance(out, dict) else crop(out)
 
 
-OUTPUT_NAMES = {"msn": "segmentation", "envmap": "envmap"}
-"""Names of the single outputs of MSN and EnvMap (IRN outputs are named by head)."""
+OUTPUT_NAMES = {"msn": "segmentation", "envmap": "envmap", "inpaint": "inpainted"}
+"""Names of the single outputs of MSN, EnvMap and the inpainter (IRN outputs are named by head)."""
 
 
 def named_outputs(net, out):

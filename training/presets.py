@@ -9,7 +9,7 @@ presets and the parameter count live in one place.
 import copy
 import json
 
-NETS = ("irn", "msn", "envmap")
+NETS = ("irn", "msn", "envmap", "inpaint")
 
 IRN_HEADS = (
     ("diffuse_albedo", 3),
@@ -24,6 +24,7 @@ CONFIG_KEYS = {
     "irn": ("widths", "blocks", "heads", "conv_bias", "bn_eps"),
     "msn": ("widths", "blocks", "out_channels", "conv_bias", "bn_eps"),
     "envmap": ("widths", "blocks", "tail_widths", "out_channels", "conv_bias", "bn_eps"),
+    "inpaint": ("widths", "blocks", "channels", "conv_bias", "bn_eps"),
 }
 
 
@@ -47,6 +48,12 @@ PRESETS = {
                    "conv_bias": False, "bn_eps": 1e-5},
         "tiny": {"widths": [8, 12, 16], "blocks": 1, "tail_widths": [16, 12], "out_channels": 3,
                  "conv_bias": True, "bn_eps": 1e-5},
+    },
+    # Learned texture inpainter: the MSN's structure (pix2pix resnet_9blocks at thesis size) with
+    # channels + 1 inputs (texture with unknown texels 0, then the known mask ±1) and channels outputs.
+    "inpaint": {
+        "thesis": {"widths": [64, 128, 256], "blocks": 9, "channels": 3, "conv_bias": False, "bn_eps": 1e-5},
+        "tiny": {"widths": [8, 12, 16], "blocks": 2, "channels": 3, "conv_bias": True, "bn_eps": 1e-5},
     },
 }
 
@@ -78,6 +85,8 @@ def validate_config(net, config):
         for h in config["heads"]:
             if set(h) != {"name", "channels"} or h["channels"] < 1:
                 raise ValueError(f"bad head {h}")
+    if net == "inpaint" and config["channels"] < 1:
+        raise ValueError(f"channels must be >= 1, got {config['channels']}")
     if net == "envmap" and len(config["tail_widths"]) != 2:
         raise ValueError(f"tail_widths must have two entries, got {config['tail_widths']}")
 
@@ -93,21 +102,30 @@ def _conv(cin, cout, k):
 
 
 def net_of_config(config):
-    """Which net a config describes, from its keys (``heads`` → irn, ``tail_widths`` → envmap, else msn)."""
+    """Which net a config describes, from its keys (``heads`` → irn, ``tail_widths`` → envmap,
+    ``channels`` → inpaint, else msn)."""
     if "heads" in config:
         return "irn"
+    if "channels" in config:
+        return "inpaint"
     return "envmap" if "tail_widths" in config else "msn"
+
+
+def in_channels(net, config):
+    """Input planes of the net: 3 (normalised RGB), or channels + 1 for the inpainter (texture + mask)."""
+    return config["channels"] + 1 if net == "inpaint" else 3
 
 
 def count_params_folded(config):
     """Parameters of the inference network after BatchNorm folding: sum over convs of (weights + c_out).
 
-    Matches the contract's count: thesis IRN 108,856,080, MSN 11,378,179, EnvMap 5,463,427.
+    Matches the contract's count: thesis IRN 108,856,080, MSN 11,378,179, EnvMap 5,463,427,
+    inpaint 11,381,315.
     """
     net = net_of_config(config)
     validate_config(net, config)
     w0, w1, w2 = config["widths"]
-    encoder = _conv(3, w0, 7) + _conv(w0, w1, 3) + _conv(w1, w2, 3)
+    encoder = _conv(in_channels(net, config), w0, 7) + _conv(w0, w1, 3) + _conv(w1, w2, 3)
     blocks = config["blocks"] * 2 * _conv(w2, w2, 3)
 
     def decoder(c):
@@ -117,5 +135,7 @@ def count_params_folded(config):
         return encoder + sum(blocks + decoder(h["channels"]) for h in config["heads"])
     if net == "msn":
         return encoder + blocks + decoder(config["out_channels"])
+    if net == "inpaint":
+        return encoder + blocks + decoder(config["channels"])
     t0, t1 = config["tail_widths"]
     return encoder + blocks + _conv(w2, t0, 1) + _conv(t0, t1, 3) + _conv(t1, config["out_channels"], 3)

@@ -26,7 +26,7 @@ from training.picker_nets import (
     save_weights,
 )
 
-THESIS_PARAMS = {"irn": 108_856_080, "msn": 11_378_179, "envmap": 5_463_427}
+THESIS_PARAMS = {"irn": 108_856_080, "msn": 11_378_179, "envmap": 5_463_427, "inpaint": 11_381_315}
 
 
 def _count_modules(model):
@@ -77,6 +77,12 @@ def test_state_dict_keys():
     assert env["tail.2.conv.weight"].shape == (3, 12, 3, 3) and "tail.2.bn.running_var" in env
     assert not any(k.startswith("dec.") for k in env)
 
+    inp = build("inpaint", preset("inpaint", "tiny")).state_dict()
+    assert inp["enc.conv_in.conv.weight"].shape == (8, 4, 7, 7)  # texture planes + mask
+    assert inp["dec.conv_out.weight"].shape == (3, 8, 7, 7) and "enc.conv_in.conv.bias" in inp
+    msn_keys = set(build("msn", dict(preset("msn", "tiny"), conv_bias=True)).state_dict())
+    assert set(inp) == msn_keys
+
 
 def test_unknown_config_key_rejected():
     config = preset("msn", "tiny")
@@ -101,6 +107,8 @@ def test_tiny_forward_shapes():
     assert forward_any(env, torch.zeros(1, 3, 13, 30)).shape == (1, 3, 1, 3)
     assert forward_any(env, torch.zeros(1, 3, 1, 5)).shape == (1, 3, 1, 1)
     assert forward_any(msn, torch.zeros(1, 3, 21, 27)).shape == (1, 3, 21, 27)
+    inp = build("inpaint", preset("inpaint", "tiny")).eval()
+    assert forward_any(inp, torch.zeros(1, 4, 21, 27)).shape == (1, 3, 21, 27)
 
 
 def test_forward_any_is_identity_on_valid_sizes():
@@ -143,6 +151,8 @@ def test_conventions():
     uvt = conv.texture_coords(torch.tensor([[[1.0]], [[-1.0]], [[1.0]]]))
     assert uvt.flatten().tolist() == [0.0, 0.0, 1.0]  # u = 1 wraps to 0; t is not wrapped
     assert conv.encode_input(torch.tensor(1.0)) == 1.0
+    x = conv.inpaint_input(torch.tensor([[[[0.0, 1.0]], [[0.25, 0.5]], [[1.0, 0.75]]]]), [[True, False]])
+    assert x.flatten().tolist() == [-1.0, 0.0, -0.5, 0.0, 1.0, 0.0, 1.0, -1.0]
 
 
 def test_save_weights_metadata_and_bytes():
@@ -167,7 +177,7 @@ def test_save_weights_metadata_and_bytes():
 def test_parity_fixtures_reproduce():
     """The committed fixtures agree with a float32 run of these modules on the stored weights."""
     root = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "fixtures", "parity")
-    names = ["irn_tiny", "msn_tiny", "envmap_tiny", "msn_tiny_f16", "envmap_tiny_bf16"]
+    names = ["irn_tiny", "msn_tiny", "envmap_tiny", "msn_tiny_f16", "envmap_tiny_bf16", "inpaint_tiny"]
     dtypes = {"msn_tiny_f16": torch.float16, "envmap_tiny_bf16": torch.bfloat16}
     for name in names:
         with safe_open(os.path.join(root, f"{name}.safetensors"), "pt") as f:

@@ -12,6 +12,8 @@ pub enum NetArg {
     Msn,
     /// Environment-map (lighting) network.
     Envmap,
+    /// Learned texture inpainter (`picker extract --inpainter FILE`).
+    Inpaint,
 }
 
 impl From<NetArg> for NetKind {
@@ -20,6 +22,7 @@ impl From<NetArg> for NetKind {
             NetArg::Irn => NetKind::Irn,
             NetArg::Msn => NetKind::Msn,
             NetArg::Envmap => NetKind::EnvMap,
+            NetArg::Inpaint => NetKind::Inpaint,
         }
     }
 }

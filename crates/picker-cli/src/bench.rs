@@ -98,7 +98,8 @@ pub fn run(a: Args) -> Result<()> {
     let config = net.config();
 
     let mut rng = Rng::new(1);
-    let shape = [a.batch as usize, 3, h, w];
+    // 3 planes (normalised RGB); the learned inpainter reads channels + 1 (texture + mask).
+    let shape = [a.batch as usize, config.in_channels(), h, w];
     let input = Tensor::new(shape, rng.uniform_vec(shape.iter().product(), -1.0, 1.0))
         .context("making the random input")?;
 

@@ -86,19 +86,36 @@ fn scene_dirs(dir: &Path) -> Result<Vec<PathBuf>> {
         .collect();
     v.sort();
     if v.is_empty() {
-        bail!("{}: no scene folders (with scene.json) found", dir.display());
+        bail!(
+            "{}: no scene folders (with scene.json) found",
+            dir.display()
+        );
     }
     Ok(v)
 }
 
 /// Chamfer (3-4) distance of every pixel of `mask` to the nearest pixel outside it (image border counts as outside).
 fn inner_distance(mask: &[bool], w: usize, h: usize) -> Vec<u32> {
-    let mut d: Vec<u32> = mask.iter().map(|&m| if m { u32::MAX / 2 } else { 0 }).collect();
-    let get = |d: &[u32], x: i64, y: i64| if x < 0 || y < 0 || x >= w as i64 || y >= h as i64 { 0 } else { d[y as usize * w + x as usize] };
+    let mut d: Vec<u32> = mask
+        .iter()
+        .map(|&m| if m { u32::MAX / 2 } else { 0 })
+        .collect();
+    let get = |d: &[u32], x: i64, y: i64| {
+        if x < 0 || y < 0 || x >= w as i64 || y >= h as i64 {
+            0
+        } else {
+            d[y as usize * w + x as usize]
+        }
+    };
     for y in 0..h as i64 {
         for x in 0..w as i64 {
             let i = y as usize * w + x as usize;
-            let m = [(get(&d, x - 1, y), 3), (get(&d, x, y - 1), 3), (get(&d, x - 1, y - 1), 4), (get(&d, x + 1, y - 1), 4)];
+            let m = [
+                (get(&d, x - 1, y), 3),
+                (get(&d, x, y - 1), 3),
+                (get(&d, x - 1, y - 1), 4),
+                (get(&d, x + 1, y - 1), 4),
+            ];
             for (v, c) in m {
                 d[i] = d[i].min(v + c);
             }
@@ -107,7 +124,12 @@ fn inner_distance(mask: &[bool], w: usize, h: usize) -> Vec<u32> {
     for y in (0..h as i64).rev() {
         for x in (0..w as i64).rev() {
             let i = y as usize * w + x as usize;
-            let m = [(get(&d, x + 1, y), 3), (get(&d, x, y + 1), 3), (get(&d, x + 1, y + 1), 4), (get(&d, x - 1, y + 1), 4)];
+            let m = [
+                (get(&d, x + 1, y), 3),
+                (get(&d, x, y + 1), 3),
+                (get(&d, x + 1, y + 1), 4),
+                (get(&d, x - 1, y + 1), 4),
+            ];
             for (v, c) in m {
                 d[i] = d[i].min(v + c);
             }
@@ -121,11 +143,19 @@ fn f(v: &serde_json::Value) -> Option<f32> {
 }
 
 fn eval_scene(dir: &Path, a: &Args) -> Result<Vec<Row>> {
-    let scene: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("scene.json")).with_context(|| format!("reading {}", dir.join("scene.json").display()))?)
-        .with_context(|| format!("parsing {}", dir.join("scene.json").display()))?;
-    let ids_img = rio::read_png(&dir.join("material_id.png")).with_context(|| format!("reading {}", dir.join("material_id.png").display()))?;
+    let scene: serde_json::Value = serde_json::from_slice(
+        &std::fs::read(dir.join("scene.json"))
+            .with_context(|| format!("reading {}", dir.join("scene.json").display()))?,
+    )
+    .with_context(|| format!("parsing {}", dir.join("scene.json").display()))?;
+    let ids_img = rio::read_png(&dir.join("material_id.png"))
+        .with_context(|| format!("reading {}", dir.join("material_id.png").display()))?;
     let (w, h) = (ids_img.width, ids_img.height);
-    let ids: Vec<u32> = ids_img.plane(0).iter().map(|&v| (v * 65535.0).round() as u32).collect();
+    let ids: Vec<u32> = ids_img
+        .plane(0)
+        .iter()
+        .map(|&v| (v * 65535.0).round() as u32)
+        .collect();
     let photo_path = dir.join("image.png");
     let truth = ElementImages::load(dir)?;
     let inputs = if a.weights.is_empty() {
@@ -134,7 +164,10 @@ fn eval_scene(dir: &Path, a: &Args) -> Result<Vec<Row>> {
             photo: rio::read_png(&photo_path)?,
             elements: truth.clone(),
             segmentation: rio::read_exr(&dir.join("segmentation.exr"))?,
-            envmap: Some(EnvMap::from_image(&rio::read_exr(&env_path)?).map_err(|e| anyhow!("{}: {e}", env_path.display()))?),
+            envmap: Some(
+                EnvMap::from_image(&rio::read_exr(&env_path)?)
+                    .map_err(|e| anyhow!("{}: {e}", env_path.display()))?,
+            ),
         }
     } else {
         crate::extract::infer_inputs(&a.weights, &photo_path, 320)?.0
@@ -160,17 +193,26 @@ fn eval_scene(dir: &Path, a: &Args) -> Result<Vec<Row>> {
             continue;
         }
         let dist = inner_distance(&true_mask, w, h);
-        let best = (0..w * h).max_by_key(|&i| (dist[i], std::cmp::Reverse(i))).expect("non-empty");
+        let best = (0..w * h)
+            .max_by_key(|&i| (dist[i], std::cmp::Reverse(i)))
+            .expect("non-empty");
         let pick = [(best % w) as u32, (best / w) as u32];
         let pm = prepared.pick_mask(pick, &opts.mask)?;
         let (mat, diag) = pipeline::extract(&prepared, &format!("m{id}"), Some(pick), &pm, &opts)
             .with_context(|| format!("{}: material {id}", dir.display()))?;
         let got: Vec<bool> = mat.mask.data.iter().map(|&v| v > 0.5).collect();
-        let got = Mask { width: w, height: h, data: got };
+        let got = Mask {
+            width: w,
+            height: h,
+            data: got,
+        };
         let el = &prepared.inputs.elements;
         let textured_truth = m["textured"].as_bool().unwrap_or(false);
         let mut row = Row {
-            scene: dir.file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default(),
+            scene: dir
+                .file_name()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default(),
             material_id: id,
             name: m["name"].as_str().unwrap_or("").to_string(),
             family: m["family"].as_str().unwrap_or("").to_string(),
@@ -188,12 +230,19 @@ fn eval_scene(dir: &Path, a: &Args) -> Result<Vec<Row>> {
             seam_ratio: None,
             truth_seam_ratio: None,
             coverage: None,
-            uv_mode: diag.uv.as_ref().map(|u| format!("{:?}", u.mode).to_lowercase()),
+            uv_mode: diag
+                .uv
+                .as_ref()
+                .map(|u| format!("{:?}", u.mode).to_lowercase()),
             colour_rmse: None,
         };
         if textured_truth {
-            let tex_path = dir.join("materials").join(id.to_string()).join("texture.exr");
-            let true_tex = rio::read_exr(&tex_path).with_context(|| format!("reading the true texture {}", tex_path.display()))?;
+            let tex_path = dir
+                .join("materials")
+                .join(id.to_string())
+                .join("texture.exr");
+            let true_tex = rio::read_exr(&tex_path)
+                .with_context(|| format!("reading the true texture {}", tex_path.display()))?;
             row.truth_seam_ratio = Some(seam_score(&true_tex).ratio);
             if let Some(t) = &mat.texture {
                 let s = metrics::aligned_texture_score(&t.texture, &true_tex);
@@ -206,7 +255,10 @@ fn eval_scene(dir: &Path, a: &Args) -> Result<Vec<Row>> {
         } else if let Some(c) = m["diffuse_colour"].as_array() {
             let c: Vec<f32> = c.iter().filter_map(f).collect();
             if c.len() == 3 {
-                let e: f32 = (0..3).map(|k| (mat.params.diffuse[k] - c[k]).powi(2)).sum::<f32>() / 3.0;
+                let e: f32 = (0..3)
+                    .map(|k| (mat.params.diffuse[k] - c[k]).powi(2))
+                    .sum::<f32>()
+                    / 3.0;
                 row.colour_rmse = Some(e.sqrt() as f64);
             }
         }
@@ -225,7 +277,8 @@ fn min(v: impl Iterator<Item = f64>) -> Option<f64> {
 }
 
 fn opt(v: Option<f64>, prec: usize) -> String {
-    v.map(|x| format!("{x:.prec$}")).unwrap_or_else(|| "-".into())
+    v.map(|x| format!("{x:.prec$}"))
+        .unwrap_or_else(|| "-".into())
 }
 
 /// Runs `picker eval`.
@@ -238,7 +291,20 @@ pub fn run(a: Args) -> Result<()> {
     }
     println!(
         "{:<14} {:>3} {:<10} {:<14} {:>6} {:>6} {:>7} {:>7} {:>8} {:>6} {:>5} {:>6} {:>6} {:>5}",
-        "scene", "id", "name", "family", "area", "IoU", "alb", "nrm°", "tex dB", "cdist", "size", "seam", "tseam", "uv"
+        "scene",
+        "id",
+        "name",
+        "family",
+        "area",
+        "IoU",
+        "alb",
+        "nrm°",
+        "tex dB",
+        "cdist",
+        "size",
+        "seam",
+        "tseam",
+        "uv"
     );
     for r in &rows {
         println!(

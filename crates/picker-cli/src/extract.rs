@@ -158,7 +158,11 @@ fn run_nets(
 }
 
 /// The inputs of an extraction, a description and per-network timings.
-type Inferred = (Inputs, serde_json::Value, serde_json::Map<String, serde_json::Value>);
+type Inferred = (
+    Inputs,
+    serde_json::Value,
+    serde_json::Map<String, serde_json::Value>,
+);
 
 /// Runs the networks of `weights` on the photo at `work_size` (long side).
 pub fn infer_inputs(weights: &[PathBuf], photo_path: &Path, work_size: u32) -> Result<Inferred> {

@@ -109,13 +109,13 @@ fn encoding(name: &str) -> (&'static str, &'static str) {
 }
 
 /// A weights file chosen to run.
-struct Chosen {
-    path: PathBuf,
-    weights: Weights,
+pub(crate) struct Chosen {
+    pub(crate) path: PathBuf,
+    pub(crate) weights: Weights,
 }
 
 /// Resolves every `--weights` argument to opened weights files, one per network.
-fn resolve_weights(args: &[PathBuf]) -> Result<Vec<Chosen>> {
+pub(crate) fn resolve_weights(args: &[PathBuf]) -> Result<Vec<Chosen>> {
     let mut chosen: Vec<Chosen> = Vec::new();
     for arg in args {
         let meta =
@@ -140,6 +140,13 @@ fn resolve_weights(args: &[PathBuf]) -> Result<Vec<Chosen>> {
         }
         for (expected, path) in found {
             let weights = Weights::open(&path).context("reading weights")?;
+            if weights.kind() == NetKind::Inpaint {
+                bail!(
+                    "{}: file holds inpaint weights (the learned texture inpainter), which \
+                     `picker infer` does not run; give irn, msn or envmap weights",
+                    path.display()
+                );
+            }
             if let Some(kind) = expected {
                 if weights.kind() != kind {
                     bail!(

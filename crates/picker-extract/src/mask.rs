@@ -172,6 +172,32 @@ pub fn pick_colour(seg: &Image, valid: &[bool], x: usize, y: usize) -> Option<([
     Some((pick, sigma))
 }
 
+/// The automatic tolerance: `τ = clamp(τ_min + 3σ, τ_min, τ_max)`, lowered
+/// to the middle of the first empty band of colour distances beyond the
+/// pick's own spread (at least [`GAP_MIN`] wide), so two materials whose
+/// segmentation colours are close but distinct (as in clean segmentations)
+/// stay apart.
+fn gap_tolerance(seg: &Image, valid: &[bool], c: [f32; 3], sigma: f32) -> f32 {
+    let tau = (TOLERANCE_MIN + 3.0 * sigma).clamp(TOLERANCE_MIN, TOLERANCE_MAX);
+    let mut d: Vec<f32> = (0..seg.plane_len())
+        .filter(|&i| valid[i])
+        .map(|i| dist(colour(seg, i), c))
+        .filter(|&x| x <= tau)
+        .collect();
+    d.sort_by(|a, b| a.total_cmp(b));
+    let own = 3.0 * sigma;
+    let gap = GAP_MIN.max(sigma);
+    for p in d.windows(2) {
+        if p[0] >= own && p[1] - p[0] >= gap {
+            return (p[0] + p[1]) / 2.0;
+        }
+    }
+    tau
+}
+
+/// Narrowest empty band of colour distances that separates two materials.
+pub const GAP_MIN: f32 = 0.004;
+
 /// 8-connected component labels of `mask` (0 = outside, 1.. = component).
 pub fn components(mask: &Mask) -> (Vec<u32>, Vec<usize>) {
     let (w, h) = (mask.width, mask.height);
@@ -234,9 +260,10 @@ pub fn pick_mask(
             "no surface at the pick ({x}, {y}): the pixel and its neighbours show no material (sky or window)"
         ))
     })?;
-    let tolerance = opts
-        .tolerance
-        .unwrap_or((TOLERANCE_MIN + 3.0 * sigma).clamp(TOLERANCE_MIN, TOLERANCE_MAX));
+    let tolerance = match opts.tolerance {
+        Some(t) => t,
+        None => gap_tolerance(seg, valid, c, sigma),
+    };
     let data: Vec<bool> = (0..w * h)
         .map(|i| valid[i] && dist(colour(seg, i), c) <= tolerance)
         .collect();

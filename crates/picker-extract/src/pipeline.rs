@@ -12,8 +12,9 @@
 //!   exact and the de-lit colour is the true albedo.
 //! - **UV mode `auto`** reprojects with the predicted UVs when their
 //!   cross-validated consistency ([`reproject::consistency`]) reaches
-//!   [`AUTO_MIN_R2`], otherwise rectifies a plane when the picked normals agree
-//!   within [`AUTO_MAX_PLANE_SPREAD_DEG`], otherwise keeps the UVs.
+//!   [`AUTO_MIN_R2`] (or cannot be measured because the material shows less
+//!   than about one repeat), otherwise rectifies a plane when the picked
+//!   normals agree within [`AUTO_MAX_PLANE_SPREAD_DEG`], otherwise keeps the UVs.
 //! - **Material parameters**: ρs and g are per-channel medians over the mask at
 //!   the working resolution; n = 2^(13g); the diffuse colour is the mean of the
 //!   final texture (textured) or the median de-lit colour (single colour).
@@ -444,9 +445,14 @@ pub fn extract(
             Some(plane::plane_coords(fw, fh, &full.data, n, f))
         };
         let mut focal = None;
+        // Never more than ~4 texels per observed pixel: beyond that the texture is mostly invented.
+        let observed_cap = opts
+            .max_size
+            .min((2.0 * (full.count() as f64).sqrt()) as usize)
+            .max(16);
         let probe_size = reproject::texture_size(
-            net_coords.as_ref().and_then(|c| c.median_area(&full.data)),
-            opts.max_size,
+            net_coords.as_ref().and_then(|c| c.sizing_area(&full.data)),
+            observed_cap,
         );
         let net_r2 = match (&net_coords, opts.uv) {
             (Some(c), UvChoice::Auto) => {
@@ -472,7 +478,8 @@ pub fn extract(
                     }
                 },
                 UvChoice::Auto => {
-                    let net_ok = net_r2.is_some_and(|r| r >= AUTO_MIN_R2);
+                    // Unmeasurable (the halves share too few texels): trust the UVs.
+                    let net_ok = net_r2.is_none_or(|r| r >= AUTO_MIN_R2);
                     let planar = spread.is_some_and(|s| s <= AUTO_MAX_PLANE_SPREAD_DEG);
                     if net_ok || !planar {
                         match net_coords {
@@ -510,7 +517,7 @@ pub fn extract(
         });
         lap("coordinates", &mut timings);
         let size = opts.size.unwrap_or_else(|| {
-            reproject::texture_size(coords.median_area(&full.data), opts.max_size)
+            reproject::texture_size(coords.sizing_area(&full.data), observed_cap)
         });
         diag.texture_size = Some(size);
         let r = reproject::reproject(&coords, &full.data, &delit, &confidence, size);

@@ -61,8 +61,8 @@ impl Coords {
         a.is_finite().then_some(a)
     }
 
-    /// Median texture-square area per picked pixel.
-    pub fn median_area(&self, mask: &[bool]) -> Option<f32> {
+    /// The `q`-quantile (0 = smallest) of the texture-square area per picked pixel.
+    pub fn area_quantile(&self, mask: &[bool], q: f32) -> Option<f32> {
         let mut a: Vec<f32> = (0..mask.len())
             .filter_map(|i| self.pixel_area(mask, i))
             .filter(|&a| a > 0.0)
@@ -70,18 +70,29 @@ impl Coords {
         if a.is_empty() {
             return None;
         }
-        let mid = a.len() / 2;
-        a.select_nth_unstable_by(mid, |x, y| x.total_cmp(y));
-        Some(a[mid])
+        let k = ((a.len() - 1) as f32 * q.clamp(0.0, 1.0)).round() as usize;
+        a.select_nth_unstable_by(k, |x, y| x.total_cmp(y));
+        Some(a[k])
+    }
+
+    /// The texture-square area per pixel at which the texture is sized: the
+    /// [`DENSITY_QUANTILE`] quantile, i.e. the density of the best-seen part
+    /// of the material (the closest pixels show the finest detail).
+    pub fn sizing_area(&self, mask: &[bool]) -> Option<f32> {
+        self.area_quantile(mask, DENSITY_QUANTILE)
     }
 }
 
+/// Quantile of the per-pixel texture area that sizes the texture (0.1: the
+/// best-resolved tenth of the picked pixels gets about one texel per pixel).
+pub const DENSITY_QUANTILE: f32 = 0.5;
+
 /// The texture side that gives about one texel per picked pixel at the
-/// median observed density, rounded to a multiple of 4 and clamped to
+/// observed density `area` (see [`Coords::sizing_area`]), rounded to a multiple of 4 and clamped to
 /// `[16, max]` (`max ≥ 16`).
-pub fn texture_size(median_area: Option<f32>, max: usize) -> usize {
+pub fn texture_size(area: Option<f32>, max: usize) -> usize {
     let max = max.max(16);
-    let side = match median_area {
+    let side = match area {
         Some(a) if a > 0.0 => (1.0 / a.sqrt()) as f64,
         _ => 256.0,
     };
@@ -352,7 +363,7 @@ mod tests {
         let tex = |u: f32, v: f32| Vec3::new(u, v, 0.5);
         let (coords, img) = frontal(96, 64, 32.0, tex);
         let mask = vec![true; 96 * 64];
-        let area = coords.median_area(&mask).unwrap();
+        let area = coords.sizing_area(&mask).unwrap();
         assert!((area - 1.0 / 1024.0).abs() < 1e-5, "{area}");
         let size = texture_size(Some(area), 1024);
         assert_eq!(size, 32);

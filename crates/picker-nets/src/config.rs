@@ -16,7 +16,7 @@ use crate::error::{Error, Result};
 /// The preset names this crate knows the configuration of.
 pub const KNOWN_PRESETS: [&str; 2] = ["thesis", "tiny"];
 
-/// Which of the three networks.
+/// Which network: the three of the thesis, plus the learned texture inpainter.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum NetKind {
     /// Intrinsic Render-element Network: shared encoder, one residual tower and decoder per head.
@@ -25,27 +25,37 @@ pub enum NetKind {
     Msn,
     /// Environment-map (lighting) network.
     EnvMap,
+    /// Learned texture inpainter (pix2pix ResnetGenerator-style, like the MSN, with the
+    /// known-texel mask as an extra input channel).
+    Inpaint,
 }
 
 impl NetKind {
     /// Every kind, in a fixed order.
-    pub const ALL: [NetKind; 3] = [NetKind::Irn, NetKind::Msn, NetKind::EnvMap];
+    pub const ALL: [NetKind; 4] = [
+        NetKind::Irn,
+        NetKind::Msn,
+        NetKind::EnvMap,
+        NetKind::Inpaint,
+    ];
 
-    /// The name used in metadata (`net` key) and on the command line: `irn`, `msn`, `envmap`.
+    /// The name used in metadata (`net` key) and on the command line: `irn`, `msn`, `envmap`,
+    /// `inpaint`.
     pub fn as_str(self) -> &'static str {
         match self {
             NetKind::Irn => "irn",
             NetKind::Msn => "msn",
             NetKind::EnvMap => "envmap",
+            NetKind::Inpaint => "inpaint",
         }
     }
 
     /// The size `(hp, wp)` an `h × w` input is mirror-padded to before the
-    /// network runs (contract, "Inputs of any size"): IRN and MSN need
+    /// network runs (contract, "Inputs of any size"): IRN, MSN and the inpainter need
     /// `max(8, ceil4(·))` on each axis, EnvMap `max(16, ·)`.
     pub fn padded_size(self, h: usize, w: usize) -> (usize, usize) {
         match self {
-            NetKind::Irn | NetKind::Msn => {
+            NetKind::Irn | NetKind::Msn | NetKind::Inpaint => {
                 let f = |n: usize| n.div_ceil(4).saturating_mul(4).max(8);
                 (f(h), f(w))
             }
@@ -75,6 +85,7 @@ impl FromStr for NetKind {
             "irn" => Ok(NetKind::Irn),
             "msn" => Ok(NetKind::Msn),
             "envmap" => Ok(NetKind::EnvMap),
+            "inpaint" => Ok(NetKind::Inpaint),
             _ => Err(Error::UnknownNet {
                 found: s.to_string(),
             }),
@@ -147,6 +158,27 @@ pub struct EnvMapConfig {
     pub tail_widths: [usize; 2],
     /// Output channels (3: RGB radiance).
     pub out_channels: usize,
+    /// Whether the convolutions before a BatchNorm have a bias.
+    pub conv_bias: bool,
+    /// BatchNorm ε.
+    pub bn_eps: f64,
+}
+
+/// Learned-inpainter configuration (contract:
+/// `{"widths","blocks","channels","conv_bias","bn_eps"}`).
+///
+/// The network is the MSN's Encoder → ResBlocks → Decoder with `channels + 1`
+/// inputs (the texture with unknown texels zeroed, then the known mask) and
+/// `channels` tanh outputs (the filled texture).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct InpaintConfig {
+    /// Encoder widths `[w0, w1, w2]`.
+    pub widths: [usize; 3],
+    /// Residual blocks.
+    pub blocks: usize,
+    /// Texture channels (3: RGB); the network reads `channels + 1` planes and writes `channels`.
+    pub channels: usize,
     /// Whether the convolutions before a BatchNorm have a bias.
     pub conv_bias: bool,
     /// BatchNorm ε.
@@ -241,6 +273,36 @@ impl EnvMapConfig {
     }
 }
 
+impl InpaintConfig {
+    /// The thesis-sized inpainter: pix2pix's `resnet_9blocks` generator at the MSN's widths
+    /// (11,381,315 parameters).
+    pub fn thesis() -> Self {
+        Self {
+            widths: [64, 128, 256],
+            blocks: 9,
+            channels: 3,
+            conv_bias: false,
+            bn_eps: 1e-5,
+        }
+    }
+    /// The test-sized network of the contract.
+    pub fn tiny() -> Self {
+        Self {
+            widths: [8, 12, 16],
+            blocks: 2,
+            channels: 3,
+            conv_bias: true,
+            bn_eps: 1e-5,
+        }
+    }
+}
+
+impl Default for InpaintConfig {
+    fn default() -> Self {
+        Self::thesis()
+    }
+}
+
 impl Default for IrnConfig {
     fn default() -> Self {
         Self::thesis()
@@ -257,7 +319,7 @@ impl Default for EnvMapConfig {
     }
 }
 
-/// The configuration of any of the three networks.
+/// The configuration of any of the networks.
 #[derive(Clone, Debug, PartialEq)]
 pub enum NetConfig {
     /// An IRN.
@@ -266,6 +328,8 @@ pub enum NetConfig {
     Msn(MsnConfig),
     /// An EnvMap network.
     EnvMap(EnvMapConfig),
+    /// A learned inpainter.
+    Inpaint(InpaintConfig),
 }
 
 impl From<IrnConfig> for NetConfig {
@@ -281,6 +345,11 @@ impl From<MsnConfig> for NetConfig {
 impl From<EnvMapConfig> for NetConfig {
     fn from(c: EnvMapConfig) -> Self {
         NetConfig::EnvMap(c)
+    }
+}
+impl From<InpaintConfig> for NetConfig {
+    fn from(c: InpaintConfig) -> Self {
+        NetConfig::Inpaint(c)
     }
 }
 
@@ -325,6 +394,8 @@ impl NetConfig {
             (NetKind::Msn, "tiny") => MsnConfig::tiny().into(),
             (NetKind::EnvMap, "thesis") => EnvMapConfig::thesis().into(),
             (NetKind::EnvMap, "tiny") => EnvMapConfig::tiny().into(),
+            (NetKind::Inpaint, "thesis") => InpaintConfig::thesis().into(),
+            (NetKind::Inpaint, "tiny") => InpaintConfig::tiny().into(),
             _ => {
                 return Err(Error::UnknownPreset {
                     kind,
@@ -340,6 +411,16 @@ impl NetConfig {
             NetConfig::Irn(_) => NetKind::Irn,
             NetConfig::Msn(_) => NetKind::Msn,
             NetConfig::EnvMap(_) => NetKind::EnvMap,
+            NetConfig::Inpaint(_) => NetKind::Inpaint,
+        }
+    }
+
+    /// Channels of the network input: 3 (normalised RGB) for IRN, MSN and EnvMap,
+    /// `channels + 1` for the inpainter (texture planes, then the known mask).
+    pub fn in_channels(&self) -> usize {
+        match self {
+            NetConfig::Inpaint(c) => c.channels + 1,
+            NetConfig::Irn(_) | NetConfig::Msn(_) | NetConfig::EnvMap(_) => 3,
         }
     }
 
@@ -349,6 +430,7 @@ impl NetConfig {
             NetConfig::Irn(c) => c.widths,
             NetConfig::Msn(c) => c.widths,
             NetConfig::EnvMap(c) => c.widths,
+            NetConfig::Inpaint(c) => c.widths,
         }
     }
 
@@ -358,6 +440,7 @@ impl NetConfig {
             NetConfig::Irn(c) => c.conv_bias,
             NetConfig::Msn(c) => c.conv_bias,
             NetConfig::EnvMap(c) => c.conv_bias,
+            NetConfig::Inpaint(c) => c.conv_bias,
         }
     }
 
@@ -367,6 +450,7 @@ impl NetConfig {
             NetConfig::Irn(c) => c.bn_eps,
             NetConfig::Msn(c) => c.bn_eps,
             NetConfig::EnvMap(c) => c.bn_eps,
+            NetConfig::Inpaint(c) => c.bn_eps,
         }
     }
 
@@ -407,6 +491,7 @@ impl NetConfig {
                 check_widths("tail_widths", &c.tail_widths)?;
                 check_channels("out_channels", c.out_channels)?;
             }
+            NetConfig::Inpaint(c) => check_channels("channels", c.channels)?,
         }
         Ok(())
     }
@@ -417,6 +502,7 @@ impl NetConfig {
             NetConfig::Irn(c) => serde_json::to_string(c),
             NetConfig::Msn(c) => serde_json::to_string(c),
             NetConfig::EnvMap(c) => serde_json::to_string(c),
+            NetConfig::Inpaint(c) => serde_json::to_string(c),
         };
         // Serialising plain structs of numbers, bools and strings cannot fail.
         r.unwrap_or_default()
@@ -429,6 +515,7 @@ impl NetConfig {
             NetKind::Irn => serde_json::from_str::<IrnConfig>(json).map(Into::into),
             NetKind::Msn => serde_json::from_str::<MsnConfig>(json).map(Into::into),
             NetKind::EnvMap => serde_json::from_str::<EnvMapConfig>(json).map(Into::into),
+            NetKind::Inpaint => serde_json::from_str::<InpaintConfig>(json).map(Into::into),
         };
         let cfg = parsed.map_err(|e| invalid(format!("{kind} config JSON: {e}")))?;
         cfg.validate()?;
@@ -447,7 +534,8 @@ impl NetConfig {
     pub fn param_count(&self) -> u64 {
         let [w0, w1, w2] = self.widths().map(|v| v as u64);
         let conv = |cin: u64, cout: u64, k: u64| cin * cout * k * k + cout;
-        let encoder = conv(3, w0, 7) + conv(w0, w1, 3) + conv(w1, w2, 3);
+        let cin = self.in_channels() as u64;
+        let encoder = conv(cin, w0, 7) + conv(w0, w1, 3) + conv(w1, w2, 3);
         let block = 2 * conv(w2, w2, 3);
         let decoder = |c: u64| conv(w2, w1, 3) + conv(w1, w0, 3) + conv(w0, c, 7);
         match self {
@@ -459,6 +547,7 @@ impl NetConfig {
                         .sum::<u64>()
             }
             NetConfig::Msn(c) => encoder + c.blocks as u64 * block + decoder(c.out_channels as u64),
+            NetConfig::Inpaint(c) => encoder + c.blocks as u64 * block + decoder(c.channels as u64),
             NetConfig::EnvMap(c) => {
                 let [t0, t1] = c.tail_widths.map(|v| v as u64);
                 encoder
@@ -486,7 +575,10 @@ impl NetConfig {
             spec.out_hw(h, w).unwrap_or((0, 0))
         };
         let stride0 = if self.kind() == NetKind::EnvMap { 2 } else { 1 };
-        let s = conv(ConvSpec::square(3, w0, 7, stride0, 0), (hp + 6, wp + 6));
+        let s = conv(
+            ConvSpec::square(self.in_channels(), w0, 7, stride0, 0),
+            (hp + 6, wp + 6),
+        );
         let s = conv(ConvSpec::square(w0, w1, 3, 2, 1), s);
         let enc = conv(ConvSpec::square(w1, w2, 3, 2, 1), s);
         let block = |n: usize, (h, w): (usize, usize)| -> u64 {
@@ -509,6 +601,7 @@ impl NetConfig {
                 .map(|hd| block(c.blocks, enc) + decoder(hd.channels, enc))
                 .sum::<u64>(),
             NetConfig::Msn(c) => block(c.blocks, enc) + decoder(c.out_channels, enc),
+            NetConfig::Inpaint(c) => block(c.blocks, enc) + decoder(c.channels, enc),
             NetConfig::EnvMap(c) => {
                 let [t0, t1] = c.tail_widths;
                 let t0s = ConvSpec::square(w2, t0, 1, 2, 0);
@@ -536,6 +629,8 @@ mod tests {
         assert_eq!(count(NetKind::Irn), 108_856_080);
         assert_eq!(count(NetKind::Msn), 11_378_179);
         assert_eq!(count(NetKind::EnvMap), 5_463_427);
+        // The MSN plus one input plane of the first 7×7 conv (64·49).
+        assert_eq!(count(NetKind::Inpaint), 11_378_179 + 64 * 49);
     }
 
     #[test]
@@ -545,11 +640,14 @@ mod tests {
         assert_eq!(flops(NetKind::Irn), 1_068_004_147_200);
         assert_eq!(flops(NetKind::Msn), 116_136_345_600);
         assert_eq!(flops(NetKind::EnvMap), 13_188_111_360);
+        // The MSN plus the mask plane of the first conv: 2·64·49·240·320.
+        assert_eq!(flops(NetKind::Inpaint), 116_618_035_200);
         // ×4 at 480×640 for IRN and MSN; the EnvMap tail rounds odd sizes up (52.7 G).
         let at = |k| NetConfig::preset(k, "thesis").unwrap().flops(480, 640);
         assert_eq!(at(NetKind::Irn), 4_272_016_588_800);
         assert_eq!(at(NetKind::Msn), 464_545_382_400);
         assert_eq!(at(NetKind::EnvMap), 52_740_648_960);
+        assert_eq!(at(NetKind::Inpaint), 466_472_140_800);
     }
 
     #[test]
@@ -596,6 +694,16 @@ mod tests {
                 NetKind::EnvMap,
                 "tiny",
                 r#"{"widths":[8,12,16],"blocks":1,"tail_widths":[16,12],"out_channels":3,"conv_bias":true,"bn_eps":1e-05}"#,
+            ),
+            (
+                NetKind::Inpaint,
+                "thesis",
+                r#"{"widths":[64,128,256],"blocks":9,"channels":3,"conv_bias":false,"bn_eps":1e-5}"#,
+            ),
+            (
+                NetKind::Inpaint,
+                "tiny",
+                r#"{"widths":[8,12,16],"blocks":2,"channels":3,"conv_bias":true,"bn_eps":1e-5}"#,
             ),
         ];
         for (kind, preset, json) in contract {
@@ -646,6 +754,10 @@ mod tests {
         let mut c = EnvMapConfig::tiny();
         c.out_channels = 0;
         assert!(NetConfig::EnvMap(c).validate().is_err());
+        let mut c = InpaintConfig::tiny();
+        c.channels = 0;
+        let e = NetConfig::Inpaint(c).validate().unwrap_err().to_string();
+        assert!(e.contains("channels is 0"), "{e}");
         assert!(NetConfig::preset(NetKind::Irn, "huge").is_err());
     }
 
@@ -656,5 +768,7 @@ mod tests {
         assert_eq!(NetKind::EnvMap.padded_size(13, 240), (16, 240));
         assert_eq!(NetKind::Irn.input_pads(13, 7), [1, 2, 0, 1]);
         assert_eq!(NetKind::EnvMap.input_pads(5, 20), [5, 6, 0, 0]);
+        assert_eq!(NetKind::Inpaint.padded_size(13, 240), (16, 240));
+        assert_eq!("inpaint".parse::<NetKind>().unwrap(), NetKind::Inpaint);
     }
 }

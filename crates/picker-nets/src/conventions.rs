@@ -36,6 +36,13 @@ pub const UV: &str = "uv";
 pub const SEGMENTATION: &str = "segmentation";
 /// Name of the EnvMap output.
 pub const ENVMAP: &str = "envmap";
+/// Name of the learned inpainter's output.
+pub const INPAINTED: &str = "inpainted";
+/// Mask-plane value of a known (observed) texel in the inpainter's input.
+pub const INPAINT_KNOWN: f32 = 1.0;
+/// Mask-plane value of an unknown texel in the inpainter's input; its texture
+/// planes are 0 (mid-grey in `[-1, 1]`).
+pub const INPAINT_UNKNOWN: f32 = -1.0;
 
 /// Phong exponent of full glossiness: `n = 2^(PHONG_EXPONENT_LOG2_MAX · g)`, so `g ∈ [0, 1]` maps to `n ∈ [1, 8192]`.
 pub const PHONG_EXPONENT_LOG2_MAX: f32 = 13.0;
@@ -59,6 +66,40 @@ pub fn normalize_input(x: &mut Tensor) {
     x.data_mut()
         .iter_mut()
         .for_each(|v| *v = input_from_srgb(*v));
+}
+
+/// The learned inpainter's input `[N, C + 1, H, W]` from a texture of sRGB
+/// values in `[0, 1]` (`srgb`: `[N, C, H, W]`) and the known mask (`known[row·W + col]`,
+/// shared by the batch): planes `0..C` hold `2v − 1` ([`input_from_srgb`]) at known
+/// texels and `0` at unknown ones, plane `C` holds [`INPAINT_KNOWN`] (`+1`) or
+/// [`INPAINT_UNKNOWN`] (`−1`). Decode the output with [`srgb_from_input`].
+pub fn inpaint_input(srgb: &Tensor, known: &[bool]) -> Result<Tensor> {
+    let [n, c, h, w] = srgb.shape();
+    let hw = h * w;
+    if known.len() != hw {
+        return Err(Error::Input {
+            reason: format!(
+                "inpainting mask has {} entries for a {h}x{w} texture (expected {hw})",
+                known.len()
+            ),
+        });
+    }
+    let src = srgb.data();
+    let mut out = vec![0.0f32; n * (c + 1) * hw];
+    for b in 0..n {
+        let (si, oi) = (b * c * hw, b * (c + 1) * hw);
+        for ch in 0..c {
+            for (i, &k) in known.iter().enumerate() {
+                if k {
+                    out[oi + ch * hw + i] = input_from_srgb(src[si + ch * hw + i]);
+                }
+            }
+        }
+        for (i, &k) in known.iter().enumerate() {
+            out[oi + c * hw + i] = if k { INPAINT_KNOWN } else { INPAINT_UNKNOWN };
+        }
+    }
+    Ok(Tensor::new([n, c + 1, h, w], out)?)
 }
 
 /// `(y + 1)/2`: the decoding of albedos, glossiness, segmentation colours and `uv` channels.
@@ -352,6 +393,16 @@ impl RenderElements {
 mod tests {
     use super::*;
     use picker_tensor::Rng;
+
+    #[test]
+    fn inpaint_input_layout() {
+        let srgb = Tensor::from_fn([1, 3, 1, 2], |_, c, _, x| 0.25 * (c + x) as f32);
+        let x = inpaint_input(&srgb, &[true, false]).unwrap();
+        assert_eq!(x.shape(), [1, 4, 1, 2]);
+        // Plane-major: R, G, B (unknown texel zeroed), then the mask.
+        assert_eq!(x.data(), [-1.0, 0.0, -0.5, 0.0, 0.0, 0.0, 1.0, -1.0]);
+        assert!(inpaint_input(&srgb, &[true]).is_err());
+    }
 
     #[test]
     fn unit_round_trips() {

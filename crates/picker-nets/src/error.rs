@@ -186,8 +186,8 @@ pub enum Error {
         /// The name asked for.
         name: String,
     },
-    /// A network name other than `irn`, `msn`, `envmap`.
-    #[error("unknown network {found:?}; expected irn, msn or envmap")]
+    /// A network name other than `irn`, `msn`, `envmap`, `inpaint`.
+    #[error("unknown network {found:?}; expected irn, msn, envmap or inpaint")]
     UnknownNet {
         /// The name given.
         found: String,

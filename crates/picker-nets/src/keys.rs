@@ -126,8 +126,8 @@ impl Builder {
         self.bn(&format!("{p}.bn2"), c);
     }
 
-    fn encoder(&mut self, p: &str, [w0, w1, w2]: [usize; 3]) {
-        self.conv_bn(&format!("{p}.conv_in"), 3, w0, 7, Scale::One);
+    fn encoder(&mut self, p: &str, c_in: usize, [w0, w1, w2]: [usize; 3]) {
+        self.conv_bn(&format!("{p}.conv_in"), c_in, w0, 7, Scale::One);
         self.conv_bn(&format!("{p}.down.0"), w0, w1, 3, Scale::One);
         self.conv_bn(&format!("{p}.down.1"), w1, w2, 3, Scale::One);
     }
@@ -160,7 +160,7 @@ pub fn state_dict_spec(config: &NetConfig) -> Vec<ParamSpec> {
         conv_bias: config.conv_bias(),
     };
     let widths = config.widths();
-    b.encoder("enc", widths);
+    b.encoder("enc", config.in_channels(), widths);
     match config {
         NetConfig::Irn(c) => {
             for h in &c.heads {
@@ -176,6 +176,10 @@ pub fn state_dict_spec(config: &NetConfig) -> Vec<ParamSpec> {
         NetConfig::Msn(c) => {
             b.blocks("blocks", c.blocks, widths[2]);
             b.decoder("dec", widths, c.out_channels, c.blocks);
+        }
+        NetConfig::Inpaint(c) => {
+            b.blocks("blocks", c.blocks, widths[2]);
+            b.decoder("dec", widths, c.channels, c.blocks);
         }
         NetConfig::EnvMap(c) => {
             let [t0, t1] = c.tail_widths;

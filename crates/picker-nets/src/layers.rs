@@ -266,7 +266,7 @@ impl ResBlocks {
     }
 }
 
-/// Encoder: ReflectionPad(3) → `conv_in` ConvBn(3, w0, k7, stride0) + ReLU →
+/// Encoder: ReflectionPad(3) → `conv_in` ConvBn(c_in, w0, k7, stride0) + ReLU →
 /// `down.0` ConvBn(w0, w1, k3, s2, pad 1) + ReLU → `down.1` ConvBn(w1, w2, k3, s2, pad 1) + ReLU.
 #[derive(Clone, Debug)]
 pub struct Encoder {
@@ -275,9 +275,21 @@ pub struct Encoder {
 }
 
 impl Encoder {
-    /// Loads the encoder at prefix `w` (`stride0` = 1 for IRN/MSN, 2 for EnvMap).
+    /// Loads the 3-input encoder at prefix `w` (`stride0` = 1 for IRN/MSN, 2 for EnvMap).
     pub fn load(
         w: &WeightsPrefix<'_>,
+        widths: [usize; 3],
+        stride0: usize,
+        opts: LayerOptions,
+    ) -> Result<Self> {
+        Self::load_with_inputs(w, 3, widths, stride0, opts)
+    }
+
+    /// Loads an encoder whose first convolution reads `c_in` planes (the
+    /// inpainter: texture channels + the known mask).
+    pub fn load_with_inputs(
+        w: &WeightsPrefix<'_>,
+        c_in: usize,
         [w0, w1, w2]: [usize; 3],
         stride0: usize,
         opts: LayerOptions,
@@ -286,7 +298,7 @@ impl Encoder {
         Ok(Self {
             conv_in: ConvBn::load(
                 &w.pp("conv_in"),
-                ConvSpec::square(3, w0, 7, stride0, 0),
+                ConvSpec::square(c_in, w0, 7, stride0, 0),
                 opts,
                 relu,
             )?,

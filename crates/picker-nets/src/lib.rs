@@ -1,6 +1,7 @@
 //! The three networks of Material Picker — IRN (render elements), MSN
-//! (material segmentation) and EnvMap (lighting) — loaded from safetensors
-//! files and run on the CPU with the kernels of [`picker_tensor`].
+//! (material segmentation) and EnvMap (lighting) — and a learned texture
+//! inpainter (`inpaint`), loaded from safetensors files and run on the CPU
+//! with the kernels of [`picker_tensor`].
 //!
 //! The networks are those of the thesis "Material picker: Material recognition
 //! in images using machine learning" (Charles University, 2023, ch. 5.2),
@@ -17,8 +18,8 @@
 //!   **and unused** tensors.
 //! - [`layers`]: `ConvBn`, `ResBlock`, `Encoder`, `Decoder`, with BatchNorm folded
 //!   into the convolutions at load and activations fused.
-//! - [`nets`]: [`Irn`], [`Msn`], [`EnvMap`] and [`Net`]; `forward` takes a
-//!   normalised input of any size ≥ 1×1 and returns raw tanh outputs.
+//! - [`nets`]: [`Irn`], [`Msn`], [`EnvMap`], [`Inpaint`] and [`Net`]; `forward`
+//!   takes a normalised input of any size ≥ 1×1 and returns raw tanh outputs.
 //! - [`conventions`]: input normalisation, output decoding (albedo, Phong
 //!   exponent, normals, uv, segmentation, HDR radiance), environment-map
 //!   directions and solid angles, [`conventions::RenderElements`].
@@ -71,14 +72,17 @@ mod save;
 pub mod weights;
 
 pub use config::{
-    EnvMapConfig, HeadConfig, IrnConfig, MsnConfig, NetConfig, NetKind, KNOWN_PRESETS,
-    STANDARD_HEADS,
+    EnvMapConfig, HeadConfig, InpaintConfig, IrnConfig, MsnConfig, NetConfig, NetKind,
+    KNOWN_PRESETS, STANDARD_HEADS,
 };
 pub use conventions::RenderElements;
 pub use error::{Error, Result, ACCEPTED_DTYPES};
 pub use keys::{random_weights, state_dict_spec, ParamRole, ParamSpec};
 pub use layers::{LayerOptions, Trace};
-pub use nets::{EnvMap, EnvMapOutput, Irn, IrnOutput, Msn, MsnOutput, Net, NetOutput, Tower};
+pub use nets::{
+    EnvMap, EnvMapOutput, Inpaint, InpaintOutput, Irn, IrnOutput, Msn, MsnOutput, Net, NetOutput,
+    Tower,
+};
 pub use safetensors::Dtype;
 pub use save::{
     metadata_for, save_safetensors, serialize_safetensors, write_atomic, NamedTensor, StorageDtype,
@@ -96,6 +100,7 @@ mod tests {
         assert_send_sync::<crate::Irn>();
         assert_send_sync::<crate::Msn>();
         assert_send_sync::<crate::EnvMap>();
+        assert_send_sync::<crate::Inpaint>();
         assert_send_sync::<crate::Weights>();
     }
 }

@@ -1,15 +1,18 @@
-//! The three networks (thesis ch. 5.2) as typed models, and [`Net`] over them.
+//! The three networks (thesis ch. 5.2) and the learned inpainter as typed
+//! models, and [`Net`] over them.
 //!
 //! Every `forward` takes a normalised input `[N, 3, H, W]`
-//! ([`crate::conventions::normalize_input`]) of any size ≥ 1×1, mirror-pads it
-//! to what the network needs ([`NetKind::padded_size`]), runs, and crops
-//! back (IRN, MSN) or resizes to `(max(1, H/8), max(1, W/8))` (EnvMap).
+//! ([`crate::conventions::normalize_input`]; the inpainter:
+//! `[N, channels + 1, H, W]` from [`crate::conventions::inpaint_input`]) of any
+//! size ≥ 1×1, mirror-pads it to what the network needs
+//! ([`NetKind::padded_size`]), runs, and crops back (IRN, MSN, inpainter) or
+//! resizes to `(max(1, H/8), max(1, W/8))` (EnvMap).
 
 use std::borrow::Cow;
 
 use picker_tensor::{mirror_pad, resize_bilinear, Activation, ConvSpec, Tensor};
 
-use crate::config::{EnvMapConfig, IrnConfig, MsnConfig, NetConfig, NetKind};
+use crate::config::{EnvMapConfig, InpaintConfig, IrnConfig, MsnConfig, NetConfig, NetKind};
 use crate::error::{Error, Result};
 use crate::layers::{join, ConvBn, Decoder, Encoder, LayerOptions, ResBlocks, Trace, Tracer};
 use crate::weights::Weights;
@@ -21,13 +24,18 @@ fn options(cfg: &NetConfig) -> LayerOptions {
     }
 }
 
-/// Checks `x` is `[N ≥ 1, 3, H ≥ 1, W ≥ 1]` and mirror-pads it for `kind`.
-fn pad_input(kind: NetKind, x: &Tensor) -> Result<(Cow<'_, Tensor>, [usize; 4])> {
+/// Checks `x` is `[N ≥ 1, c_in, H ≥ 1, W ≥ 1]` and mirror-pads it for `kind`.
+fn pad_input(kind: NetKind, x: &Tensor, c_in: usize) -> Result<(Cow<'_, Tensor>, [usize; 4])> {
     let [n, c, h, w] = x.shape();
-    if n == 0 || c != 3 || h == 0 || w == 0 {
+    if n == 0 || c != c_in || h == 0 || w == 0 {
+        let what = if kind == NetKind::Inpaint {
+            "inpainting input (texture planes with unknown texels 0, then the known mask ±1)"
+        } else {
+            "normalised RGB"
+        };
         return Err(Error::Input {
             reason: format!(
-                "{kind} needs a normalised RGB tensor [N >= 1, 3, H >= 1, W >= 1]; got {:?}",
+                "{kind} needs a {what} tensor [N >= 1, {c_in}, H >= 1, W >= 1]; got {:?}",
                 x.shape()
             ),
         });
@@ -154,7 +162,7 @@ impl Irn {
     }
 
     fn run(&self, x: &Tensor, tr: &mut Tracer<'_>) -> Result<IrnOutput> {
-        let (xp, pads) = pad_input(NetKind::Irn, x)?;
+        let (xp, pads) = pad_input(NetKind::Irn, x, 3)?;
         let e = self.enc.forward_traced(&xp, tr, "enc")?;
         let mut heads = Vec::with_capacity(self.heads.len());
         for (name, tower) in &self.heads {
@@ -220,7 +228,7 @@ impl Msn {
         self.run(x, &mut Tracer::new(Some(trace)))
     }
     fn run(&self, x: &Tensor, tr: &mut Tracer<'_>) -> Result<MsnOutput> {
-        let (xp, pads) = pad_input(NetKind::Msn, x)?;
+        let (xp, pads) = pad_input(NetKind::Msn, x, 3)?;
         let e = self.enc.forward_traced(&xp, tr, "enc")?;
         let b = self.blocks.forward_traced(&e, tr, "blocks")?;
         let y = self.dec.forward_traced(&b, tr, "dec")?;
@@ -307,7 +315,7 @@ impl EnvMap {
         self.run(x, &mut Tracer::new(Some(trace)))
     }
     fn run(&self, x: &Tensor, tr: &mut Tracer<'_>) -> Result<EnvMapOutput> {
-        let (xp, _) = pad_input(NetKind::EnvMap, x)?;
+        let (xp, _) = pad_input(NetKind::EnvMap, x, 3)?;
         let e = self.enc.forward_traced(&xp, tr, "enc")?;
         let mut y = self.blocks.forward_traced(&e, tr, "blocks")?;
         for (i, t) in self.tail.iter().enumerate() {
@@ -324,7 +332,84 @@ impl EnvMap {
     }
 }
 
-/// Named outputs of any network: IRN heads by name, MSN `segmentation`, EnvMap `envmap`.
+/// The learned inpainter's output: the filled texture as raw tanh values
+/// `[N, channels, H, W]` for every texel (known ones included; callers keep the
+/// known texels from their input). Decode with [`crate::conventions::srgb_from_input`].
+#[derive(Clone, Debug)]
+pub struct InpaintOutput {
+    /// Raw tanh values: the texture in `[-1, 1]` (sRGB `v = (y + 1)/2`).
+    pub inpainted: Tensor,
+}
+
+/// Learned texture inpainter (pix2pix ResnetGenerator-style, as the MSN):
+/// encoder with `channels + 1` inputs, residual blocks, decoder with `channels`
+/// tanh outputs. The input layout is [`crate::conventions::inpaint_input`]'s.
+#[derive(Clone, Debug)]
+pub struct Inpaint {
+    config: InpaintConfig,
+    enc: Encoder,
+    blocks: ResBlocks,
+    dec: Decoder,
+}
+
+impl Inpaint {
+    /// Builds the inpainter of an `inpaint` weights file (strict).
+    pub fn load(w: &Weights) -> Result<Self> {
+        load_start(w, NetKind::Inpaint)?;
+        let NetConfig::Inpaint(config) = *w.config() else {
+            return Err(Error::NetMismatch {
+                path: w.path().to_path_buf(),
+                expected: NetKind::Inpaint,
+                found: w.config().kind(),
+            });
+        };
+        let opts = options(w.config());
+        let net = Self {
+            config,
+            enc: Encoder::load_with_inputs(
+                &w.pp("enc"),
+                config.channels + 1,
+                config.widths,
+                1,
+                opts,
+            )?,
+            blocks: ResBlocks::load(&w.pp("blocks"), config.blocks, config.widths[2], opts)?,
+            dec: Decoder::load(&w.pp("dec"), config.widths, config.channels, opts)?,
+        };
+        w.check_all_used()?;
+        Ok(net)
+    }
+    /// The configuration.
+    pub fn config(&self) -> &InpaintConfig {
+        &self.config
+    }
+    /// Parameters after BatchNorm folding.
+    pub fn param_count(&self) -> u64 {
+        self.enc.param_count() + self.blocks.param_count() + self.dec.param_count()
+    }
+    /// Runs the network on an `[N, channels + 1, H, W]` input of any size
+    /// ([`crate::conventions::inpaint_input`]); mirror-pads like the MSN and crops back.
+    pub fn forward(&self, x: &Tensor) -> Result<InpaintOutput> {
+        self.run(x, &mut Tracer::new(None))
+    }
+    /// As [`Inpaint::forward`], also recording `enc.conv_in`, `enc.down.0`, `enc`,
+    /// `blocks.<i>`, `dec.up.0`, `dec.up.1`, `dec.conv_out` (padded size).
+    pub fn forward_traced(&self, x: &Tensor, trace: &mut Trace) -> Result<InpaintOutput> {
+        self.run(x, &mut Tracer::new(Some(trace)))
+    }
+    fn run(&self, x: &Tensor, tr: &mut Tracer<'_>) -> Result<InpaintOutput> {
+        let (xp, pads) = pad_input(NetKind::Inpaint, x, self.config.channels + 1)?;
+        let e = self.enc.forward_traced(&xp, tr, "enc")?;
+        let b = self.blocks.forward_traced(&e, tr, "blocks")?;
+        let y = self.dec.forward_traced(&b, tr, "dec")?;
+        Ok(InpaintOutput {
+            inpainted: crop_back(y, pads, x.h(), x.w())?,
+        })
+    }
+}
+
+/// Named outputs of any network: IRN heads by name, MSN `segmentation`, EnvMap `envmap`,
+/// inpainter `inpainted`.
 #[derive(Clone, Debug)]
 pub struct NetOutput {
     /// Which network produced them.
@@ -368,8 +453,16 @@ impl From<EnvMapOutput> for NetOutput {
         }
     }
 }
+impl From<InpaintOutput> for NetOutput {
+    fn from(o: InpaintOutput) -> Self {
+        Self {
+            kind: NetKind::Inpaint,
+            tensors: vec![("inpainted".to_string(), o.inpainted)],
+        }
+    }
+}
 
-/// Any of the three networks.
+/// Any of the networks.
 // One `Net` exists per loaded file and the variants hold only layer handles (the
 // weights live on the heap), so boxing them would buy nothing.
 #[allow(clippy::large_enum_variant)]
@@ -381,6 +474,8 @@ pub enum Net {
     Msn(Msn),
     /// An EnvMap network.
     EnvMap(EnvMap),
+    /// A learned inpainter.
+    Inpaint(Inpaint),
 }
 
 impl Net {
@@ -390,6 +485,7 @@ impl Net {
             NetKind::Irn => Net::Irn(Irn::load(w)?),
             NetKind::Msn => Net::Msn(Msn::load(w)?),
             NetKind::EnvMap => Net::EnvMap(EnvMap::load(w)?),
+            NetKind::Inpaint => Net::Inpaint(Inpaint::load(w)?),
         })
     }
     /// Which network.
@@ -398,6 +494,7 @@ impl Net {
             Net::Irn(_) => NetKind::Irn,
             Net::Msn(_) => NetKind::Msn,
             Net::EnvMap(_) => NetKind::EnvMap,
+            Net::Inpaint(_) => NetKind::Inpaint,
         }
     }
     /// The configuration.
@@ -406,6 +503,7 @@ impl Net {
             Net::Irn(n) => n.config().clone().into(),
             Net::Msn(n) => (*n.config()).into(),
             Net::EnvMap(n) => (*n.config()).into(),
+            Net::Inpaint(n) => (*n.config()).into(),
         }
     }
     /// Parameters after BatchNorm folding.
@@ -414,14 +512,17 @@ impl Net {
             Net::Irn(n) => n.param_count(),
             Net::Msn(n) => n.param_count(),
             Net::EnvMap(n) => n.param_count(),
+            Net::Inpaint(n) => n.param_count(),
         }
     }
-    /// Runs the network on a normalised `[N, 3, H, W]` input of any size.
+    /// Runs the network on a normalised `[N, 3, H, W]` input of any size
+    /// (the inpainter: `[N, channels + 1, H, W]`, see [`NetConfig::in_channels`]).
     pub fn forward(&self, x: &Tensor) -> Result<NetOutput> {
         Ok(match self {
             Net::Irn(n) => n.forward(x)?.into(),
             Net::Msn(n) => n.forward(x)?.into(),
             Net::EnvMap(n) => n.forward(x)?.into(),
+            Net::Inpaint(n) => n.forward(x)?.into(),
         })
     }
     /// As [`Net::forward`], also recording intermediate activations by module path.
@@ -430,6 +531,7 @@ impl Net {
             Net::Irn(n) => n.forward_traced(x, trace)?.into(),
             Net::Msn(n) => n.forward_traced(x, trace)?.into(),
             Net::EnvMap(n) => n.forward_traced(x, trace)?.into(),
+            Net::Inpaint(n) => n.forward_traced(x, trace)?.into(),
         })
     }
 }

@@ -620,7 +620,7 @@ fn parse_metadata(
         meta_err(
             path,
             "net",
-            format!("expected \"irn\", \"msn\" or \"envmap\", found {net:?}"),
+            format!("expected \"irn\", \"msn\", \"envmap\" or \"inpaint\", found {net:?}"),
         )
     })?;
     let json = get("config")?;

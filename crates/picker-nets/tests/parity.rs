@@ -12,6 +12,9 @@
 //! `Tolerance::NET_ACTIVATION`; the max abs error of every output is printed
 //! (`cargo test -p picker-nets --release --test parity -- --nocapture`).
 //! The unfused reference forward of `common` is checked against the same data.
+//!
+//! `inpaint_tiny` is the learned inpainter (input `[N, 4, H, W]`: texture planes
+//! with unknown texels 0, then the known mask ±1; see `training/conventions.py`).
 
 mod common;
 
@@ -178,5 +181,15 @@ fn envmap_tiny_bf16() {
         "envmap_tiny_bf16_io.safetensors",
         NetKind::EnvMap,
         "BF16",
+    );
+}
+
+#[test]
+fn inpaint_tiny_f32() {
+    parity(
+        "inpaint_tiny.safetensors",
+        "inpaint_tiny_io.safetensors",
+        NetKind::Inpaint,
+        "F32",
     );
 }

@@ -43,7 +43,8 @@ fn check_net(kind: NetKind, dtype: StorageDtype, seed: u64) {
     assert_eq!(net.param_count(), w.config().param_count());
     let sd = StateDict::read(f.path());
     let mut rng = Rng::new(seed ^ 0xabc);
-    for shape in SIZES {
+    for mut shape in SIZES {
+        shape[1] = w.config().in_channels();
         let x = rng.tensor(shape);
         let mut trace = Vec::new();
         let out = net.forward_traced(&x, &mut trace).unwrap();
@@ -99,8 +100,14 @@ fn envmap_matches_unfused_reference() {
 }
 
 #[test]
+fn inpaint_matches_unfused_reference() {
+    check_net(NetKind::Inpaint, StorageDtype::F32, 14);
+}
+
+#[test]
 fn half_precision_storage_matches_reference() {
     check_net(NetKind::Msn, StorageDtype::F16, 4);
+    check_net(NetKind::Inpaint, StorageDtype::BF16, 15);
     check_net(NetKind::EnvMap, StorageDtype::BF16, 5);
     check_net(NetKind::Irn, StorageDtype::BF16, 6);
 }
@@ -110,8 +117,9 @@ fn output_shapes_for_any_size() {
     for kind in NetKind::ALL {
         let f = write(kind, "tiny", 7, StorageDtype::F32);
         let net = Net::load(&Weights::open(f.path()).unwrap()).unwrap();
+        let c = net.config().in_channels();
         for (h, w) in [(1, 1), (2, 3), (7, 8), (8, 7), (15, 16), (17, 33), (40, 9)] {
-            let x = Tensor::zeros([1, 3, h, w]);
+            let x = Tensor::zeros([1, c, h, w]);
             let out = net.forward(&x).unwrap();
             for (name, t) in &out.tensors {
                 let (eh, ew) = match kind {
@@ -123,9 +131,9 @@ fn output_shapes_for_any_size() {
             }
         }
         // Bad inputs are refused with a clear message.
-        for bad in [[1, 1, 8, 8], [0, 3, 8, 8], [1, 3, 0, 8]] {
+        for bad in [[1, 1, 8, 8], [0, c, 8, 8], [1, c, 0, 8]] {
             let e = net.forward(&Tensor::zeros(bad)).unwrap_err().to_string();
-            assert!(e.contains("[N >= 1, 3, H >= 1, W >= 1]"), "{e}");
+            assert!(e.contains(&format!("[N >= 1, {c}, H >= 1, W >= 1]")), "{e}");
         }
     }
 }
@@ -220,7 +228,7 @@ fn thesis_check(kind: NetKind, h: usize, w: usize) {
     let weights = Weights::open(f.path()).unwrap();
     let net = Net::load(&weights).unwrap();
     assert_eq!(net.param_count(), weights.config().param_count());
-    let mut x = Rng::new(2).tensor([1, 3, h, w]);
+    let mut x = Rng::new(2).tensor([1, weights.config().in_channels(), h, w]);
     picker_nets::conventions::normalize_input(&mut x); // any values in range will do
     let out = net.forward(&x).unwrap();
     for (name, t) in &out.tensors {
@@ -243,6 +251,11 @@ fn thesis_check(kind: NetKind, h: usize, w: usize) {
 fn thesis_msn_and_envmap_random_weights() {
     thesis_check(NetKind::Msn, 48, 64);
     thesis_check(NetKind::EnvMap, 96, 128);
+}
+
+#[test]
+fn thesis_inpaint_random_weights() {
+    thesis_check(NetKind::Inpaint, 48, 64);
 }
 
 #[test]

@@ -531,3 +531,53 @@ fn missing_file() {
     let msg = Weights::open(&p).unwrap_err().to_string();
     assert_has(&msg, &[&p.display().to_string(), "cannot open"]);
 }
+
+#[test]
+fn inpaint_tensor_errors_name_key_expected_and_found() {
+    // A 3-input (MSN-style) first conv in an inpaint file: the mask plane is missing.
+    let (_, mut t, m) = tiny(NetKind::Inpaint);
+    let x = t
+        .iter_mut()
+        .find(|t| t.name == "enc.conv_in.conv.weight")
+        .unwrap();
+    x.shape = vec![8, 3, 7, 7];
+    x.data = TensorData::F32(vec![0.0; 8 * 3 * 49]);
+    let (e, msg) = load_err(&save("inpaint-shape", &t, &m));
+    assert!(matches!(e, Error::ShapeMismatch { .. }));
+    assert_has(
+        &msg,
+        &[
+            "\"enc.conv_in.conv.weight\"",
+            "[8, 3, 7, 7]",
+            "expected [8, 4, 7, 7]",
+        ],
+    );
+
+    let (_, mut t, m) = tiny(NetKind::Inpaint);
+    t.retain(|t| t.name != "dec.conv_out.bias");
+    let (e, msg) = load_err(&save("inpaint-missing", &t, &m));
+    assert!(matches!(e, Error::MissingTensor { .. }));
+    assert_has(&msg, &["missing tensor", "\"dec.conv_out.bias\"", "[3]"]);
+
+    let (_, mut t, m) = tiny(NetKind::Inpaint);
+    t.push(NamedTensor::f32("disc.conv.weight", vec![1], vec![0.0]));
+    let (e, msg) = load_err(&save("inpaint-extra", &t, &m));
+    assert!(matches!(e, Error::UnusedTensors { count: 1, .. }));
+    assert_has(&msg, &["1 unused tensor(s)", "disc.conv.weight"]);
+}
+
+#[test]
+fn inpaint_loader_refuses_other_nets() {
+    let (_, t, m) = tiny(NetKind::Msn);
+    let f = save("msn-as-inpaint", &t, &m);
+    let w = Weights::open(f.path()).unwrap();
+    let msg = picker_nets::Inpaint::load(&w).unwrap_err().to_string();
+    assert_has(
+        &msg,
+        &[
+            &f.path().display().to_string(),
+            "msn weights",
+            "inpaint weights were asked for",
+        ],
+    );
+}

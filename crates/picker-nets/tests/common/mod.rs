@@ -1,5 +1,5 @@
 //! Shared test helpers: temp files, an independent safetensors reader, and a
-//! straightforward **unfused** reference forward of the three networks built
+//! straightforward **unfused** reference forward of the networks built
 //! from `picker_tensor::reference` ops (plain conv + plain BatchNorm + plain
 //! pads), written from docs/contract.md. It is a second check of the fast,
 //! BatchNorm-folded models, independent of their loading code.
@@ -240,6 +240,12 @@ pub fn reference_forward(sd: &StateDict, x: &Tensor) -> (Named, Named) {
             let b = rf.blocks("blocks", c.blocks, e);
             let y = rf.decoder("dec", &b);
             vec![("segmentation".to_string(), crop(y))]
+        }
+        NetConfig::Inpaint(c) => {
+            let e = rf.encoder(&xp, 1);
+            let b = rf.blocks("blocks", c.blocks, e);
+            let y = rf.decoder("dec", &b);
+            vec![("inpainted".to_string(), crop(y))]
         }
         NetConfig::EnvMap(c) => {
             let e = rf.encoder(&xp, 2);

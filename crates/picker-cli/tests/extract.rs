@@ -1,0 +1,490 @@
+//! `picker extract` and `picker eval` end to end.
+//!
+//! - Ground truth standing in for the networks (`--elements`) on freshly
+//!   generated synthetic scenes: mask IoU and aligned texture PSNR.
+//! - Golden extraction on the committed tiny fixtures (`fixtures/extract/`):
+//!   the synthetic scene of `fixtures/synth/scene_000000` with its ground
+//!   truth, and the tiny random network weights on `fixtures/examples/coffee.jpg`.
+//!   Images are compared value by value (±1 code value), `material.json` numbers
+//!   to 1e-4 relative; re-bless with `PICKER_BLESS=1 cargo test -p picker-cli --test extract`.
+//! - Robustness: picks on edges, outside the image, single-colour materials,
+//!   several picks, `--all`, `--json`, `--16bit`, determinism, bad inputs.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use picker_render::io::read_png;
+use serde_json::Value;
+
+fn picker() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_picker"))
+}
+
+fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+fn run(args: &[&str]) -> Output {
+    let out = picker().args(args).output().expect("runs picker");
+    out
+}
+
+fn ok(args: &[&str]) -> Output {
+    let out = run(args);
+    assert!(
+        out.status.success(),
+        "picker {args:?} failed:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+fn json_file(p: &Path) -> Value {
+    serde_json::from_slice(&std::fs::read(p).unwrap_or_else(|e| panic!("{}: {e}", p.display())))
+        .unwrap_or_else(|e| panic!("{}: {e}", p.display()))
+}
+
+#[test]
+fn ground_truth_extraction_recovers_masks_and_textures() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scenes = tmp.path().join("scenes");
+    ok(&[
+        "synth",
+        "--count",
+        "6",
+        "--size",
+        "180x240",
+        "--seed",
+        "31337",
+        "--threads",
+        "2",
+        "--out",
+        scenes.to_str().unwrap(),
+    ]);
+    let report = tmp.path().join("eval.json");
+    let out = ok(&[
+        "eval",
+        scenes.to_str().unwrap(),
+        "--json-out",
+        report.to_str().unwrap(),
+    ]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    println!("{text}");
+    let r = json_file(&report);
+    let rows = r["rows"].as_array().unwrap();
+    assert!(
+        rows.len() >= 6,
+        "too few materials evaluated: {}",
+        rows.len()
+    );
+    for row in rows {
+        let iou = row["iou"].as_f64().unwrap();
+        assert!(iou >= 0.95, "mask IoU {iou} < 0.95: {row}");
+        assert_eq!(row["textured_truth"], row["textured_extracted"], "{row}");
+    }
+    let psnr: Vec<f64> = rows
+        .iter()
+        .filter_map(|r| r["texture_psnr_db"].as_f64())
+        .collect();
+    assert!(!psnr.is_empty());
+    let good = psnr.iter().filter(|&&p| p >= 25.0).count();
+    let mean = psnr.iter().sum::<f64>() / psnr.len() as f64;
+    assert!(mean >= 28.0, "mean aligned texture PSNR {mean:.2} dB");
+    assert!(
+        good * 4 >= psnr.len() * 3,
+        "only {good} of {} textures reach 25 dB: {psnr:?}",
+        psnr.len()
+    );
+    for row in rows
+        .iter()
+        .filter(|r| !r["textured_truth"].as_bool().unwrap())
+    {
+        let e = row["colour_rmse"].as_f64().unwrap();
+        assert!(e < 0.01, "single-colour material colour error {e}: {row}");
+    }
+}
+
+/// Compares two images value by value (8-bit PNGs: ±1 code value).
+fn same_png(got: &Path, want: &Path) -> Result<(), String> {
+    let (a, b) = (
+        read_png(got).map_err(|e| e.to_string())?,
+        read_png(want).map_err(|e| e.to_string())?,
+    );
+    if (a.channels, a.width, a.height) != (b.channels, b.width, b.height) {
+        return Err(format!(
+            "shape {}x{}x{} vs {}x{}x{}",
+            a.channels, a.height, a.width, b.channels, b.height, b.width
+        ));
+    }
+    let worst = a
+        .data
+        .iter()
+        .zip(&b.data)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0f32, f32::max);
+    if worst > 1.5 / 255.0 {
+        return Err(format!("max difference {:.1} code values", worst * 255.0));
+    }
+    Ok(())
+}
+
+/// Compares material.json values that do not depend on time or paths.
+fn same_json(got: &Value, want: &Value, path: &str, errs: &mut Vec<String>) {
+    const SKIP: [&str; 6] = [
+        "timings_ms",
+        "photo",
+        "inputs",
+        "dir",
+        "picker_version",
+        "path",
+    ];
+    match (got, want) {
+        (Value::Object(a), Value::Object(b)) => {
+            for (k, vb) in b {
+                if SKIP.contains(&k.as_str()) {
+                    continue;
+                }
+                match a.get(k) {
+                    Some(va) => same_json(va, vb, &format!("{path}.{k}"), errs),
+                    None => errs.push(format!("{path}.{k} missing")),
+                }
+            }
+        }
+        (Value::Array(a), Value::Array(b)) if a.len() == b.len() => {
+            for (i, (x, y)) in a.iter().zip(b).enumerate() {
+                same_json(x, y, &format!("{path}[{i}]"), errs);
+            }
+        }
+        (Value::Number(a), Value::Number(b)) => {
+            let (x, y) = (a.as_f64().unwrap(), b.as_f64().unwrap());
+            if (x - y).abs() > 1e-4 * y.abs().max(1.0) {
+                errs.push(format!("{path}: {x} vs {y}"));
+            }
+        }
+        (a, b) if a != b => errs.push(format!("{path}: {a} vs {b}")),
+        _ => {}
+    }
+}
+
+fn golden(name: &str, args: &[&str]) {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join(name);
+    let mut full: Vec<&str> = args.to_vec();
+    let o = out.to_str().unwrap().to_string();
+    full.extend(["--out", &o, "--threads", "2"]);
+    ok(&full);
+    let want = repo().join("fixtures/extract").join(name);
+    const FILES: [&str; 5] = [
+        "texture.png",
+        "coverage.png",
+        "mask.png",
+        "preview.png",
+        "material.json",
+    ];
+    if std::env::var_os("PICKER_BLESS").is_some() {
+        std::fs::create_dir_all(&want).unwrap();
+        for f in FILES {
+            if out.join(f).exists() {
+                std::fs::copy(out.join(f), want.join(f)).unwrap();
+            }
+        }
+        return;
+    }
+    let mut errs = Vec::new();
+    for f in FILES {
+        let (g, w) = (out.join(f), want.join(f));
+        if !w.exists() {
+            if g.exists() {
+                errs.push(format!("{f}: written but not in the golden set"));
+            }
+            continue;
+        }
+        if f.ends_with(".png") {
+            if let Err(e) = same_png(&g, &w) {
+                errs.push(format!("{f}: {e}"));
+            }
+        } else {
+            same_json(&json_file(&g), &json_file(&w), f, &mut errs);
+        }
+    }
+    if !errs.is_empty() {
+        let keep = repo().join("target/golden-failures/extract").join(name);
+        let _ = std::fs::create_dir_all(&keep);
+        for f in FILES {
+            let _ = std::fs::copy(out.join(f), keep.join(f));
+        }
+        panic!(
+            "{name} differs from fixtures/extract/{name} (output kept in {}):\n{}",
+            keep.display(),
+            errs.join("\n")
+        );
+    }
+}
+
+#[test]
+fn golden_extraction_from_ground_truth() {
+    let scene = repo().join("fixtures/synth/scene_000000");
+    golden(
+        "synth_gt_wall",
+        &[
+            "extract",
+            "--elements",
+            scene.to_str().unwrap(),
+            "--pick",
+            "16,20",
+        ],
+    );
+}
+
+#[test]
+fn golden_extraction_from_tiny_networks() {
+    let photo = repo().join("fixtures/examples/coffee.jpg");
+    let w = repo().join("fixtures/weights/tiny");
+    golden(
+        "coffee_tiny_plane",
+        &[
+            "extract",
+            photo.to_str().unwrap(),
+            "--weights",
+            w.to_str().unwrap(),
+            "--pick",
+            "150,120",
+            "--uv",
+            "plane",
+            "--max-size",
+            "64",
+        ],
+    );
+}
+
+#[test]
+fn picks_on_edges_tiny_and_single_colour_materials_never_crash() {
+    let tmp = tempfile::tempdir().unwrap();
+    let photo = repo().join("fixtures/examples/coffee.jpg");
+    let w = repo().join("fixtures/weights/tiny");
+    let out = tmp.path().join("many");
+    // Corners and edges of the 320x213 photo, several picks sharing one inference.
+    let o = ok(&[
+        "extract",
+        photo.to_str().unwrap(),
+        "--weights",
+        w.to_str().unwrap(),
+        "--pick",
+        "0,0",
+        "--pick",
+        "319,212",
+        "--pick",
+        "0,212",
+        "--pick",
+        "160,0",
+        "--out",
+        out.to_str().unwrap(),
+        "--json",
+    ]);
+    let s: Value = serde_json::from_slice(&o.stdout).expect("--json prints JSON");
+    assert_eq!(s["materials"].as_array().unwrap().len(), 4);
+    for k in 0..4 {
+        let d = out.join(format!("material_{k}"));
+        for f in [
+            "material.json",
+            "material.mtl",
+            "material.gltf",
+            "mask.png",
+            "preview.png",
+            "report.png",
+        ] {
+            assert!(d.join(f).exists(), "{}", d.join(f).display());
+        }
+    }
+    assert!(out.join("summary.json").exists() && out.join("envmap.exr").exists());
+    // --all: a palette with an id map.
+    let all = tmp.path().join("all");
+    ok(&[
+        "extract",
+        photo.to_str().unwrap(),
+        "--weights",
+        w.to_str().unwrap(),
+        "--all",
+        "--min-area",
+        "0.001",
+        "--out",
+        all.to_str().unwrap(),
+    ]);
+    assert!(all.join("palette_ids.png").exists());
+    // Ground truth: every material of the tiny scene, single-colour ones included.
+    let scene = repo().join("fixtures/synth/scene_000000");
+    let gt = tmp.path().join("gt");
+    let o = ok(&[
+        "extract",
+        "--elements",
+        scene.to_str().unwrap(),
+        "--all",
+        "--min-area",
+        "0.001",
+        "--out",
+        gt.to_str().unwrap(),
+        "--json",
+    ]);
+    let s: Value = serde_json::from_slice(&o.stdout).unwrap();
+    let mats = s["materials"].as_array().unwrap();
+    assert!(mats.len() >= 2, "{s}");
+    let single: Vec<&Value> = mats.iter().filter(|m| m["textured"] == false).collect();
+    for m in &single {
+        assert!(m.get("texture").is_none_or(|t| t.is_null()), "{m}");
+    }
+    // --16bit
+    let b16 = tmp.path().join("b16");
+    ok(&[
+        "extract",
+        "--elements",
+        scene.to_str().unwrap(),
+        "--pick",
+        "16,20",
+        "--16bit",
+        "--out",
+        b16.to_str().unwrap(),
+    ]);
+    let bytes = std::fs::read(b16.join("texture.png")).unwrap();
+    assert_eq!(bytes[24], 16, "16-bit PNG bit depth");
+}
+
+#[test]
+fn bad_picks_and_inputs_fail_clearly_and_write_nothing() {
+    let tmp = tempfile::tempdir().unwrap();
+    let photo = repo().join("fixtures/examples/coffee.jpg");
+    let w = repo().join("fixtures/weights/tiny");
+    let out = tmp.path().join("x");
+    let o = run(&[
+        "extract",
+        photo.to_str().unwrap(),
+        "--weights",
+        w.to_str().unwrap(),
+        "--pick",
+        "320,10",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("outside the 320x213 photo") && err.contains("coffee.jpg"),
+        "{err}"
+    );
+    assert!(!out.exists(), "nothing is written for a bad pick");
+    let o = run(&[
+        "extract",
+        photo.to_str().unwrap(),
+        "--weights",
+        w.to_str().unwrap(),
+        "--pick",
+        "1;2",
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+    let o = run(&[
+        "extract",
+        photo.to_str().unwrap(),
+        "--weights",
+        w.to_str().unwrap(),
+    ]);
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--pick"));
+    let bad = tmp.path().join("bad.png");
+    std::fs::write(&bad, b"\x89PNG\r\n\x1a\n garbage").unwrap();
+    let o = run(&[
+        "extract",
+        bad.to_str().unwrap(),
+        "--weights",
+        w.to_str().unwrap(),
+        "--pick",
+        "1,1",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("bad.png"));
+    // A learned inpainter file that is not one.
+    let o = run(&[
+        "extract",
+        photo.to_str().unwrap(),
+        "--weights",
+        w.to_str().unwrap(),
+        "--pick",
+        "1,1",
+        "--inpainter",
+        w.join("irn.safetensors").to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        String::from_utf8_lossy(&o.stderr).contains("irn.safetensors"),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    // Elements folder lacking a file.
+    let empty = tmp.path().join("empty");
+    std::fs::create_dir_all(&empty).unwrap();
+    std::fs::copy(
+        repo().join("fixtures/synth/scene_000000/image.png"),
+        empty.join("image.png"),
+    )
+    .unwrap();
+    let o = run(&[
+        "extract",
+        "--elements",
+        empty.to_str().unwrap(),
+        "--pick",
+        "1,1",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        String::from_utf8_lossy(&o.stderr).contains("diffuse_albedo.exr"),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+}
+
+#[test]
+fn extraction_is_deterministic() {
+    let tmp = tempfile::tempdir().unwrap();
+    let photo = repo().join("fixtures/examples/coffee.jpg");
+    let w = repo().join("fixtures/weights/tiny");
+    let mut outs = Vec::new();
+    for (k, threads) in ["1", "2"].iter().enumerate() {
+        let out = tmp.path().join(format!("r{k}"));
+        ok(&[
+            "extract",
+            photo.to_str().unwrap(),
+            "--weights",
+            w.to_str().unwrap(),
+            "--pick",
+            "150,120",
+            "--uv",
+            "plane",
+            "--max-size",
+            "64",
+            "--threads",
+            threads,
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        outs.push(out);
+    }
+    for f in [
+        "texture.png",
+        "texture.exr",
+        "mask.png",
+        "coverage.png",
+        "material.mtl",
+        "material.gltf",
+        "preview.png",
+        "report.png",
+    ] {
+        assert_eq!(
+            std::fs::read(outs[0].join(f)).unwrap(),
+            std::fs::read(outs[1].join(f)).unwrap(),
+            "{f} differs between runs"
+        );
+    }
+}
