@@ -297,8 +297,8 @@ fn direction_colours(img: &Image) -> Image {
     let mut out = Image::zeros(3, img.height, img.width);
     for i in 0..n {
         let c = conv::encode_direction_color([img.at(0, i), img.at(1, i), img.at(2, i)]);
-        for k in 0..3 {
-            out.data[k * n + i] = c[k];
+        for (k, v) in c.into_iter().enumerate() {
+            out.data[k * n + i] = v;
         }
     }
     out

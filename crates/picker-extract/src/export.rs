@@ -34,7 +34,8 @@
 //!   specular strength relative to glTF's default dielectric (ior 1.5, F0 = 0.04)
 //!   and its tint.
 //!
-//! **MTL**: `Kd` = mean diffuse ρd (linear), `Ks` = ρs, `Ns` = the Phong
+//! **MTL**: `Kd` = mean diffuse ρd (linear; white when textured, because MTL
+//! multiplies `map_Kd` by `Kd` — the mean is then a comment), `Ks` = ρs, `Ns` = the Phong
 //! exponent clamped to `[0, 1000]` (what MTL readers accept), `d 1`, `illum 2`,
 //! `map_Kd texture.png` when textured.
 //!
@@ -388,7 +389,7 @@ fn conventions() -> Value {
     );
     put(
         "mtl",
-        "Kd = rho_d (mean, linear), Ks = rho_s, Ns = n clamped to [0, 1000], d 1, illum 2, map_Kd texture.png when textured",
+        "Kd = rho_d (mean, linear; 1 1 1 when textured since map_Kd is multiplied by Kd), Ks = rho_s, Ns = n clamped to [0, 1000], d 1, illum 2, map_Kd texture.png when textured",
     );
     Value::Object(c)
 }
@@ -501,7 +502,17 @@ pub fn mtl_text(m: &Material) -> String {
     ));
     s.push_str(&format!("newmtl {}\n", mtl_name(&m.name)));
     s.push_str("Ka 0.000000 0.000000 0.000000\n");
-    s.push_str(&format!("Kd {}\n", rgb(p.diffuse)));
+    // The MTL format multiplies map_Kd by Kd: with a texture Kd is white and
+    // the mean colour goes in a comment.
+    if m.texture.is_some() {
+        s.push_str(&format!(
+            "# mean diffuse albedo (texture mean) = {}\n",
+            rgb(p.diffuse)
+        ));
+        s.push_str("Kd 1.000000 1.000000 1.000000\n");
+    } else {
+        s.push_str(&format!("Kd {}\n", rgb(p.diffuse)));
+    }
     s.push_str(&format!("Ks {}\n", rgb(p.specular)));
     s.push_str(&format!("Ns {:.6}\n", mtl_ns(p.exponent)));
     s.push_str("d 1\n");

@@ -342,8 +342,8 @@ mod tests {
     fn seg_from(ids: &[u8], w: usize, h: usize, palette: &[[f32; 3]]) -> Image {
         let mut img = Image::zeros(3, h, w);
         for (i, &id) in ids.iter().enumerate() {
-            for c in 0..3 {
-                img.data[c * w * h + i] = palette[id as usize][c];
+            for (c, v) in palette[id as usize].iter().enumerate() {
+                img.data[c * w * h + i] = *v;
             }
         }
         img

@@ -38,12 +38,9 @@ pub fn focal_from_view(view: &Image, mask: &[bool]) -> Option<f32> {
     let (w, h) = (view.width, view.height);
     let (cx, cy) = (w as f32 / 2.0, h as f32 / 2.0);
     let mut est = Vec::new();
-    for i in 0..w * h {
-        if !mask[i] {
-            continue;
-        }
+    for (i, _) in mask.iter().enumerate().filter(|(_, &m)| m) {
         let v = view.rgb(i);
-        if !(v.z > 0.05) {
+        if v.z.is_nan() || v.z <= 0.05 {
             continue;
         }
         let (x, y) = ((i % w) as f32 + 0.5, (i / w) as f32 + 0.5);

@@ -96,8 +96,7 @@ pub fn texture_size(area: Option<f32>, max: usize) -> usize {
         Some(a) if a > 0.0 => (1.0 / a.sqrt()) as f64,
         _ => 256.0,
     };
-    let side = ((side / 4.0).round() as usize * 4).clamp(16, max);
-    side
+    ((side / 4.0).round() as usize * 4).clamp(16, max)
 }
 
 /// The reprojected texture.

@@ -195,7 +195,8 @@ fn textured_material_writes_every_file() {
             .clone()
     };
     assert_eq!(get("newmtl"), ["material_0"]);
-    assert_eq!(floats(&get("Kd")), m.params.diffuse);
+    // Textured: MTL multiplies map_Kd by Kd, so Kd is white.
+    assert_eq!(floats(&get("Kd")), [1.0, 1.0, 1.0]);
     assert_eq!(floats(&get("Ks")), m.params.specular);
     assert!((floats(&get("Ns"))[0] - m.params.exponent).abs() < 1e-3);
     assert_eq!(get("d"), ["1"]);
