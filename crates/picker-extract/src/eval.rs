@@ -41,8 +41,6 @@ pub const ALIGN_CANDIDATES: usize = 8;
 pub const ALIGN_REFINE_RADIUS: i64 = 2;
 /// The coarsest pyramid level's smaller side is below this many texels.
 const COARSEST_SIDE: usize = 32;
-/// Histogram bins per channel of the colour-statistics distance.
-pub const COLOUR_HISTOGRAM_BINS: usize = 8;
 
 /// Intersection over union of two masks of the same length.
 ///
@@ -134,14 +132,11 @@ fn psnr_from_mse(mse: f64) -> f64 {
 }
 
 /// A colour-statistics distance between two images of **linear** values
-/// (any sizes; 1 channel treated as grey), computed on their sRGB encodings:
-///
-/// `d = (1/3) Σ_c (|μa,c − μb,c| + |σa,c − σb,c|) + (1/3) Σ_c ½ Σ_k |pa,c,k − pb,c,k|`
-///
-/// with μ, σ the per-channel mean and standard deviation and `p·,c,k` the
-/// fraction of texels in bin `k` of a [`COLOUR_HISTOGRAM_BINS`]-bin histogram
-/// of channel `c` over `[0, 1]`. 0 for identical statistics; the histogram
-/// term lies in `[0, 1]`, the moment term in `[0, 1.5]`. NaN for an empty image.
+/// (any sizes; 1 channel treated as grey): [`picker_inpaint::colour_stats_distance`]
+/// (per-channel mean and standard deviation gaps plus the total-variation
+/// distance of the joint colour histograms) of their sRGB encodings, so that
+/// the inpainting tests and the evaluation use one definition. 0 for identical
+/// statistics. NaN for an empty image.
 pub fn colour_distance(a: &Image, b: &Image) -> f64 {
     let empty = |i: &Image| i.width == 0 || i.height == 0 || i.channels == 0;
     if empty(a) || empty(b) {
@@ -151,31 +146,7 @@ pub fn colour_distance(a: &Image, b: &Image) -> f64 {
 }
 
 fn colour_distance_srgb(a: &Image, b: &Image) -> f64 {
-    let stats = |p: &[f32]| {
-        let n = p.len() as f64;
-        let mean = p.iter().map(|&v| f64::from(v)).sum::<f64>() / n;
-        let var = p
-            .iter()
-            .map(|&v| (f64::from(v) - mean).powi(2))
-            .sum::<f64>()
-            / n;
-        let mut hist = [0.0f64; COLOUR_HISTOGRAM_BINS];
-        for &v in p {
-            let k = ((v.clamp(0.0, 1.0) * COLOUR_HISTOGRAM_BINS as f32) as usize)
-                .min(COLOUR_HISTOGRAM_BINS - 1);
-            hist[k] += 1.0 / n;
-        }
-        (mean, var.sqrt(), hist)
-    };
-    let mut moments = 0.0;
-    let mut histogram = 0.0;
-    for c in 0..3 {
-        let (ma, sa, ha) = stats(a.plane(c));
-        let (mb, sb, hb) = stats(b.plane(c));
-        moments += (ma - mb).abs() + (sa - sb).abs();
-        histogram += 0.5 * ha.iter().zip(&hb).map(|(x, y)| (x - y).abs()).sum::<f64>();
-    }
-    (moments + histogram) / 3.0
+    picker_inpaint::colour_stats_distance(a, b)
 }
 
 /// RMSE of linear albedos over the texels where `mask` is true, over the
