@@ -34,14 +34,19 @@ pub fn bilinear_plane(src: &[f32], w: usize, h: usize, dw: usize, dh: usize) -> 
     out
 }
 
-/// Bilinear resize of every plane of `img` to `dw × dh`.
-pub fn bilinear(img: &Image, dw: usize, dh: usize) -> Image {
+/// Resizes every plane of `img` to `dw × dh` with `resize_plane` (a copy when the size already fits).
+fn per_plane(
+    img: &Image,
+    dw: usize,
+    dh: usize,
+    resize_plane: fn(&[f32], usize, usize, usize, usize) -> Vec<f32>,
+) -> Image {
     if (img.width, img.height) == (dw, dh) {
         return img.clone();
     }
     let mut data = Vec::with_capacity(img.channels * dw * dh);
     for c in 0..img.channels {
-        data.extend(bilinear_plane(img.plane(c), img.width, img.height, dw, dh));
+        data.extend(resize_plane(img.plane(c), img.width, img.height, dw, dh));
     }
     Image {
         channels: img.channels,
@@ -49,6 +54,11 @@ pub fn bilinear(img: &Image, dw: usize, dh: usize) -> Image {
         width: dw,
         data,
     }
+}
+
+/// Bilinear resize of every plane of `img` to `dw × dh`.
+pub fn bilinear(img: &Image, dw: usize, dh: usize) -> Image {
+    per_plane(img, dw, dh, bilinear_plane)
 }
 
 /// Area (box) downsampling of one plane: each destination pixel is the
@@ -93,19 +103,7 @@ pub fn area_plane(src: &[f32], w: usize, h: usize, dw: usize, dh: usize) -> Vec<
 
 /// Area downsampling of every plane of `img`.
 pub fn area(img: &Image, dw: usize, dh: usize) -> Image {
-    if (img.width, img.height) == (dw, dh) {
-        return img.clone();
-    }
-    let mut data = Vec::with_capacity(img.channels * dw * dh);
-    for c in 0..img.channels {
-        data.extend(area_plane(img.plane(c), img.width, img.height, dw, dh));
-    }
-    Image {
-        channels: img.channels,
-        height: dh,
-        width: dw,
-        data,
-    }
+    per_plane(img, dw, dh, area_plane)
 }
 
 /// Mask-aware (normalised) bilinear upsampling: only source pixels with
