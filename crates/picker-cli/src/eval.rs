@@ -142,7 +142,7 @@ fn f(v: &serde_json::Value) -> Option<f32> {
     v.as_f64().map(|x| x as f32)
 }
 
-fn eval_scene(dir: &Path, a: &Args) -> Result<Vec<Row>> {
+fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> Result<Vec<Row>> {
     let scene: serde_json::Value = serde_json::from_slice(
         &std::fs::read(dir.join("scene.json"))
             .with_context(|| format!("reading {}", dir.join("scene.json").display()))?,
@@ -158,7 +158,9 @@ fn eval_scene(dir: &Path, a: &Args) -> Result<Vec<Row>> {
         .collect();
     let photo_path = dir.join("image.png");
     let truth = ElementImages::load(dir)?;
-    let inputs = if a.weights.is_empty() {
+    let inputs = if let Some(models) = models {
+        crate::extract::infer_inputs(models, &photo_path, 320)?
+    } else {
         let env_path = dir.join("envmap.exr");
         Inputs {
             photo: rio::read_png(&photo_path)?,
@@ -169,8 +171,6 @@ fn eval_scene(dir: &Path, a: &Args) -> Result<Vec<Row>> {
                     .map_err(|e| anyhow!("{}: {e}", env_path.display()))?,
             ),
         }
-    } else {
-        crate::extract::infer_inputs(&a.weights, &photo_path, 320)?.0
     };
     let prepared = Prepared::new(inputs)?;
     let inpainter = PatchMatchInpainter::default();
@@ -285,9 +285,14 @@ fn opt(v: Option<f64>, prec: usize) -> String {
 pub fn run(a: Args) -> Result<()> {
     crate::threads::init(a.threads)?;
     let dirs = scene_dirs(&a.dir)?;
+    let models = if a.weights.is_empty() {
+        None
+    } else {
+        Some(crate::extract::Models::load(&a.weights)?)
+    };
     let mut rows = Vec::new();
     for d in &dirs {
-        rows.extend(eval_scene(d, &a)?);
+        rows.extend(eval_scene(d, &a, models.as_ref())?);
     }
     println!(
         "{:<14} {:>3} {:<10} {:<14} {:>6} {:>6} {:>7} {:>7} {:>8} {:>6} {:>5} {:>6} {:>6} {:>5}",

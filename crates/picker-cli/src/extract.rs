@@ -7,6 +7,9 @@
 //! pick the files go straight into `--out`; with several, each material gets
 //! `--out/<name>/` and the shared files (`envmap.exr`, `summary.json`,
 //! `palette_ids.png` for `--all`) stay at the top.
+//!
+//! The pieces ([`Models`], [`load_inputs`], [`write_materials`]) are shared
+//! with `picker batch`, which loads the networks once for a folder of photos.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -18,11 +21,11 @@ use picker_extract::report::{self, Tile};
 use picker_extract::{pipeline, Inputs, Material, Prepared, UvChoice};
 use picker_inpaint::{DiffusionInpainter, Inpainter, LearnedInpainter, PatchMatchInpainter};
 use picker_nets::conventions as conv;
-use picker_nets::Net;
+use picker_nets::{Net, NetKind};
 use picker_render::io::{self as rio, Image};
 use picker_render::{ElementImages, EnvMap};
 use picker_tensor::Tensor;
-use serde_json::json;
+use serde_json::{json, Value};
 
 use crate::photo;
 
@@ -37,34 +40,15 @@ pub enum UvArg {
     Auto,
 }
 
-/// Arguments of `picker extract`.
-#[derive(Debug, clap::Args)]
-pub struct Args {
-    /// The photograph (PNG, JPEG, TIFF, WebP or BMP). Optional with --elements
-    /// (then DIR/image.png, or DIR/input.png for a `picker infer` folder).
-    #[arg(value_name = "PHOTO")]
-    pub photo: Option<PathBuf>,
-    /// A point on the material, `X,Y` in photo pixels (x right, y down, after EXIF
-    /// orientation). May be repeated.
-    #[arg(long, value_name = "X,Y", value_parser = parse_pick)]
-    pub pick: Vec<[u32; 2]>,
-    /// Extract every material covering at least --min-area of the image (a palette).
-    #[arg(long)]
-    pub all: bool,
-    /// Smallest image fraction of a material for --all.
-    #[arg(long, default_value_t = 0.02)]
-    pub min_area: f64,
+/// How materials are extracted: the flags `picker extract` and `picker batch` share.
+#[derive(Clone, Debug, clap::Args)]
+pub struct Flags {
     /// Network weights: a directory with irn/msn[/envmap].safetensors, or files.
     #[arg(long, value_name = "DIR_OR_FILE")]
     pub weights: Vec<PathBuf>,
-    /// Render elements instead of the networks: a folder with diffuse_albedo.exr,
-    /// specular_albedo.exr, glossiness.exr, normals.exr, view_vector.exr, uv.exr,
-    /// segmentation.exr and optionally envmap.exr (as `picker synth` or `picker infer` write).
-    #[arg(long, value_name = "DIR", conflicts_with = "weights")]
-    pub elements: Option<PathBuf>,
-    /// Output directory (default: `<photo stem>.material/` next to the photo).
-    #[arg(long, value_name = "DIR")]
-    pub out: Option<PathBuf>,
+    /// Smallest image fraction of a material for --all.
+    #[arg(long, default_value_t = 0.02)]
+    pub min_area: f64,
     /// Long side of the networks' working resolution.
     #[arg(long, default_value_t = 320, value_parser = clap::value_parser!(u32).range(8..=4096))]
     pub work_size: u32,
@@ -98,15 +82,130 @@ pub struct Args {
     /// Seed of every random choice (inpainting).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Refuse photos with more pixels than this many megapixels (decompression
+    /// bombs). Extraction holds about 64 bytes per photo pixel at its peak.
+    #[arg(long, default_value_t = 100.0)]
+    pub max_megapixels: f64,
+}
+
+impl Flags {
+    /// Checks the values clap cannot check.
+    pub fn validate(&self) -> Result<()> {
+        if !(0.0..1.0).contains(&self.min_area) {
+            bail!("--min-area {} must be in [0, 1)", self.min_area);
+        }
+        if let Some(t) = self.tolerance {
+            if !(t.is_finite() && t > 0.0) {
+                bail!("--tolerance {t} must be a positive number");
+            }
+        }
+        if let Some(f) = self.fov {
+            if !(f > 0.0 && f < 180.0) {
+                bail!("--fov {f} must be in (0, 180) degrees");
+            }
+        }
+        if !(self.max_megapixels.is_finite() && self.max_megapixels > 0.0) {
+            bail!("--max-megapixels {} must be positive", self.max_megapixels);
+        }
+        Ok(())
+    }
+
+    /// The pipeline options (the inpainter is passed separately).
+    pub fn options<'a>(&self, inpainter: &'a dyn Inpainter) -> pipeline::Options<'a> {
+        pipeline::Options {
+            mask: self.mask_options(),
+            uv: match self.uv {
+                UvArg::Net => UvChoice::Net,
+                UvArg::Plane => UvChoice::Plane,
+                UvArg::Auto => UvChoice::Auto,
+            },
+            size: self.size.map(|s| s as usize),
+            max_size: self.max_size as usize,
+            fov_deg: self.fov,
+            tileable: !self.no_tile,
+            seed: self.seed,
+            inpainter,
+        }
+    }
+
+    fn mask_options(&self) -> MaskOptions {
+        MaskOptions {
+            connected: self.connected,
+            tolerance: self.tolerance,
+        }
+    }
+
+    /// The photo limits (decompression bombs).
+    pub fn photo_limits(&self) -> photo::PhotoLimits {
+        let max_pixels = (self.max_megapixels * 1e6) as u64;
+        photo::PhotoLimits {
+            max_pixels,
+            // The decoders' buffers for the largest photo allowed.
+            max_alloc: max_pixels
+                .saturating_mul(picker_extract::photo::PEAK_BYTES_PER_PIXEL)
+                .max(picker_extract::photo::DEFAULT_MAX_ALLOC),
+        }
+    }
+
+    /// Every setting that changes the outputs, as JSON (the batch manifest
+    /// compares it to decide whether a finished photo is stale).
+    pub fn output_settings(&self) -> Value {
+        json!({
+            "min_area": self.min_area,
+            "work_size": self.work_size,
+            "connected": self.connected,
+            "tolerance": self.tolerance,
+            "uv": format!("{:?}", self.uv).to_lowercase(),
+            "fov": self.fov,
+            "size": self.size,
+            "max_size": self.max_size,
+            "tileable": !self.no_tile,
+            "inpainter": self.inpainter,
+            "sixteen_bit": self.sixteen_bit,
+            "seed": self.seed,
+        })
+    }
+}
+
+/// Arguments of `picker extract`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// The photograph (PNG, JPEG, TIFF, WebP, BMP, EXR or HDR). Optional with --elements
+    /// (then DIR/image.png, or DIR/input.png for a `picker infer` folder).
+    #[arg(value_name = "PHOTO")]
+    pub photo: Option<PathBuf>,
+    /// A point on the material, `X,Y` in photo pixels (x right, y down, after EXIF
+    /// orientation). May be repeated.
+    #[arg(long, value_name = "X,Y", value_parser = parse_pick)]
+    pub pick: Vec<[u32; 2]>,
+    /// Extract every material covering at least --min-area of the image (a palette).
+    #[arg(long)]
+    pub all: bool,
+    /// Render elements instead of the networks: a folder with diffuse_albedo.exr,
+    /// specular_albedo.exr, glossiness.exr, normals.exr, view_vector.exr, uv.exr,
+    /// segmentation.exr and optionally envmap.exr (as `picker synth` or `picker infer` write).
+    #[arg(long, value_name = "DIR", conflicts_with = "weights")]
+    pub elements: Option<PathBuf>,
+    /// Output directory (default: `<photo stem>.material/` next to the photo).
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+    /// The extraction settings.
+    #[command(flatten)]
+    pub flags: Flags,
     /// Print the summary as JSON on stdout.
     #[arg(long)]
     pub json: bool,
+    /// Leave timings and thread counts out of material.json and summary.json,
+    /// so that the same inputs give byte-identical files (golden tests).
+    #[arg(long)]
+    pub no_timings: bool,
     /// Worker threads (default: one per logical core).
     #[arg(long)]
     pub threads: Option<usize>,
 }
 
-fn parse_pick(s: &str) -> std::result::Result<[u32; 2], String> {
+/// Parses `X,Y` pixel coordinates.
+pub fn parse_pick(s: &str) -> std::result::Result<[u32; 2], String> {
     let (x, y) = s
         .split_once(',')
         .ok_or_else(|| format!("expected X,Y (e.g. 120,88), got {s:?}"))?;
@@ -131,110 +230,197 @@ fn ms(t: Instant) -> f64 {
     (t.elapsed().as_secs_f64() * 1e6).round() / 1e3
 }
 
-/// The photo as planar sRGB values.
-fn read_photo(path: &Path) -> Result<(Image, serde_json::Value)> {
-    let p = photo::load(path)?;
+/// One loaded network.
+struct LoadedNet {
+    path: PathBuf,
+    kind: NetKind,
+    preset: String,
+    net: Net,
+}
+
+/// The networks of `--weights`, loaded once and shared by every photo.
+pub struct Models {
+    nets: Vec<LoadedNet>,
+}
+
+impl Models {
+    /// Loads the weights of `--weights` (directories or files); IRN and MSN are required.
+    pub fn load(weights: &[PathBuf]) -> Result<Self> {
+        let chosen = crate::infer::resolve_weights(weights)?;
+        let has = |k| chosen.iter().any(|c| c.weights.kind() == k);
+        if !has(NetKind::Irn) {
+            bail!("no IRN weights among --weights (picker extract needs irn.safetensors and msn.safetensors)");
+        }
+        if !has(NetKind::Msn) {
+            bail!("no MSN weights among --weights (picker extract needs irn.safetensors and msn.safetensors)");
+        }
+        let mut nets = Vec::new();
+        for c in chosen {
+            let net =
+                Net::load(&c.weights).with_context(|| format!("loading {}", c.path.display()))?;
+            nets.push(LoadedNet {
+                kind: c.weights.kind(),
+                preset: c.weights.preset().to_string(),
+                path: c.path,
+                net,
+            });
+        }
+        Ok(Self { nets })
+    }
+
+    /// The weights files, in network order.
+    pub fn paths(&self) -> Vec<&Path> {
+        self.nets.iter().map(|n| n.path.as_path()).collect()
+    }
+
+    /// Runs the networks on the photo (sRGB, `[0, 1]`) at `work_size` (long side).
+    fn infer(
+        &self,
+        photo_rgb: &image::Rgb32FImage,
+        work_size: u32,
+        timings: &mut serde_json::Map<String, Value>,
+    ) -> Result<(ElementImages, Image, Option<EnvMap>, Value)> {
+        let (pw, ph) = photo_rgb.dimensions();
+        let (ww, wh) = photo::working_size(pw, ph, work_size);
+        let work = photo::resize(photo_rgb, ww, wh);
+        let mut x = Tensor::new([1, 3, wh as usize, ww as usize], photo::to_planar(&work))
+            .map_err(|e| anyhow!("making the input tensor: {e}"))?;
+        conv::normalize_input(&mut x);
+        let (mut elements, mut seg, mut env) = (None, None, None);
+        let mut described = Vec::new();
+        for n in &self.nets {
+            let t = Instant::now();
+            let what = || format!("running the {} network ({})", n.kind, n.path.display());
+            match &n.net {
+                Net::Irn(irn) => {
+                    let out = irn.forward(&x).with_context(what)?;
+                    let re = conv::RenderElements::from_irn(&out).with_context(|| {
+                        format!("decoding the IRN outputs of {}", n.path.display())
+                    })?;
+                    elements = Some(
+                        ElementImages::new(
+                            tensor_image(&re.diffuse_albedo),
+                            tensor_image(&re.specular_albedo),
+                            tensor_image(&re.glossiness),
+                            tensor_image(&re.normals),
+                            tensor_image(&re.view_vector),
+                            Some(tensor_image(&re.uv)),
+                        )
+                        .map_err(|e| anyhow!("IRN outputs: {e}"))?,
+                    );
+                }
+                Net::Msn(msn) => {
+                    let out = msn.forward(&x).with_context(what)?;
+                    seg = Some(tensor_image(&conv::decode_segmentation_tensor(
+                        &out.segmentation,
+                    )));
+                }
+                Net::EnvMap(e) => {
+                    let out = e.forward(&x).with_context(what)?;
+                    let img = tensor_image(&conv::decode_envmap(&out.envmap));
+                    env = Some(
+                        EnvMap::from_image(&img).map_err(|e| anyhow!("environment map: {e}"))?,
+                    );
+                }
+                #[allow(unreachable_patterns)]
+                _ => bail!(
+                    "{}: a {} network has no place in `--weights`; pass a learned inpainter with --inpainter",
+                    n.path.display(),
+                    n.kind
+                ),
+            }
+            timings.insert(format!("net_{}", n.kind.as_str()), json!(ms(t)));
+            described.push(json!({"net": n.kind.as_str(), "weights": n.path.display().to_string(), "preset": n.preset}));
+        }
+        let elements = elements.ok_or_else(|| anyhow!("the IRN network gave no outputs"))?;
+        let seg = seg.ok_or_else(|| anyhow!("the MSN network gave no outputs"))?;
+        Ok((
+            elements,
+            seg,
+            env,
+            json!({"source": "networks", "nets": described, "working_size": {"width": ww, "height": wh}}),
+        ))
+    }
+}
+
+/// Where the render elements come from.
+pub enum Source<'a> {
+    /// The networks, run on the photo.
+    Nets(&'a Models),
+    /// A folder of render elements (`picker synth` ground truth, `picker infer` output).
+    Elements(&'a Path),
+}
+
+/// A photo with its inputs prepared for any number of picks.
+pub struct Loaded {
+    /// The prepared inputs.
+    pub prepared: Prepared,
+    /// What the photo is (path as given by the caller, size, format, orientation).
+    pub photo_info: Value,
+    /// Where the render elements came from.
+    pub source: Value,
+    /// Milliseconds per step so far.
+    pub timings: serde_json::Map<String, Value>,
+}
+
+/// Reads the photo (once), runs the networks or reads the elements, and
+/// prepares the inputs. `label` is how the photo is named in the outputs.
+pub fn load_inputs(
+    source: &Source<'_>,
+    photo_path: &Path,
+    label: &str,
+    flags: &Flags,
+) -> Result<Loaded> {
+    let mut timings = serde_json::Map::new();
+    let t = Instant::now();
+    let p = photo::load_with(photo_path, &flags.photo_limits())?;
     let (w, h) = p.rgb.dimensions();
-    let img = Image::new(3, h as usize, w as usize, photo::to_planar(&p.rgb))
-        .map_err(|e| anyhow!("{}: {e}", path.display()))?;
-    let info = json!({
-        "path": path.display().to_string(),
+    let photo_img = Image::new(3, h as usize, w as usize, photo::to_planar(&p.rgb))
+        .map_err(|e| anyhow!("{}: {e}", photo_path.display()))?;
+    let photo_info = json!({
+        "path": label,
         "width": w, "height": h,
         "format": p.format.map(|f| format!("{f:?}")),
+        "linear_input": p.linear_input,
+        "bits_per_sample": p.bit_depth,
+        "channels_in_file": p.channels_in_file,
         "exif_orientation": format!("{:?}", p.orientation),
     });
-    Ok((img, info))
-}
-
-/// Runs the networks on the photo at the working resolution.
-fn run_nets(
-    a: &Args,
-    photo_path: &Path,
-    timings: &mut serde_json::Map<String, serde_json::Value>,
-) -> Result<(Inputs, serde_json::Value)> {
-    let (inputs, source, t) = infer_inputs(&a.weights, photo_path, a.work_size)?;
-    timings.extend(t);
-    Ok((inputs, source))
-}
-
-/// The inputs of an extraction, a description and per-network timings.
-type Inferred = (
-    Inputs,
-    serde_json::Value,
-    serde_json::Map<String, serde_json::Value>,
-);
-
-/// Runs the networks of `weights` on the photo at `work_size` (long side).
-pub fn infer_inputs(weights: &[PathBuf], photo_path: &Path, work_size: u32) -> Result<Inferred> {
-    let mut timings = serde_json::Map::new();
-    let chosen = crate::infer::resolve_weights(weights)?;
-    let p = photo::load(photo_path)?;
-    let (pw, ph) = p.rgb.dimensions();
-    let (ww, wh) = photo::working_size(pw, ph, work_size);
-    let work = photo::resize(&p.rgb, ww, wh);
-    let mut x = Tensor::new([1, 3, wh as usize, ww as usize], photo::to_planar(&work))
-        .map_err(|e| anyhow!("making the input tensor: {e}"))?;
-    conv::normalize_input(&mut x);
-    let (mut elements, mut seg, mut env) = (None, None, None);
-    let mut nets = Vec::new();
-    for c in &chosen {
-        let t = Instant::now();
-        let net = Net::load(&c.weights).with_context(|| format!("loading {}", c.path.display()))?;
-        let what = || {
-            format!(
-                "running the {} network ({})",
-                c.weights.kind(),
-                c.path.display()
+    timings.insert("read_photo".into(), json!(ms(t)));
+    let t = Instant::now();
+    let (inputs, source) = match source {
+        Source::Nets(models) => {
+            let (elements, segmentation, envmap, source) =
+                models.infer(&p.rgb, flags.work_size, &mut timings)?;
+            drop(p);
+            (
+                Inputs {
+                    photo: photo_img,
+                    elements,
+                    segmentation,
+                    envmap,
+                },
+                source,
             )
-        };
-        match &net {
-            Net::Irn(irn) => {
-                let out = irn.forward(&x).with_context(what)?;
-                let re = conv::RenderElements::from_irn(&out).with_context(|| format!("decoding the IRN outputs of {}", c.path.display()))?;
-                elements = Some(
-                    ElementImages::new(
-                        tensor_image(&re.diffuse_albedo),
-                        tensor_image(&re.specular_albedo),
-                        tensor_image(&re.glossiness),
-                        tensor_image(&re.normals),
-                        tensor_image(&re.view_vector),
-                        Some(tensor_image(&re.uv)),
-                    )
-                    .map_err(|e| anyhow!("IRN outputs: {e}"))?,
-                );
-            }
-            Net::Msn(msn) => {
-                let out = msn.forward(&x).with_context(what)?;
-                seg = Some(tensor_image(&conv::decode_segmentation_tensor(&out.segmentation)));
-            }
-            Net::EnvMap(e) => {
-                let out = e.forward(&x).with_context(what)?;
-                let img = tensor_image(&conv::decode_envmap(&out.envmap));
-                env = Some(EnvMap::from_image(&img).map_err(|e| anyhow!("environment map: {e}"))?);
-            }
-            #[allow(unreachable_patterns)]
-            _ => bail!("{}: a {} network has no place in `picker extract --weights`; pass a learned inpainter with --inpainter", c.path.display(), c.weights.kind()),
         }
-        timings.insert(format!("net_{}", c.weights.kind().as_str()), json!(ms(t)));
-        nets.push(json!({"net": c.weights.kind().as_str(), "weights": c.path.display().to_string(), "preset": c.weights.preset()}));
-    }
-    let elements = elements.ok_or_else(|| anyhow!("no IRN weights among --weights (picker extract needs irn.safetensors and msn.safetensors)"))?;
-    let segmentation = seg.ok_or_else(|| anyhow!("no MSN weights among --weights (picker extract needs irn.safetensors and msn.safetensors)"))?;
-    let (photo_img, _) = read_photo(photo_path)?;
-    Ok((
-        Inputs {
-            photo: photo_img,
-            elements,
-            segmentation,
-            envmap: env,
-        },
-        json!({"source": "networks", "nets": nets, "working_size": {"width": ww, "height": wh}}),
+        Source::Elements(dir) => {
+            drop(p);
+            read_elements(dir, photo_img)?
+        }
+    };
+    timings.insert("inputs".into(), json!(ms(t)));
+    let prepared =
+        Prepared::new(inputs).with_context(|| format!("preparing {}", photo_path.display()))?;
+    Ok(Loaded {
+        prepared,
+        photo_info,
+        source,
         timings,
-    ))
+    })
 }
 
 /// Reads render elements from a folder.
-fn read_elements(dir: &Path, photo_path: &Path) -> Result<(Inputs, serde_json::Value)> {
+fn read_elements(dir: &Path, photo: Image) -> Result<(Inputs, Value)> {
     let elements = ElementImages::load(dir)
         .with_context(|| format!("reading render elements from {}", dir.display()))?;
     let seg_path = dir.join(format!("{}.exr", conv::SEGMENTATION));
@@ -248,10 +434,9 @@ fn read_elements(dir: &Path, photo_path: &Path) -> Result<(Inputs, serde_json::V
     } else {
         None
     };
-    let (photo_img, _) = read_photo(photo_path)?;
     Ok((
         Inputs {
-            photo: photo_img,
+            photo,
             elements,
             segmentation,
             envmap,
@@ -260,7 +445,8 @@ fn read_elements(dir: &Path, photo_path: &Path) -> Result<(Inputs, serde_json::V
     ))
 }
 
-fn inpainter(spec: &str) -> Result<Box<dyn Inpainter>> {
+/// The inpainter named by `--inpainter`.
+pub fn inpainter(spec: &str) -> Result<Box<dyn Inpainter>> {
     Ok(match spec {
         "patchmatch" => Box::new(PatchMatchInpainter::default()),
         "diffusion" => Box::new(DiffusionInpainter::default()),
@@ -396,79 +582,63 @@ fn report_sheet(p: &Prepared, m: &Material, preview: &Image) -> Image {
     report::compose_sheet(&tiles, 4, 192)
 }
 
-/// Runs `picker extract`.
-pub fn run(a: Args) -> Result<()> {
-    let t_total = Instant::now();
-    let threads = crate::threads::init(a.threads)?;
-    if a.pick.is_empty() && !a.all {
-        bail!("nothing to extract: give --pick X,Y (may be repeated) or --all");
-    }
-    if !(0.0..1.0).contains(&a.min_area) {
-        bail!("--min-area {} must be in [0, 1)", a.min_area);
-    }
-    let photo_path = match (&a.photo, &a.elements) {
-        (Some(p), _) => p.clone(),
-        (None, Some(d)) => {
-            let img = d.join("image.png");
-            if img.exists() {
-                img
-            } else {
-                d.join("input.png")
-            }
-        }
-        (None, None) => bail!("give a PHOTO (or --elements DIR holding image.png)"),
-    };
-    if a.elements.is_none() && a.weights.is_empty() {
-        bail!("give --weights DIR (irn.safetensors + msn.safetensors [+ envmap.safetensors]) or --elements DIR");
-    }
-    let inpainter = inpainter(&a.inpainter)?;
-    let out_dir = match &a.out {
-        Some(o) => o.clone(),
-        None => {
-            let stem = photo_path
-                .file_stem()
-                .map(|s| s.to_string_lossy().into_owned())
-                .unwrap_or_else(|| "photo".into());
-            photo_path.with_file_name(format!("{stem}.material"))
-        }
-    };
-    let mut timings = serde_json::Map::new();
-    let t = Instant::now();
-    let (inputs, source) = match &a.elements {
-        Some(dir) => read_elements(dir, &photo_path)?,
-        None => run_nets(&a, &photo_path, &mut timings)?,
-    };
-    let (_, photo_info) = read_photo(&photo_path)?;
-    timings.insert("inputs".into(), json!(ms(t)));
-    let prepared =
-        Prepared::new(inputs).with_context(|| format!("preparing {}", photo_path.display()))?;
-    for &pk in &a.pick {
-        prepared
-            .check_pick(pk)
-            .with_context(|| format!("{}", photo_path.display()))?;
-    }
-    std::fs::create_dir_all(&out_dir)
-        .with_context(|| format!("creating output directory {}", out_dir.display()))?;
+/// What to extract from one photo.
+#[derive(Clone, Debug, Default)]
+pub struct Request {
+    /// Named picks (name, `[x, y]`).
+    pub picks: Vec<(String, [u32; 2])>,
+    /// Also every material covering at least `--min-area` (a palette).
+    pub all: bool,
+}
 
-    let mask_opts = MaskOptions {
-        connected: a.connected,
-        tolerance: a.tolerance,
-    };
+/// How [`write_materials`] lays out and annotates its files.
+#[derive(Clone, Copy, Debug)]
+pub struct Layout {
+    /// A folder per material even when there is only one.
+    pub always_subdirs: bool,
+    /// Put timings and the thread count into material.json / summary.json.
+    pub timings: bool,
+    /// Write absolute paths (`out`, `dir`) into the summaries; batch writes
+    /// paths relative to the photo's output folder instead.
+    pub absolute_paths: bool,
+}
+
+/// Extracts the requested materials from a loaded photo into `out_dir`
+/// (created if needed) and returns the summary written to `summary.json`.
+pub fn write_materials(
+    loaded: &Loaded,
+    req: &Request,
+    flags: &Flags,
+    inpainter: &dyn Inpainter,
+    out_dir: &Path,
+    layout: Layout,
+) -> Result<Value> {
+    let t_total = Instant::now();
+    let prepared = &loaded.prepared;
+    let label = loaded.photo_info["path"]
+        .as_str()
+        .unwrap_or("photo")
+        .to_string();
+    for (_, pk) in &req.picks {
+        prepared.check_pick(*pk).with_context(|| label.clone())?;
+    }
+    std::fs::create_dir_all(out_dir)
+        .with_context(|| format!("creating output directory {}", out_dir.display()))?;
+    let mask_opts = flags.mask_options();
     let mut jobs = Vec::new();
-    for (k, &pk) in a.pick.iter().enumerate() {
+    for (name, pk) in &req.picks {
         let pm = prepared
-            .pick_mask(pk, &mask_opts)
-            .with_context(|| format!("pick {},{} in {}", pk[0], pk[1], photo_path.display()))?;
-        jobs.push((format!("material_{k}"), Some(pk), pm));
+            .pick_mask(*pk, &mask_opts)
+            .with_context(|| format!("pick {},{} in {label}", pk[0], pk[1]))?;
+        jobs.push((name.clone(), Some(*pk), pm));
     }
     let mut palette_ids = None;
-    if a.all {
-        let pal = prepared.palette(a.min_area, 64);
+    if req.all {
+        let pal = prepared.palette(flags.min_area, 64);
         if pal.is_empty() {
             bail!(
-                "{}: no material covers --min-area {} of the image",
-                photo_path.display(),
-                a.min_area
+                "{label}: no material covers --min-area {} of the image",
+                flags.min_area
             );
         }
         let (w, h) = prepared.work_size();
@@ -484,33 +654,26 @@ pub fn run(a: Args) -> Result<()> {
         }
         palette_ids = Some(ids);
     }
-    let opts = pipeline::Options {
-        mask: mask_opts,
-        uv: match a.uv {
-            UvArg::Net => UvChoice::Net,
-            UvArg::Plane => UvChoice::Plane,
-            UvArg::Auto => UvChoice::Auto,
-        },
-        size: a.size.map(|s| s as usize),
-        max_size: a.max_size as usize,
-        fov_deg: a.fov,
-        tileable: !a.no_tile,
-        seed: a.seed,
-        inpainter: inpainter.as_ref(),
-    };
+    if jobs.is_empty() {
+        bail!("{label}: nothing to extract (no pick and no --all)");
+    }
+    let opts = flags.options(inpainter);
     let env = prepared.inputs.envmap.clone();
     let preview_env = env
         .clone()
         .unwrap_or_else(|| EnvMap::uniform(64, 32, glam::Vec3::ONE));
-    let single = jobs.len() == 1;
+    let single = jobs.len() == 1 && !layout.always_subdirs;
+    let export_opts = ExportOptions {
+        sixteen_bit: flags.sixteen_bit,
+    };
     let mut summaries = Vec::new();
     for (name, pick, pm) in &jobs {
         let t = Instant::now();
-        let (m, diag) = pipeline::extract(&prepared, name, *pick, pm, &opts)
-            .with_context(|| format!("extracting {name} from {}", photo_path.display()))?;
+        let (m, diag) = pipeline::extract(prepared, name, *pick, pm, &opts)
+            .with_context(|| format!("extracting {name} from {label}"))?;
         let extract_ms = ms(t);
         let dir = if single {
-            out_dir.clone()
+            out_dir.to_path_buf()
         } else {
             out_dir.join(name)
         };
@@ -518,44 +681,46 @@ pub fn run(a: Args) -> Result<()> {
         let t = Instant::now();
         let preview = tone_mapped(&pipeline::preview_sphere(&m, &preview_env, 256, 2.0));
         rio::write_png(&dir.join("preview.png"), &preview)?;
-        let sheet = report_sheet(&prepared, &m, &preview);
+        let sheet = report_sheet(prepared, &m, &preview);
         rio::write_png(&dir.join("report.png"), &sheet)?;
         let report_ms = ms(t);
-        let extra = json!({
-            "photo": photo_info,
-            "inputs": source,
-            "diagnostics": diag,
-            "timings_ms": {"extract": extract_ms, "preview_and_report": report_ms, "steps": diag.timings_ms},
+        let mut diagnostics = serde_json::to_value(&diag).context("serialising diagnostics")?;
+        if !layout.timings {
+            if let Some(o) = diagnostics.as_object_mut() {
+                o.remove("timings_ms");
+            }
+        }
+        let mut extra = json!({
+            "photo": loaded.photo_info,
+            "inputs": loaded.source,
+            "diagnostics": diagnostics,
             "picker_version": env!("CARGO_PKG_VERSION"),
-            "seed": a.seed,
+            "seed": flags.seed,
             "preview": {"file": "preview.png", "envmap": if env.is_some() { "estimated" } else { "uniform white (no envmap network given)" }, "texture_repeats": 2.0},
             "report": "report.png",
         });
-        let files = export::write_material_files(
-            &dir,
-            &m,
-            &extra,
-            &ExportOptions {
-                sixteen_bit: a.sixteen_bit,
-            },
-        )
-        .with_context(|| format!("writing {name} to {}", dir.display()))?;
-        let mut s = export::material_json(
-            &m,
-            &serde_json::Value::Null,
-            &ExportOptions {
-                sixteen_bit: a.sixteen_bit,
-            },
-        )?;
+        if layout.timings {
+            extra["timings_ms"] = json!({"extract": extract_ms, "preview_and_report": report_ms, "steps": diag.timings_ms});
+        }
+        let files = export::write_material_files(&dir, &m, &extra, &export_opts)
+            .with_context(|| format!("writing {name} to {}", dir.display()))?;
+        let mut s = export::material_json(&m, &Value::Null, &export_opts)?;
         if let Some(o) = s.as_object_mut() {
-            o.insert("dir".into(), json!(dir.display().to_string()));
-            o.insert(
-                "files".into(),
-                json!(files
-                    .iter()
-                    .map(|f| f.file_name().map(|n| n.to_string_lossy().into_owned()))
-                    .collect::<Vec<_>>()),
-            );
+            let shown = if layout.absolute_paths {
+                dir.display().to_string()
+            } else if single {
+                ".".into()
+            } else {
+                name.clone()
+            };
+            o.insert("dir".into(), json!(shown));
+            let mut names: Vec<String> = files
+                .iter()
+                .filter_map(|f| f.file_name().map(|n| n.to_string_lossy().into_owned()))
+                .collect();
+            names.extend(["preview.png".to_string(), "report.png".to_string()]);
+            names.sort();
+            o.insert("files".into(), json!(names));
         }
         summaries.push(s);
     }
@@ -566,29 +731,112 @@ pub fn run(a: Args) -> Result<()> {
     if let Some(ids) = &palette_ids {
         rio::write_png16(&out_dir.join("palette_ids.png"), ids)?;
     }
-    timings.insert("total".into(), json!(ms(t_total)));
-    let summary = json!({
+    let mut summary = json!({
         "format": "material-picker-extract",
         "format_version": 1,
         "picker_version": env!("CARGO_PKG_VERSION"),
-        "photo": photo_info,
-        "inputs": source,
-        "out": out_dir.display().to_string(),
+        "photo": loaded.photo_info,
+        "inputs": loaded.source,
+        "settings": flags.output_settings(),
+        "out": if layout.absolute_paths { out_dir.display().to_string() } else { ".".into() },
         "materials": summaries,
         "envmap": env.as_ref().map(|_| "envmap.exr"),
         "palette_ids": palette_ids.as_ref().map(|_| "palette_ids.png (16-bit: 0 = none, k = material_{k-1})"),
-        "threads": threads,
-        "timings_ms": timings,
     });
+    if layout.timings {
+        let mut timings = loaded.timings.clone();
+        timings.insert("materials".into(), json!(ms(t_total)));
+        summary["timings_ms"] = Value::Object(timings);
+        summary["threads"] = json!(rayon::current_num_threads());
+    }
     let text = serde_json::to_string_pretty(&summary).context("serialising summary.json")?;
     crate::output::write_atomic(
         &out_dir.join("summary.json"),
         format!("{text}\n").as_bytes(),
     )?;
+    Ok(summary)
+}
+
+/// The photo path `picker extract` reads: PHOTO, or the image of `--elements DIR`.
+fn photo_path(a: &Args) -> Result<PathBuf> {
+    Ok(match (&a.photo, &a.elements) {
+        (Some(p), _) => p.clone(),
+        (None, Some(d)) => {
+            let img = d.join("image.png");
+            if img.exists() {
+                img
+            } else {
+                d.join("input.png")
+            }
+        }
+        (None, None) => bail!("give a PHOTO (or --elements DIR holding image.png)"),
+    })
+}
+
+/// Runs `picker extract`.
+pub fn run(a: Args) -> Result<()> {
+    let t_total = Instant::now();
+    crate::threads::init(a.threads)?;
+    if a.pick.is_empty() && !a.all {
+        bail!("nothing to extract: give --pick X,Y (may be repeated) or --all");
+    }
+    a.flags.validate()?;
+    let photo_path = photo_path(&a)?;
+    if a.elements.is_none() && a.flags.weights.is_empty() {
+        bail!("give --weights DIR (irn.safetensors + msn.safetensors [+ envmap.safetensors]) or --elements DIR");
+    }
+    let inpainter = inpainter(&a.flags.inpainter)?;
+    let out_dir = match &a.out {
+        Some(o) => o.clone(),
+        None => {
+            let stem = photo_path
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_else(|| "photo".into());
+            photo_path.with_file_name(format!("{stem}.material"))
+        }
+    };
+    let models;
+    let source = match &a.elements {
+        Some(dir) => Source::Elements(dir),
+        None => {
+            models = Models::load(&a.flags.weights)?;
+            Source::Nets(&models)
+        }
+    };
+    let loaded = load_inputs(
+        &source,
+        &photo_path,
+        &photo_path.display().to_string(),
+        &a.flags,
+    )?;
+    let req = Request {
+        picks: a
+            .pick
+            .iter()
+            .enumerate()
+            .map(|(k, &p)| (format!("material_{k}"), p))
+            .collect(),
+        all: a.all,
+    };
+    let layout = Layout {
+        always_subdirs: false,
+        timings: !a.no_timings,
+        absolute_paths: true,
+    };
+    let summary = write_materials(
+        &loaded,
+        &req,
+        &a.flags,
+        inpainter.as_ref(),
+        &out_dir,
+        layout,
+    )?;
     if a.json {
+        let text = serde_json::to_string_pretty(&summary).context("serialising the summary")?;
         println!("{text}");
     } else {
-        for s in &summary["materials"].as_array().cloned().unwrap_or_default() {
+        for s in summary["materials"].as_array().cloned().unwrap_or_default() {
             println!(
                 "{}: {} -> {}",
                 s["name"].as_str().unwrap_or("?"),
@@ -603,4 +851,21 @@ pub fn run(a: Args) -> Result<()> {
         println!("done in {:.2} s", t_total.elapsed().as_secs_f64());
     }
     Ok(())
+}
+
+/// Runs the networks on a photo at `work_size` (long side) and returns the
+/// extraction inputs (for `picker eval`).
+pub fn infer_inputs(models: &Models, photo_path: &Path, work_size: u32) -> Result<Inputs> {
+    let p = photo::load(photo_path)?;
+    let (w, h) = p.rgb.dimensions();
+    let photo_img = Image::new(3, h as usize, w as usize, photo::to_planar(&p.rgb))
+        .map_err(|e| anyhow!("{}: {e}", photo_path.display()))?;
+    let (elements, segmentation, envmap, _) =
+        models.infer(&p.rgb, work_size, &mut serde_json::Map::new())?;
+    Ok(Inputs {
+        photo: photo_img,
+        elements,
+        segmentation,
+        envmap,
+    })
 }

@@ -5,6 +5,9 @@
 //!
 //! - `picker extract PHOTO --weights DIR --pick X,Y`: the material under a
 //!   point as a tileable texture + Phong parameters + exports ([`extract`]).
+//! - `picker batch IN_DIR --out OUT_DIR --picks picks.csv | --all`: extract over
+//!   a folder, resumable and shardable ([`batch`]).
+//! - `picker completions SHELL`: a shell completion script.
 //! - `picker infer PHOTO --weights DIR_OR_FILE --out DIR`: run IRN, MSN and/or
 //!   EnvMap on a photo and write every decoded output as EXR + PNG
 //!   ([`infer`]).
@@ -17,13 +20,15 @@
 //!   elements and score against a reference; `--preview` renders a material ([`render`]).
 //!
 //! Errors are printed as one line, `error: <what>: <cause>`, and the exit
-//! status is 1 (2 for command-line usage errors, from clap).
+//! status is 1 (2 for command-line usage errors; `picker batch` also exits 1
+//! when some photos failed and 130 when interrupted).
 
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
 mod args;
+mod batch;
 mod bench;
 mod eval;
 mod extract;
@@ -48,6 +53,8 @@ struct Cli {
 enum Command {
     /// Extract the material under a picked point: tileable texture, Phong parameters, exports.
     Extract(extract::Args),
+    /// Extract materials from a folder of photos: resumable, shardable, one report.
+    Batch(batch::Args),
     /// Score extraction on synthetic scenes with ground truth (mask IoU, texture PSNR, ...).
     Eval(eval::Args),
     /// Run the networks on a photo and write their decoded outputs (EXR + PNG).
@@ -61,27 +68,56 @@ enum Command {
     Render(render::Args),
     /// Generate synthetic indoor scenes with ground-truth render elements.
     Synth(synth::Args),
+    /// Print a shell completion script (bash, zsh, fish, elvish, powershell).
+    Completions {
+        /// The shell.
+        #[arg(value_enum)]
+        shell: clap_complete::Shell,
+    },
 }
 
-fn run(cli: Cli) -> anyhow::Result<()> {
+/// A command-line usage error found after parsing (exit status 2, as clap's own).
+#[derive(Debug)]
+pub struct UsageError(pub String);
+
+impl std::fmt::Display for UsageError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for UsageError {}
+
+fn run(cli: Cli) -> anyhow::Result<ExitCode> {
+    let done = |r: anyhow::Result<()>| r.map(|()| ExitCode::SUCCESS);
     match cli.command {
-        Command::Extract(a) => extract::run(a),
-        Command::Eval(a) => eval::run(a),
-        Command::Infer(a) => infer::run(a),
-        Command::Weights(c) => weights_cmd::run(c),
-        Command::Bench(a) => bench::run(a),
-        Command::Render(a) => render::run(a),
-        Command::Synth(a) => synth::run(a),
+        Command::Batch(a) => batch::run(a),
+        Command::Completions { shell } => {
+            use clap::CommandFactory;
+            clap_complete::generate(shell, &mut Cli::command(), "picker", &mut std::io::stdout());
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Extract(a) => done(extract::run(a)),
+        Command::Eval(a) => done(eval::run(a)),
+        Command::Infer(a) => done(infer::run(a)),
+        Command::Weights(c) => done(weights_cmd::run(c)),
+        Command::Bench(a) => done(bench::run(a)),
+        Command::Render(a) => done(render::run(a)),
+        Command::Synth(a) => done(synth::run(a)),
     }
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
     match run(cli) {
-        Ok(()) => ExitCode::SUCCESS,
+        Ok(code) => code,
         Err(e) => {
             eprintln!("error: {}", one_line(&e));
-            ExitCode::FAILURE
+            if e.downcast_ref::<UsageError>().is_some() {
+                ExitCode::from(2)
+            } else {
+                ExitCode::FAILURE
+            }
         }
     }
 }
@@ -89,7 +125,7 @@ fn main() -> ExitCode {
 /// The error and its causes joined by `": "` on one line, skipping a cause
 /// whose text the message already contains (some library errors print their
 /// source themselves).
-fn one_line(e: &anyhow::Error) -> String {
+pub(crate) fn one_line(e: &anyhow::Error) -> String {
     let mut msg = String::new();
     for cause in e.chain() {
         let text = cause.to_string();

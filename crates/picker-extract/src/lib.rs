@@ -2,6 +2,7 @@
 //! an artist can use (design.md §4–5, `docs/contract-extract.md`).
 //!
 //! The chain, one module per step:
+//! - [`photo`]: the photograph read from any supported file, oriented, checked.
 //! - [`resample`], [`guided`]: the network outputs at the working resolution
 //!   are brought to the photo's resolution guided by the photo.
 //! - [`mask`]: pick → mask from the segmentation colour.
@@ -19,6 +20,7 @@ pub mod export;
 pub mod guided;
 pub mod mask;
 pub mod material;
+pub mod photo;
 pub mod pipeline;
 pub mod plane;
 pub mod report;

@@ -9,7 +9,8 @@
 //! far from their texel's mean (Cauchy weights), which rejects misplaced UVs
 //! and highlights that survived de-lighting. Coverage is `W/(W + ½)` of the
 //! accumulated weight `W` (0 never observed, → 1 well observed); texels with
-//! `W ≥` [`KNOWN_WEIGHT`] count as known for the inpainter.
+//! `W ≥` [`KNOWN_WEIGHT`] count as known for the inpainter (or, when no texel
+//! reaches it, those with at least half the largest weight).
 
 use glam::Vec3;
 use picker_render::io::Image;
@@ -108,7 +109,7 @@ pub struct Reprojected {
     pub weight: Image,
     /// Coverage `W/(W+½)` per texel (1 channel, [0,1)).
     pub coverage: Image,
-    /// Texels with `W ≥ KNOWN_WEIGHT`.
+    /// Texels with `W ≥ KNOWN_WEIGHT` (or ≥ half the largest `W` when none reaches it).
     pub known: Vec<bool>,
 }
 
@@ -240,11 +241,16 @@ pub fn reproject(
     let mut weight = Image::zeros(1, size, size);
     let mut coverage = Image::zeros(1, size, size);
     let mut known = vec![false; size * size];
+    // A material seen only through low-confidence pixels (clipped highlights,
+    // mask edges) still gets its best-observed texels: the threshold drops to
+    // half the largest accumulated weight.
+    let max_w = wsum.iter().copied().fold(0.0f32, f32::max);
+    let threshold = KNOWN_WEIGHT.min(0.5 * max_w);
     for t in 0..size * size {
         let w = wsum[t];
         weight.data[t] = w;
         coverage.data[t] = w / (w + 0.5);
-        if w >= KNOWN_WEIGHT {
+        if w > 0.0 && w >= threshold {
             known[t] = true;
             texture.set_rgb(t, sum[t] / w);
         }
@@ -355,6 +361,26 @@ mod tests {
             },
             img,
         )
+    }
+
+    #[test]
+    fn low_confidence_pixels_still_give_known_texels() {
+        let tex = |u: f32, v: f32| Vec3::new(u, v, 0.5);
+        let (coords, img) = frontal(8, 8, 32.0, tex);
+        let mut mask = vec![false; 64];
+        mask[27] = true;
+        mask[28] = true;
+        // Clipped highlights on the mask edge: confidence far below KNOWN_WEIGHT.
+        let r = reproject(&coords, &mask, &img, &vec![0.0125; 64], 16);
+        assert!(r.known_fraction() > 0.0);
+        for t in 0..16 * 16 {
+            if r.known[t] {
+                assert!(r.weight.data[t] > 0.0);
+            }
+        }
+        // No usable pixel: nothing known.
+        let r = reproject(&coords, &mask, &img, &vec![0.0; 64], 16);
+        assert_eq!(r.known_fraction(), 0.0);
     }
 
     #[test]

@@ -1,0 +1,556 @@
+//! `picker batch` end to end: a folder of good photos in every supported
+//! format with broken files of every kind mixed in, a killed-then-resumed run
+//! against an uninterrupted one (byte-identical outputs), Ctrl-C, shards,
+//! `--jobs`, staleness and usage errors.
+//!
+//! The CI test uses 40 photos; `batch_300_photos_kill_and_resume` (ignored,
+//! run with `cargo test --release -p picker-cli --test batch -- --ignored`)
+//! does the 300 photos with 5% broken files.
+
+use std::collections::BTreeMap;
+use std::io::Cursor;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+use image::{DynamicImage, ImageFormat, Rgb, RgbImage};
+use serde_json::Value;
+
+fn picker() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_picker"))
+}
+
+fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+fn weights() -> String {
+    repo().join("fixtures/weights/tiny").display().to_string()
+}
+
+/// A small deterministic "photo": a floor, a wall and a box with noise.
+fn photo(seed: u64, w: u32, h: u32) -> RgbImage {
+    let mut s = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+    let mut rnd = move || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        (s >> 40) as f32 / (1u64 << 24) as f32
+    };
+    let wall = [rnd(), rnd(), rnd()];
+    let floor = [rnd(), rnd(), rnd()];
+    let boxc = [rnd(), rnd(), rnd()];
+    let horizon = 0.4 + 0.3 * rnd();
+    let (bx, by) = (rnd() * 0.5, 0.3 + rnd() * 0.4);
+    RgbImage::from_fn(w, h, |x, y| {
+        let (u, v) = (x as f32 / w as f32, y as f32 / h as f32);
+        let base = if u > bx && u < bx + 0.3 && v > by && v < by + 0.25 {
+            boxc
+        } else if v > horizon {
+            let check = ((x / 6 + y / 6) % 2) as f32 * 0.15;
+            [floor[0] + check, floor[1] + check, floor[2] + check]
+        } else {
+            wall
+        };
+        let n = (rnd() - 0.5) * 0.06;
+        Rgb(base.map(|c| ((c + n).clamp(0.0, 1.0) * 255.0) as u8))
+    })
+}
+
+fn encode(img: DynamicImage, f: ImageFormat) -> Vec<u8> {
+    let mut b = Cursor::new(Vec::new());
+    img.write_to(&mut b, f).unwrap();
+    b.into_inner()
+}
+
+fn crc32(bytes: &[u8]) -> u32 {
+    let mut c = !0u32;
+    for &b in bytes {
+        c ^= b as u32;
+        for _ in 0..8 {
+            c = if c & 1 != 0 {
+                0xEDB8_8320 ^ (c >> 1)
+            } else {
+                c >> 1
+            };
+        }
+    }
+    !c
+}
+
+/// A PNG whose header claims `w × h` (a decompression bomb's calling card).
+fn bomb_png(w: u32, h: u32) -> Vec<u8> {
+    let mut png = encode(DynamicImage::ImageRgb8(photo(1, 8, 8)), ImageFormat::Png);
+    png[16..20].copy_from_slice(&w.to_be_bytes());
+    png[20..24].copy_from_slice(&h.to_be_bytes());
+    let crc = crc32(&png[12..29]);
+    png[29..33].copy_from_slice(&crc.to_be_bytes());
+    png
+}
+
+/// Writes `n` photos under `dir` (about 5% of them broken, every kind), and
+/// `picks.csv`. Returns the relative paths of the broken files.
+fn make_folder(dir: &Path, n: usize) -> Vec<String> {
+    let good = [
+        ("png", ImageFormat::Png),
+        ("jpg", ImageFormat::Jpeg),
+        ("tif", ImageFormat::Tiff),
+        ("webp", ImageFormat::WebP),
+        ("bmp", ImageFormat::Bmp),
+    ];
+    let good_png = encode(DynamicImage::ImageRgb8(photo(7, 48, 36)), ImageFormat::Png);
+    let good_jpg = encode(DynamicImage::ImageRgb8(photo(8, 48, 36)), ImageFormat::Jpeg);
+    let good_tif = encode(DynamicImage::ImageRgb8(photo(9, 48, 36)), ImageFormat::Tiff);
+    let mut corrupt = good_png.clone();
+    let mid = corrupt.len() / 2;
+    for b in &mut corrupt[mid..mid + 16] {
+        *b ^= 0x5A;
+    }
+    let broken: Vec<(&str, Vec<u8>)> = vec![
+        ("empty.png", Vec::new()),
+        ("truncated.png", good_png[..good_png.len() / 2].to_vec()),
+        ("truncated.jpg", good_jpg[..good_jpg.len() / 2].to_vec()),
+        ("truncated.tif", good_tif[..good_tif.len() / 3].to_vec()),
+        ("text.jpg", b"this is not a photo\n".to_vec()),
+        (
+            "pdf.png",
+            b"%PDF-1.7\n%\xe2\xe3\xcf\xd3\n1 0 obj\n".to_vec(),
+        ),
+        (
+            "random.webp",
+            (0..4000u32)
+                .map(|i| (i.wrapping_mul(2654435761) >> 13) as u8)
+                .collect(),
+        ),
+        ("bomb.png", bomb_png(100_000, 100_000)),
+        ("corrupt.png", corrupt),
+    ];
+    let n_broken = (n / 20).max(broken.len().min(n / 4)).min(broken.len() * 4);
+    let mut csv = String::from("file,x,y,name\n");
+    let mut broken_names = Vec::new();
+    for k in 0..n_broken {
+        let (name, bytes) = &broken[k % broken.len()];
+        let rel = format!("broken/{k:02}_{name}");
+        std::fs::create_dir_all(dir.join("broken")).unwrap();
+        std::fs::write(dir.join(&rel), bytes).unwrap();
+        csv.push_str(&format!("{rel},4,4\n"));
+        broken_names.push(rel);
+    }
+    for k in 0..n - n_broken {
+        let (ext, fmt) = good[k % good.len()];
+        let (w, h) = (40 + (k as u32 * 7) % 40, 30 + (k as u32 * 5) % 30);
+        let img = photo(k as u64 + 100, w, h);
+        let img = match k % 7 {
+            3 if fmt == ImageFormat::Png => {
+                DynamicImage::ImageLuma16(DynamicImage::ImageRgb8(img).to_luma16())
+            }
+            5 if fmt == ImageFormat::Png => {
+                DynamicImage::ImageRgba8(DynamicImage::ImageRgb8(img).to_rgba8())
+            }
+            _ => DynamicImage::ImageRgb8(img),
+        };
+        let rel = format!("set{}/photo_{k:03}.{ext}", k % 3);
+        std::fs::create_dir_all(dir.join(format!("set{}", k % 3))).unwrap();
+        std::fs::write(dir.join(&rel), encode(img, fmt)).unwrap();
+        csv.push_str(&format!("{rel},{},{},centre\n", w / 2, h / 2));
+        if k % 4 == 0 {
+            csv.push_str(&format!("{rel},{},{},floor\n", w / 3, h - 2));
+        }
+    }
+    std::fs::write(dir.join("README.txt"), "not an image; ignored\n").unwrap();
+    std::fs::write(dir.parent().unwrap().join("picks.csv"), csv).unwrap();
+    broken_names
+}
+
+fn batch_cmd(input: &Path, out: &Path, extra: &[&str]) -> Command {
+    let mut c = picker();
+    c.arg("batch")
+        .arg(input)
+        .arg("--out")
+        .arg(out)
+        .arg("--picks")
+        .arg(input.parent().unwrap().join("picks.csv"))
+        .args([
+            "--weights",
+            &weights(),
+            "--work-size",
+            "48",
+            "--max-size",
+            "32",
+        ])
+        .args(extra);
+    c
+}
+
+fn run(mut c: Command) -> Output {
+    c.output().expect("runs picker")
+}
+
+/// Every file under `dir` but the batch reports, with its bytes.
+fn tree(dir: &Path) -> BTreeMap<String, Vec<u8>> {
+    let mut out = BTreeMap::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                let rel = p.strip_prefix(dir).unwrap().display().to_string();
+                if !rel.starts_with("batch-report") {
+                    out.insert(rel, std::fs::read(&p).unwrap());
+                }
+            }
+        }
+    }
+    out
+}
+
+fn assert_same_tree(a: &Path, b: &Path) {
+    let (ta, tb) = (tree(a), tree(b));
+    let ka: Vec<_> = ta.keys().collect();
+    let kb: Vec<_> = tb.keys().collect();
+    assert_eq!(ka, kb, "the two runs wrote different files");
+    for (k, v) in &ta {
+        assert!(tb[k] == *v, "{k} differs between the runs");
+    }
+}
+
+fn report(out: &Path) -> Value {
+    serde_json::from_slice(&std::fs::read(out.join("batch-report.json")).unwrap()).unwrap()
+}
+
+/// Finished photos (visible folders with a manifest), tolerant of a batch
+/// renaming folders while it is counted.
+fn manifests(out: &Path) -> usize {
+    let mut n = 0;
+    let mut stack = vec![out.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        let Ok(rd) = std::fs::read_dir(&d) else {
+            continue;
+        };
+        for e in rd.flatten() {
+            let name = e.file_name().to_string_lossy().into_owned();
+            if name.starts_with('.') {
+                continue;
+            }
+            if name.ends_with(".material") {
+                n += e.path().join("manifest.json").exists() as usize;
+            } else if e.path().is_dir() {
+                stack.push(e.path());
+            }
+        }
+    }
+    n
+}
+
+/// Checks the invariant of an interrupted run: every visible photo folder is
+/// complete (has its manifest); partial work is only in hidden folders.
+fn assert_only_whole_results(out: &Path) {
+    for k in tree(out).keys() {
+        if k.split('/').any(|c| c.starts_with('.')) {
+            continue;
+        }
+        let photo_dir = k.split(".material/").next().unwrap();
+        if k.contains(".material/") {
+            assert!(
+                out.join(format!("{photo_dir}.material/manifest.json"))
+                    .exists(),
+                "{k} is visible but its photo folder has no manifest"
+            );
+        }
+    }
+}
+
+fn check_batch(n: usize, kill_at: usize) {
+    let tmp = tempfile::tempdir().unwrap();
+    let input = tmp.path().join("photos");
+    std::fs::create_dir_all(&input).unwrap();
+    let broken = make_folder(&input, n);
+
+    // 1. Uninterrupted.
+    let out_a = tmp.path().join("a");
+    let o = run(batch_cmd(&input, &out_a, &[]));
+    assert_eq!(
+        o.status.code(),
+        Some(1),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let r = report(&out_a);
+    assert_eq!(r["counts"]["photos"], n as u64);
+    assert_eq!(r["counts"]["failed"], broken.len() as u64, "{r:#}");
+    assert_eq!(r["counts"]["ok"], (n - broken.len()) as u64, "{r:#}");
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    for row in r["photos"].as_array().unwrap() {
+        if row["status"] == "failed" {
+            let why = row["reason"].as_str().unwrap();
+            let name = row["photo"].as_str().unwrap();
+            assert!(why.contains(name), "the reason names the file: {why}");
+            assert!(!why.contains('\n'), "one line: {why}");
+            assert!(stderr.contains(why), "the summary lists {why}");
+        }
+    }
+    let why = |needle: &str| {
+        r["photos"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|p| p["photo"].as_str().unwrap().contains(needle))
+            .map(|p| p["reason"].as_str().unwrap().to_lowercase())
+            .unwrap()
+    };
+    assert!(why("empty.png").contains("empty"));
+    assert!(why("bomb.png").contains("megapixel"), "{}", why("bomb.png"));
+    assert!(
+        why("truncated.jpg").contains("truncated"),
+        "{}",
+        why("truncated.jpg")
+    );
+
+    // 2. Killed (SIGKILL, the worst case) then resumed.
+    let out_b = tmp.path().join("b");
+    let mut child = batch_cmd(&input, &out_b, &["--quiet"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let t = Instant::now();
+    while manifests(&out_b) < kill_at && t.elapsed() < Duration::from_secs(120) {
+        if child.try_wait().unwrap().is_some() {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let _ = child.kill();
+    let _ = child.wait();
+    let done_before = manifests(&out_b);
+    assert!(
+        done_before < n - broken.len(),
+        "killed too late to test resume ({done_before})"
+    );
+    assert_only_whole_results(&out_b);
+    let o = run(batch_cmd(&input, &out_b, &[]));
+    assert_eq!(o.status.code(), Some(1));
+    let r = report(&out_b);
+    assert_eq!(r["counts"]["up_to_date"], done_before as u64, "{r:#}");
+    assert_eq!(
+        r["counts"]["ok"],
+        (n - broken.len() - done_before) as u64,
+        "{r:#}"
+    );
+    assert_same_tree(&out_a, &out_b);
+
+    // 3. A re-run does nothing and changes nothing.
+    let o = run(batch_cmd(&input, &out_b, &[]));
+    assert_eq!(o.status.code(), Some(1));
+    assert_eq!(report(&out_b)["counts"]["ok"], 0);
+    assert_same_tree(&out_a, &out_b);
+}
+
+#[test]
+fn batch_with_broken_files_kill_and_resume() {
+    check_batch(40, 8);
+}
+
+#[test]
+#[ignore = "the issue's full 300-photo run (about a minute in release)"]
+fn batch_300_photos_kill_and_resume() {
+    check_batch(300, 100);
+}
+
+#[test]
+fn interrupt_stops_cleanly_and_resumes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let input = tmp.path().join("photos");
+    std::fs::create_dir_all(&input).unwrap();
+    make_folder(&input, 30);
+    let out = tmp.path().join("out");
+    let child = batch_cmd(&input, &out, &["--quiet", "--jobs", "1"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let t = Instant::now();
+    while manifests(&out) < 3 && t.elapsed() < Duration::from_secs(60) {
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let st = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(st.success());
+    let o = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(130), "{stderr}");
+    assert!(stderr.contains("interrupted"), "{stderr}");
+    let r = report(&out);
+    assert_eq!(r["interrupted"], true);
+    assert!(r["counts"]["not_started"].as_u64().unwrap() > 0, "{r:#}");
+    // No partial folder is left behind by a clean stop.
+    for k in tree(&out).keys() {
+        assert!(!k.contains(".partial"), "{k}");
+    }
+    assert_only_whole_results(&out);
+    let o = run(batch_cmd(&input, &out, &[]));
+    assert_eq!(o.status.code(), Some(1));
+    let r = report(&out);
+    assert_eq!(r["counts"]["not_started"], 0);
+    assert!(r["counts"]["up_to_date"].as_u64().unwrap() >= 3);
+}
+
+#[test]
+fn shards_jobs_and_staleness() {
+    let tmp = tempfile::tempdir().unwrap();
+    let input = tmp.path().join("photos");
+    std::fs::create_dir_all(&input).unwrap();
+    make_folder(&input, 16);
+    let full = tmp.path().join("full");
+    assert_eq!(
+        run(batch_cmd(&input, &full, &["--jobs", "2", "--threads", "2"]))
+            .status
+            .code(),
+        Some(1)
+    );
+    // Three shards into one folder (as three machines would) make the same tree.
+    let sharded = tmp.path().join("sharded");
+    let mut seen = 0;
+    for k in 0..3 {
+        let shard = format!("{k}/3");
+        let o = run(batch_cmd(
+            &input,
+            &sharded,
+            &["--shard", &shard, "--jobs", "1"],
+        ));
+        assert!(matches!(o.status.code(), Some(0 | 1)));
+        let r: Value = serde_json::from_slice(
+            &std::fs::read(sharded.join(format!("batch-report.shard-{k}-of-3.json"))).unwrap(),
+        )
+        .unwrap();
+        seen += r["counts"]["photos"].as_u64().unwrap();
+    }
+    assert_eq!(seen, 16, "every photo in exactly one shard");
+    assert_same_tree(&full, &sharded);
+
+    // Changing a photo or a setting redoes exactly what is stale.
+    let victim = input.join("set0/photo_000.png");
+    let img = image::open(&victim).unwrap().to_rgb8();
+    let mut img2 = img.clone();
+    img2.put_pixel(0, 0, Rgb([255, 0, 255]));
+    img2.save(&victim).unwrap();
+    let o = run(batch_cmd(&input, &full, &[]));
+    assert_eq!(o.status.code(), Some(1));
+    let r = report(&full);
+    assert_eq!(r["counts"]["ok"], 1, "{r:#}");
+    let o = run(batch_cmd(&input, &full, &["--seed", "5"]));
+    assert_eq!(o.status.code(), Some(1));
+    let r = report(&full);
+    assert_eq!(r["counts"]["up_to_date"], 0, "{r:#}");
+    // A half-deleted result is redone.
+    let o = run(batch_cmd(&input, &full, &["--seed", "5"]));
+    assert_eq!(
+        report(&full)["counts"]["ok"],
+        0,
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    std::fs::remove_file(full.join("set0/photo_000.png.material/centre/material.json")).unwrap();
+    run(batch_cmd(&input, &full, &["--seed", "5"]));
+    assert_eq!(report(&full)["counts"]["ok"], 1);
+}
+
+#[test]
+fn usage_errors_exit_2() {
+    let tmp = tempfile::tempdir().unwrap();
+    let input = tmp.path().join("photos");
+    std::fs::create_dir_all(&input).unwrap();
+    let out = tmp.path().join("out");
+    let w = weights();
+    let o = out.to_str().unwrap();
+    let i = input.to_str().unwrap();
+    let cases: Vec<(Vec<&str>, &str)> = vec![
+        (vec!["batch", i, "--out", o, "--weights", &w], "--picks"),
+        (
+            vec![
+                "batch",
+                i,
+                "--out",
+                o,
+                "--all",
+                "--weights",
+                &w,
+                "--shard",
+                "3/3",
+            ],
+            "K < N",
+        ),
+        (
+            vec![
+                "batch",
+                "/nonexistent/dir",
+                "--out",
+                o,
+                "--all",
+                "--weights",
+                &w,
+            ],
+            "not a folder",
+        ),
+        (vec!["batch", i, "--out", o, "--all"], "--weights"),
+    ];
+    for (args, want) in cases {
+        let r = picker().args(&args).output().unwrap();
+        let err = String::from_utf8_lossy(&r.stderr);
+        assert_eq!(r.status.code(), Some(2), "{args:?}: {err}");
+        assert!(err.contains(want), "{args:?}: {err}");
+    }
+    let csv = tmp.path().join("bad.csv");
+    std::fs::write(&csv, "a.png,1\n").unwrap();
+    let r = picker()
+        .args([
+            "batch",
+            i,
+            "--out",
+            o,
+            "--weights",
+            &w,
+            "--picks",
+            csv.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert_eq!(r.status.code(), Some(2), "{err}");
+    assert!(err.contains("bad.csv line 1"), "{err}");
+}
+
+#[test]
+fn completions_for_every_shell() {
+    for shell in ["bash", "zsh", "fish", "elvish", "powershell"] {
+        let o = picker().args(["completions", shell]).output().unwrap();
+        assert!(o.status.success(), "{shell}");
+        let text = String::from_utf8_lossy(&o.stdout);
+        assert!(
+            text.contains("batch") && text.contains("extract"),
+            "{shell}"
+        );
+    }
+}
+
+/// Writes the test folder for a look by hand:
+/// `PICKER_BATCH_FOLDER=/tmp/b PICKER_BATCH_PHOTOS=300 cargo test --release -p picker-cli --test batch -- --ignored write_folder`
+/// makes `/tmp/b/photos/` and `/tmp/b/picks.csv`.
+#[test]
+#[ignore = "writes a folder for inspection when PICKER_BATCH_FOLDER is set"]
+fn write_folder() {
+    let Some(dir) = std::env::var_os("PICKER_BATCH_FOLDER") else {
+        return;
+    };
+    let n = std::env::var("PICKER_BATCH_PHOTOS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(300);
+    let input = Path::new(&dir).join("photos");
+    std::fs::create_dir_all(&input).unwrap();
+    make_folder(&input, n);
+}

@@ -1,0 +1,786 @@
+//! Reading a photograph: the inputs people actually have (design §2).
+//!
+//! [`decode`] turns the bytes of a file into a [`Photo`]: RGB `f32` values,
+//! sRGB-encoded in `[0, 1]`, with the EXIF orientation applied, so pixel
+//! coordinates are those of the photo as a viewer shows it.
+//!
+//! - **Formats.** PNG, JPEG, TIFF, WebP and BMP at any bit depth the `image`
+//!   crate reads (1–16 bit integer, and 32-bit float TIFF), plus OpenEXR and
+//!   Radiance HDR. The format is found from the *content*, never from the file
+//!   name: a PNG named `.jpg` decodes fine and [`Photo::format`] says `"png"`
+//!   (compare with [`format_for_extension`] to warn about it). A mislabelled
+//!   file only fails when its content does not decode, and then the message
+//!   says both what it is named and what it contains.
+//! - **Channels.** Greyscale is replicated to RGB. Alpha is *dropped*, not
+//!   composited over any background: the colour of transparent pixels is kept
+//!   as stored. 16-bit and float samples keep their precision.
+//! - **Display-referred inputs** (everything but EXR/HDR) are taken as
+//!   sRGB-encoded: integers are scaled to `[0, 1]`, float TIFF values are
+//!   clamped to `[0, 1]` and NaN becomes 0.
+//! - **Linear inputs** (EXR, HDR; [`Photo::linear_input`]) hold scene-linear
+//!   radiance. They are brought to the sRGB-encoded range the networks were
+//!   trained on by [`expose_linear`]: NaN, infinities and negative values
+//!   become 0; when the 99th percentile of the luminance
+//!   (`0.2126 R + 0.7152 G + 0.0722 B`) exceeds 1 the image is scaled so that
+//!   it becomes exactly 1 (otherwise it is left as is, never brightened); then
+//!   each channel is sRGB-encoded (IEC 61966-2-1) and clamped to `[0, 1]`.
+//! - **Decompression bombs.** The dimensions are read from the header before
+//!   any pixel is decoded, and the photo is refused when it has more than
+//!   [`PhotoLimits::max_pixels`] pixels, or when decoding it would need more
+//!   than [`PhotoLimits::max_alloc`] bytes at the budget of
+//!   [`PEAK_BYTES_PER_PIXEL`]. The same limits are handed to the decoder
+//!   (`image::Limits`), so a header that lies cannot make it allocate more.
+//!
+//! Every failure is a [`PhotoError`] whose message is one line naming the
+//! file and saying what is wrong with it.
+//!
+//! ```
+//! use picker_extract::photo::{self, PhotoLimits};
+//! use std::path::Path;
+//!
+//! let err = photo::decode(b"", Path::new("photo.png"), &PhotoLimits::default()).unwrap_err();
+//! assert_eq!(err.to_string(), "photo.png: the file is empty (0 bytes)");
+//! ```
+
+use std::io::{Cursor, Read};
+use std::path::{Path, PathBuf};
+
+use image::imageops::FilterType;
+use image::metadata::Orientation;
+use image::{DynamicImage, ImageDecoder, ImageError, ImageFormat, ImageReader, Rgb32FImage};
+
+/// The file extensions [`is_supported_extension`] accepts (lower case,
+/// without the dot).
+pub const SUPPORTED_EXTENSIONS: &[&str] = &[
+    "png", "jpg", "jpeg", "tif", "tiff", "webp", "bmp", "exr", "hdr",
+];
+
+/// The supported formats as named in messages.
+const SUPPORTED_LIST: &str = "PNG, JPEG, TIFF, WebP, BMP, OpenEXR, Radiance HDR";
+
+/// The decode memory budget, in bytes per photo pixel, that
+/// [`PhotoLimits::max_alloc`] is checked against before decoding.
+///
+/// At its peak, decoding holds the decoder's native buffer (up to 16 B/px,
+/// RGBA `f32`) and the `f32` RGB copy being made of it (12 B/px); the EXR
+/// decoder also holds its own `f32` copy of the pixels (up to 16 B/px) while
+/// it fills the native buffer, and a 90° orientation needs a second 12 B/px
+/// image. The worst case, float RGBA EXR, is 32 B/px; an 8-bit JPEG or PNG
+/// peaks at about 15–24 B/px. The returned [`Photo`] keeps 12 B/px. Not
+/// counted: the file's bytes themselves (and a copy of them the JPEG decoder
+/// makes), and the decoders' small per-row or per-strip buffers.
+pub const PEAK_BYTES_PER_PIXEL: u64 = 32;
+
+/// The default [`PhotoLimits::max_pixels`]: 100 megapixels.
+pub const DEFAULT_MAX_PIXELS: u64 = 100_000_000;
+
+/// The default [`PhotoLimits::max_alloc`]: 4 GiB.
+pub const DEFAULT_MAX_ALLOC: u64 = 4 << 30;
+
+/// How large a photo [`decode`] accepts.
+///
+/// With the defaults a 100 MP photo needs at most
+/// 100 M × [`PEAK_BYTES_PER_PIXEL`] = 3.2 GB while decoding, under the 4 GiB
+/// `max_alloc`; in general `max_alloc / 32` pixels always fit.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PhotoLimits {
+    /// The most pixels (width × height) a photo may have.
+    pub max_pixels: u64,
+    /// The most bytes decoding may allocate: checked up front as
+    /// pixels × [`PEAK_BYTES_PER_PIXEL`], and given to the decoder as its
+    /// `image::Limits::max_alloc`.
+    pub max_alloc: u64,
+}
+
+impl Default for PhotoLimits {
+    fn default() -> Self {
+        Self {
+            max_pixels: DEFAULT_MAX_PIXELS,
+            max_alloc: DEFAULT_MAX_ALLOC,
+        }
+    }
+}
+
+/// A decoded photo.
+#[derive(Clone, Debug)]
+pub struct Photo {
+    /// The pixels: RGB `f32`, row-major, sRGB-encoded in `[0, 1]`, with the
+    /// EXIF orientation applied (linear inputs already exposed and encoded,
+    /// see the module docs).
+    pub rgb: Rgb32FImage,
+    /// The EXIF orientation that was applied (`NoTransforms` when none).
+    pub orientation: Orientation,
+    /// The format found from the content: `"png"`, `"jpeg"`, `"tiff"`,
+    /// `"webp"`, `"bmp"`, `"exr"` or `"hdr"`, whatever the file is named.
+    pub format: String,
+    /// Bits per sample in the file (1, 2, 4, 8, 16 or 32).
+    pub bit_depth: u8,
+    /// Channels in the file, alpha included (1–4).
+    pub channels_in_file: u8,
+    /// True for scene-linear inputs (EXR, HDR) that went through
+    /// [`expose_linear`].
+    pub linear_input: bool,
+}
+
+/// Why a photo could not be read. Every message is one line that starts with
+/// the file's name.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum PhotoError {
+    /// An I/O operation on the file failed.
+    #[error("{}: {op} failed: {source}", path.display())]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// What was being done, e.g. `"opening the file"`.
+        op: &'static str,
+        /// The operating system's reason.
+        #[source]
+        source: std::io::Error,
+    },
+    /// The file has no bytes at all.
+    #[error("{}: the file is empty (0 bytes)", path.display())]
+    Empty {
+        /// The file.
+        path: PathBuf,
+    },
+    /// The content is not an image format this build reads.
+    #[error("{}: not a supported image (the content is {content}); supported: {SUPPORTED_LIST}", path.display())]
+    Unsupported {
+        /// The file.
+        path: PathBuf,
+        /// What the content looks like, e.g. `"a PDF document"`.
+        content: String,
+    },
+    /// The file ends before the image data does.
+    #[error("{}: the {format} data is truncated ({detail})", path.display())]
+    Truncated {
+        /// The file.
+        path: PathBuf,
+        /// The format found from the content, e.g. `"JPEG"`.
+        format: &'static str,
+        /// What is missing.
+        detail: String,
+    },
+    /// The extension names one format, the content is another, and the
+    /// content does not decode.
+    #[error("{}: the file is named .{extension} but its content is {format}, which could not be decoded: {reason}", path.display())]
+    Mislabelled {
+        /// The file.
+        path: PathBuf,
+        /// The file's extension.
+        extension: String,
+        /// The format found from the content, e.g. `"PNG"`.
+        format: &'static str,
+        /// The decoder's reason.
+        reason: String,
+    },
+    /// More pixels than [`PhotoLimits::max_pixels`].
+    #[error("{}: {width} × {height} = {} megapixels exceeds the limit of {} megapixels (--max-megapixels)", path.display(), megapixels(*width as u64 * *height as u64), megapixels(*max_pixels))]
+    TooManyPixels {
+        /// The file.
+        path: PathBuf,
+        /// Width from the header.
+        width: u32,
+        /// Height from the header.
+        height: u32,
+        /// The limit.
+        max_pixels: u64,
+    },
+    /// Decoding would need more memory than [`PhotoLimits::max_alloc`].
+    #[error("{}: decoding {width} × {height} pixels needs about {} (at {PEAK_BYTES_PER_PIXEL} bytes per pixel), over the memory limit of {} (--max-megapixels)", path.display(), bytes_text(*needed), bytes_text(*max_alloc))]
+    TooMuchMemory {
+        /// The file.
+        path: PathBuf,
+        /// Width from the header.
+        width: u32,
+        /// Height from the header.
+        height: u32,
+        /// Bytes the decode is budgeted to need.
+        needed: u64,
+        /// The limit.
+        max_alloc: u64,
+    },
+    /// The file itself is larger than [`PhotoLimits::max_alloc`].
+    #[error("{}: the file is {}, more than the memory limit of {} (--max-megapixels)", path.display(), bytes_text(*bytes), bytes_text(*max_alloc))]
+    FileTooLarge {
+        /// The file.
+        path: PathBuf,
+        /// The file's size.
+        bytes: u64,
+        /// The limit.
+        max_alloc: u64,
+    },
+    /// The header declares a width or height of zero.
+    #[error("{}: the image has no pixels ({width} × {height})", path.display())]
+    NoPixels {
+        /// The file.
+        path: PathBuf,
+        /// Width from the header.
+        width: u32,
+        /// Height from the header.
+        height: u32,
+    },
+    /// The decoder refused the content.
+    #[error("{}: cannot decode the {format} data: {reason}", path.display())]
+    Decode {
+        /// The file.
+        path: PathBuf,
+        /// The format found from the content, e.g. `"TIFF"`.
+        format: &'static str,
+        /// The decoder's reason.
+        reason: String,
+    },
+}
+
+impl PhotoError {
+    /// The file the error is about.
+    pub fn path(&self) -> &Path {
+        match self {
+            Self::Io { path, .. }
+            | Self::Empty { path }
+            | Self::Unsupported { path, .. }
+            | Self::Truncated { path, .. }
+            | Self::Mislabelled { path, .. }
+            | Self::TooManyPixels { path, .. }
+            | Self::TooMuchMemory { path, .. }
+            | Self::FileTooLarge { path, .. }
+            | Self::NoPixels { path, .. }
+            | Self::Decode { path, .. } => path,
+        }
+    }
+}
+
+/// A format this module reads.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Kind {
+    image: ImageFormat,
+    /// Lower-case short name, [`Photo::format`].
+    name: &'static str,
+    /// Name in messages.
+    display: &'static str,
+    linear: bool,
+}
+
+const KINDS: [Kind; 7] = [
+    Kind::new(ImageFormat::Png, "png", "PNG", false),
+    Kind::new(ImageFormat::Jpeg, "jpeg", "JPEG", false),
+    Kind::new(ImageFormat::Tiff, "tiff", "TIFF", false),
+    Kind::new(ImageFormat::WebP, "webp", "WebP", false),
+    Kind::new(ImageFormat::Bmp, "bmp", "BMP", false),
+    Kind::new(ImageFormat::OpenExr, "exr", "OpenEXR", true),
+    Kind::new(ImageFormat::Hdr, "hdr", "Radiance HDR", true),
+];
+
+impl Kind {
+    const fn new(
+        image: ImageFormat,
+        name: &'static str,
+        display: &'static str,
+        linear: bool,
+    ) -> Self {
+        Self {
+            image,
+            name,
+            display,
+            linear,
+        }
+    }
+
+    fn from_image(f: ImageFormat) -> Option<Self> {
+        KINDS.iter().copied().find(|k| k.image == f)
+    }
+}
+
+/// True when `path` has one of the [`SUPPORTED_EXTENSIONS`] (any case): the
+/// files batch discovery picks up. Says nothing about the content.
+pub fn is_supported_extension(path: &Path) -> bool {
+    format_for_extension(path).is_some()
+}
+
+/// The [`Photo::format`] name a file with this extension should have
+/// (`"jpeg"` for `.JPG`), or `None` for an unsupported extension. Compare
+/// with the decoded [`Photo::format`] to notice a mislabelled file.
+pub fn format_for_extension(path: &Path) -> Option<&'static str> {
+    let ext = path.extension()?.to_str()?.to_ascii_lowercase();
+    Some(match ext.as_str() {
+        "png" => "png",
+        "jpg" | "jpeg" => "jpeg",
+        "tif" | "tiff" => "tiff",
+        "webp" => "webp",
+        "bmp" => "bmp",
+        "exr" => "exr",
+        "hdr" => "hdr",
+        _ => return None,
+    })
+}
+
+/// Reads and decodes the file at `path`; see [`decode`]. A file larger than
+/// [`PhotoLimits::max_alloc`] is refused before it is read.
+pub fn load(path: &Path, limits: &PhotoLimits) -> Result<Photo, PhotoError> {
+    let io = |op: &'static str| {
+        move |source| PhotoError::Io {
+            path: path.to_path_buf(),
+            op,
+            source,
+        }
+    };
+    let mut file = std::fs::File::open(path).map_err(io("opening the file"))?;
+    let len = file
+        .metadata()
+        .map_err(io("reading the file's metadata"))?
+        .len();
+    if len > limits.max_alloc {
+        return Err(PhotoError::FileTooLarge {
+            path: path.to_path_buf(),
+            bytes: len,
+            max_alloc: limits.max_alloc,
+        });
+    }
+    let mut bytes = Vec::new();
+    bytes
+        .try_reserve_exact(len as usize)
+        .map_err(|e| io("reading the file")(std::io::Error::other(e)))?;
+    file.read_to_end(&mut bytes)
+        .map_err(io("reading the file"))?;
+    decode(&bytes, path, limits)
+}
+
+/// Decodes a photo from the bytes of a file; `label` names the file in
+/// messages (and its extension is compared with the content). See the module
+/// docs for what is accepted and how values are encoded.
+pub fn decode(bytes: &[u8], label: &Path, limits: &PhotoLimits) -> Result<Photo, PhotoError> {
+    let path = || label.to_path_buf();
+    if bytes.is_empty() {
+        return Err(PhotoError::Empty { path: path() });
+    }
+    let kind = match image::guess_format(bytes).ok().and_then(Kind::from_image) {
+        Some(k) => k,
+        None => {
+            return Err(PhotoError::Unsupported {
+                path: path(),
+                content: describe_content(bytes),
+            })
+        }
+    };
+    let extension = label
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_owned);
+    let mislabelled = match (&extension, format_for_extension(label)) {
+        (Some(ext), Some(named)) if named != kind.name => Some(ext.clone()),
+        _ => None,
+    };
+    let fail = |e: ImageError| classify(e, kind, label, mislabelled.as_deref());
+    let truncated = |detail: String| PhotoError::Truncated {
+        path: path(),
+        format: kind.display,
+        detail,
+    };
+
+    // Cut-off files some decoders would silently fill in.
+    match kind.image {
+        // The JPEG decoder fills a cut-off file with grey instead of failing.
+        ImageFormat::Jpeg if !jpeg_is_complete(bytes) => {
+            return Err(truncated(
+                "no end-of-image marker after the image data".into(),
+            ))
+        }
+        ImageFormat::WebP => {
+            if let Some(declared) = bytes.get(4..8) {
+                let declared = u32::from_le_bytes(declared.try_into().unwrap_or([0; 4])) as u64;
+                if (bytes.len() as u64) < declared + 8 {
+                    return Err(truncated(format!(
+                        "the RIFF header declares {} bytes, the file has {}",
+                        declared + 8,
+                        bytes.len()
+                    )));
+                }
+            }
+        }
+        _ => {}
+    }
+
+    // EXR: the `image` decoder reads the offset tables (sized by the header)
+    // as it is made, so the header's size is checked on its own first.
+    if kind.image == ImageFormat::OpenExr {
+        if let Ok(meta) = exr::meta::MetaData::read_from_buffered(bytes, false) {
+            for header in &meta.headers {
+                for size in [
+                    header.shared_attributes.display_window.size,
+                    header.layer_size,
+                ] {
+                    let (w, h) = (size.width() as u64, size.height() as u64);
+                    if w.saturating_mul(h) > limits.max_pixels {
+                        return Err(PhotoError::TooManyPixels {
+                            path: path(),
+                            width: u32::try_from(w).unwrap_or(u32::MAX),
+                            height: u32::try_from(h).unwrap_or(u32::MAX),
+                            max_pixels: limits.max_pixels,
+                        });
+                    }
+                }
+            }
+        }
+    }
+
+    // The header only: no pixel buffer is allocated yet.
+    let mut reader = ImageReader::with_format(Cursor::new(bytes), kind.image);
+    let mut header_limits = image::Limits::no_limits();
+    header_limits.max_alloc = Some(limits.max_alloc);
+    reader.limits(header_limits);
+    let mut decoder = reader.into_decoder().map_err(fail)?;
+    let (width, height) = decoder.dimensions();
+    if width == 0 || height == 0 {
+        return Err(PhotoError::NoPixels {
+            path: path(),
+            width,
+            height,
+        });
+    }
+    let pixels = width as u64 * height as u64;
+    if pixels > limits.max_pixels {
+        return Err(PhotoError::TooManyPixels {
+            path: path(),
+            width,
+            height,
+            max_pixels: limits.max_pixels,
+        });
+    }
+    let needed = pixels.saturating_mul(PEAK_BYTES_PER_PIXEL);
+    if needed > limits.max_alloc {
+        return Err(PhotoError::TooMuchMemory {
+            path: path(),
+            width,
+            height,
+            needed,
+            max_alloc: limits.max_alloc,
+        });
+    }
+    let mut decode_limits = image::Limits::no_limits();
+    let side = u32::try_from(limits.max_pixels).unwrap_or(u32::MAX);
+    decode_limits.max_image_width = Some(side);
+    decode_limits.max_image_height = Some(side);
+    decode_limits.max_alloc = Some(limits.max_alloc);
+    decoder.set_limits(decode_limits).map_err(fail)?;
+
+    let original = decoder.original_color_type();
+    let (bit_depth, channels_in_file) = match original.channel_count() {
+        0 => {
+            let c = decoder.color_type();
+            (
+                c.bits_per_pixel() / c.channel_count() as u16,
+                c.channel_count(),
+            )
+        }
+        n => (original.bits_per_pixel() / n as u16, n),
+    };
+    // A broken EXIF block is not worth refusing the photo for.
+    let orientation = decoder.orientation().unwrap_or(Orientation::NoTransforms);
+
+    let img = DynamicImage::from_decoder(decoder).map_err(fail)?;
+    // Native buffer + 12 B/px here; the native buffer is freed right after.
+    let mut rgb = img.into_rgb32f();
+    if kind.linear {
+        expose_linear(&mut rgb);
+    } else {
+        // Float formats (e.g. 32-bit TIFF) may hold values outside [0, 1] or NaN.
+        for v in rgb.iter_mut() {
+            *v = if v.is_nan() { 0.0 } else { v.clamp(0.0, 1.0) };
+        }
+    }
+    let rgb = orient(rgb, orientation);
+    Ok(Photo {
+        rgb,
+        orientation,
+        format: kind.name.to_owned(),
+        bit_depth: u8::try_from(bit_depth).unwrap_or(u8::MAX),
+        channels_in_file,
+        linear_input: kind.linear,
+    })
+}
+
+/// Applies an EXIF orientation (flips in place, rotations into a new image).
+fn orient(rgb: Rgb32FImage, orientation: Orientation) -> Rgb32FImage {
+    if orientation == Orientation::NoTransforms {
+        return rgb;
+    }
+    let mut img = DynamicImage::ImageRgb32F(rgb);
+    img.apply_orientation(orientation);
+    img.into_rgb32f()
+}
+
+/// Brings scene-linear RGB to sRGB-encoded `[0, 1]` (the rule for EXR and
+/// HDR inputs): non-finite and negative values become 0; when the 99th
+/// percentile of the luminance `0.2126 R + 0.7152 G + 0.0722 B` is above 1,
+/// everything is scaled by its inverse (so it maps to 1.0 and the brightest
+/// 1 % clip); then each channel is sRGB-encoded and clamped to `[0, 1]`.
+/// Inputs whose 99th percentile is at most 1 are not rescaled.
+pub fn expose_linear(rgb: &mut Rgb32FImage) {
+    for v in rgb.iter_mut() {
+        if !v.is_finite() || *v < 0.0 {
+            *v = 0.0;
+        }
+    }
+    let mut lum: Vec<f32> = rgb
+        .pixels()
+        .map(|p| 0.2126 * p.0[0] + 0.7152 * p.0[1] + 0.0722 * p.0[2])
+        .collect();
+    let p99 = if lum.is_empty() {
+        0.0
+    } else {
+        let k = (lum.len() - 1) * 99 / 100;
+        *lum.select_nth_unstable_by(k, f32::total_cmp).1
+    };
+    drop(lum);
+    let scale = if p99 > 1.0 { 1.0 / p99 } else { 1.0 };
+    for v in rgb.iter_mut() {
+        *v = srgb_encode(*v * scale).clamp(0.0, 1.0);
+    }
+}
+
+/// The sRGB transfer function (IEC 61966-2-1), linear → encoded.
+fn srgb_encode(c: f32) -> f32 {
+    if c <= 0.003_130_8 {
+        12.92 * c
+    } else {
+        1.055 * c.powf(1.0 / 2.4) - 0.055
+    }
+}
+
+/// Turns a decoder error into a [`PhotoError`], telling truncation apart.
+fn classify(e: ImageError, kind: Kind, path: &Path, mislabelled: Option<&str>) -> PhotoError {
+    let reason = match &e {
+        // "Format error decoding Png: <reason>" → "<reason>"
+        ImageError::Decoding(d) => match std::error::Error::source(d) {
+            Some(s) => s.to_string(),
+            None => d.to_string(),
+        },
+        ImageError::Limits(l) => {
+            format!("{l} (the decoder hit the memory limit set by --max-megapixels)")
+        }
+        other => other.to_string(),
+    };
+    if is_truncation(&e, &reason) {
+        return PhotoError::Truncated {
+            path: path.to_path_buf(),
+            format: kind.display,
+            detail: format!("the file ends early; the decoder says: {reason}"),
+        };
+    }
+    match mislabelled {
+        Some(ext) => PhotoError::Mislabelled {
+            path: path.to_path_buf(),
+            extension: ext.to_owned(),
+            format: kind.display,
+            reason,
+        },
+        None => PhotoError::Decode {
+            path: path.to_path_buf(),
+            format: kind.display,
+            reason,
+        },
+    }
+}
+
+/// Whether a decoder error means the data stopped early.
+fn is_truncation(e: &ImageError, reason: &str) -> bool {
+    let mut source: Option<&(dyn std::error::Error + 'static)> = Some(e);
+    while let Some(s) = source {
+        if let Some(io) = s.downcast_ref::<std::io::Error>() {
+            if io.kind() == std::io::ErrorKind::UnexpectedEof {
+                return true;
+            }
+        }
+        source = s.source();
+    }
+    if let ImageError::IoError(io) = e {
+        if io.kind() == std::io::ErrorKind::UnexpectedEof {
+            return true;
+        }
+    }
+    let r = reason.to_ascii_lowercase();
+    [
+        "eof",
+        "end of file",
+        "unexpected end",
+        "truncated",
+        "not enough data",
+        "no more data",
+        "fill whole buffer",
+        "missing bytes",
+    ]
+    .iter()
+    .any(|m| r.contains(m))
+}
+
+/// A short description of content that is not a supported image.
+fn describe_content(b: &[u8]) -> String {
+    let starts = |m: &[u8]| b.starts_with(m);
+    if starts(b"%PDF") {
+        return "a PDF document".into();
+    }
+    if starts(b"PK\x03\x04") {
+        return "a ZIP archive (or a DOCX/XLSX/… document)".into();
+    }
+    if starts(&[0x1F, 0x8B]) {
+        return "gzip-compressed data".into();
+    }
+    if starts(b"8BPS") {
+        return "a Photoshop PSD document".into();
+    }
+    if b.get(4..8) == Some(b"ftyp") {
+        let brand = b.get(8..12).unwrap_or_default();
+        return match brand {
+            b"heic" | b"heix" | b"hevc" | b"heim" | b"heis" | b"mif1" | b"msf1" => {
+                "a HEIF/HEIC photo, which is not supported: export it as JPEG or PNG".into()
+            }
+            b"avif" | b"avis" => "an AVIF image, which is not supported".into(),
+            b"crx " => "a Canon CR3 raw file, which is not supported".into(),
+            _ => "an MP4/QuickTime (ISO media) file".into(),
+        };
+    }
+    if let Ok(f) = image::guess_format(b) {
+        return format!("a {f:?} image, which is not supported");
+    }
+    let head = &b[..b.len().min(512)];
+    let text = match std::str::from_utf8(head) {
+        Ok(s) => Some(s),
+        // A multi-byte character cut at the 512-byte boundary.
+        Err(e) if e.error_len().is_none() => std::str::from_utf8(&head[..e.valid_up_to()]).ok(),
+        Err(_) => None,
+    };
+    if let Some(t) = text {
+        if t.chars()
+            .all(|c| !c.is_control() || matches!(c, '\n' | '\r' | '\t'))
+        {
+            let lower = t.trim_start().to_ascii_lowercase();
+            if lower.starts_with("<svg") || (lower.starts_with("<?xml") && lower.contains("<svg")) {
+                return "an SVG drawing (vector graphics)".into();
+            }
+            if lower.starts_with("<!doctype html") || lower.starts_with("<html") {
+                return "an HTML page".into();
+            }
+            return "text".into();
+        }
+    }
+    "unrecognised bytes".into()
+}
+
+/// `n` pixels as megapixels: two decimals from 1 MP up, six below, with
+/// trailing zeros dropped ("2500", "1.23", "0.000035").
+fn megapixels(n: u64) -> String {
+    let decimals = if n >= 1_000_000 { 2 } else { 6 };
+    let s = format!("{:.*}", decimals, n as f64 / 1e6);
+    s.trim_end_matches('0').trim_end_matches('.').to_owned()
+}
+
+/// A byte count for messages, in GiB or MiB.
+fn bytes_text(n: u64) -> String {
+    if n >= 1 << 30 {
+        format!("{:.1} GiB", n as f64 / (1u64 << 30) as f64)
+    } else {
+        format!("{:.0} MiB", (n as f64 / (1u64 << 20) as f64).ceil())
+    }
+}
+
+/// True when a JPEG stream has an end-of-image marker (`FF D9`) after its
+/// first scan. The marker segments before the scan are walked by their
+/// lengths, so an EXIF thumbnail's own end marker does not count; inside the
+/// entropy-coded data `FF` is always followed by `00` or a restart marker.
+fn jpeg_is_complete(b: &[u8]) -> bool {
+    if !b.starts_with(&[0xFF, 0xD8]) {
+        return false;
+    }
+    let mut i = 2;
+    loop {
+        while b.get(i) == Some(&0xFF) && b.get(i + 1) == Some(&0xFF) {
+            i += 1; // fill bytes
+        }
+        match (b.get(i), b.get(i + 1)) {
+            (Some(0xFF), Some(0xDA)) => break, // start of scan
+            (Some(0xFF), Some(0xD9)) | (None, _) | (_, None) => return false,
+            (Some(0xFF), Some(m)) if (0xD0..=0xD7).contains(m) || *m == 0x01 => i += 2,
+            (Some(0xFF), Some(_)) => match (b.get(i + 2), b.get(i + 3)) {
+                (Some(&hi), Some(&lo)) => i += 2 + u16::from_be_bytes([hi, lo]) as usize,
+                _ => return false,
+            },
+            _ => return false,
+        }
+    }
+    b[i..].windows(2).any(|w| w == [0xFF, 0xD9])
+}
+
+/// The working size `(width, height)` for a `w × h` photo: the long side
+/// becomes exactly `work_size` (up or down), the short side keeps the aspect
+/// ratio (rounded, at least 1).
+pub fn working_size(w: u32, h: u32, work_size: u32) -> (u32, u32) {
+    let (long, short) = (w.max(h) as u64, w.min(h) as u64);
+    let s = work_size as u64;
+    let short_new = ((short * s + long / 2) / long).max(1) as u32;
+    if w >= h {
+        (work_size, short_new)
+    } else {
+        (short_new, work_size)
+    }
+}
+
+/// Resizes to `(w, h)` with the `image` crate's triangle (bilinear) filter,
+/// which widens its support when shrinking, so downscaling is antialiased.
+/// Resampling happens on the sRGB-encoded values, as the training pipeline's
+/// image loaders do. Returns the image unchanged when the size already matches.
+pub fn resize(rgb: &Rgb32FImage, w: u32, h: u32) -> Rgb32FImage {
+    if rgb.dimensions() == (w, h) {
+        return rgb.clone();
+    }
+    image::imageops::resize(rgb, w, h, FilterType::Triangle)
+}
+
+/// The image as planar `[3, h, w]` values (R plane, G plane, B plane), ready
+/// to wrap as an NCHW tensor with batch 1.
+pub fn to_planar(rgb: &Rgb32FImage) -> Vec<f32> {
+    let (w, h) = rgb.dimensions();
+    let n = (w * h) as usize;
+    let mut planes = vec![0.0f32; 3 * n];
+    for (i, p) in rgb.pixels().enumerate() {
+        for c in 0..3 {
+            planes[c * n + i] = p.0[c];
+        }
+    }
+    planes
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn jpeg_completeness() {
+        let full = std::fs::read(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../../fixtures/examples/coffee.jpg"
+        ))
+        .unwrap();
+        assert!(jpeg_is_complete(&full));
+        for cut in [2, 100, 700, full.len() / 2, full.len() - 2] {
+            assert!(!jpeg_is_complete(&full[..cut]), "cut at {cut}");
+        }
+        assert!(!jpeg_is_complete(b"not a jpeg"));
+    }
+
+    #[test]
+    fn megapixel_text() {
+        assert_eq!(megapixels(100_000_000), "100");
+        assert_eq!(megapixels(2_500_000_000), "2500");
+        assert_eq!(megapixels(1_234_567), "1.23");
+        assert_eq!(megapixels(35), "0.000035");
+        assert_eq!(megapixels(1_500_000), "1.5");
+    }
+
+    #[test]
+    fn srgb_curve_ends() {
+        assert_eq!(srgb_encode(0.0), 0.0);
+        assert!((srgb_encode(1.0) - 1.0).abs() < 1e-6);
+        assert!((srgb_encode(0.18) - 0.4614).abs() < 1e-3);
+    }
+}

@@ -1,0 +1,700 @@
+//! Photo input (`picker_extract::photo`): every format × bit depth × channel
+//! layout, EXIF orientation, linear EXR/HDR, and the files people actually
+//! have by mistake (empty, cut off, mislabelled, not an image, a bomb).
+//!
+//! All inputs are made here at test time with the `image` crate (or by hand,
+//! for the EXIF segment and the lying PNG header); no fixture files.
+
+use std::io::Cursor;
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+use image::codecs::jpeg::JpegEncoder;
+use image::metadata::Orientation;
+use image::ImageEncoder;
+use image::{
+    DynamicImage, ImageBuffer, ImageFormat, Luma, LumaA, Rgb, Rgb32FImage, Rgba, Rgba32FImage,
+};
+use picker_extract::photo::{self, Photo, PhotoError, PhotoLimits};
+
+const W: u32 = 7;
+const H: u32 = 5;
+
+fn dec(bytes: &[u8], name: &str) -> Result<Photo, PhotoError> {
+    photo::decode(bytes, Path::new(name), &PhotoLimits::default())
+}
+
+/// The error message for `bytes` named `name`, asserting it is one line
+/// that starts with the name.
+fn err(bytes: &[u8], name: &str) -> String {
+    let msg = match dec(bytes, name) {
+        Ok(p) => panic!("{name}: decoded as {} instead of failing", p.format),
+        Err(e) => e.to_string(),
+    };
+    assert!(msg.starts_with(&format!("{name}: ")), "{msg}");
+    assert!(!msg.contains('\n'), "{msg}");
+    msg
+}
+
+fn encode(img: &DynamicImage, fmt: ImageFormat) -> Vec<u8> {
+    let mut out = Vec::new();
+    img.write_to(&mut Cursor::new(&mut out), fmt)
+        .unwrap_or_else(|e| panic!("encoding {:?} as {fmt:?}: {e}", img.color()));
+    out
+}
+
+fn jpeg(img: &DynamicImage) -> Vec<u8> {
+    let mut out = Vec::new();
+    // `write_image` with the image's own colour type: `encode_image` on a
+    // `DynamicImage` would always write three components.
+    JpegEncoder::new_with_quality(&mut out, 100)
+        .write_image(
+            img.as_bytes(),
+            img.width(),
+            img.height(),
+            img.color().into(),
+        )
+        .unwrap();
+    out
+}
+
+/// Smooth test values in `[0, 1]` for channel `c` (0–2: colour, 3: alpha)
+/// at `(x, y)`, exact in 8 bits.
+fn v8(x: u32, y: u32, c: u32) -> u8 {
+    if c == 3 {
+        return (255 - x * 30 - y * 7) as u8; // varying alpha: must not matter
+    }
+    (x * 16 + y * 20 + c * 35) as u8
+}
+
+/// Values that use all 16 bits.
+fn v16(x: u32, y: u32, c: u32) -> u16 {
+    if c == 3 {
+        return (65535 - x * 9000 - y * 1000) as u16;
+    }
+    (x * 4111 + y * 5003 + c * 9001 + 7) as u16
+}
+
+/// A test image with `channels` (1 grey, 2 grey+alpha, 3 RGB, 4 RGBA) at
+/// `bits` (8, 16 or 32 float) and the expected decoded RGB.
+fn sample(channels: u32, bits: u32) -> (DynamicImage, Rgb32FImage) {
+    let val = |x, y, c| -> f32 {
+        match bits {
+            8 => v8(x, y, c) as f32 / 255.0,
+            16 => v16(x, y, c) as f32 / 65535.0,
+            _ => v16(x, y, c) as f32 / 65535.0,
+        }
+    };
+    let expected = Rgb32FImage::from_fn(W, H, |x, y| {
+        if channels <= 2 {
+            Rgb([val(x, y, 0); 3])
+        } else {
+            Rgb([val(x, y, 0), val(x, y, 1), val(x, y, 2)])
+        }
+    });
+    let img = match (channels, bits) {
+        (1, 8) => ImageBuffer::from_fn(W, H, |x, y| Luma([v8(x, y, 0)])).into(),
+        (2, 8) => ImageBuffer::from_fn(W, H, |x, y| LumaA([v8(x, y, 0), v8(x, y, 3)])).into(),
+        (3, 8) => ImageBuffer::from_fn(W, H, |x, y| Rgb([0, 1, 2].map(|c| v8(x, y, c)))).into(),
+        (4, 8) => ImageBuffer::from_fn(W, H, |x, y| Rgba([0, 1, 2, 3].map(|c| v8(x, y, c)))).into(),
+        (1, 16) => ImageBuffer::from_fn(W, H, |x, y| Luma([v16(x, y, 0)])).into(),
+        (2, 16) => ImageBuffer::from_fn(W, H, |x, y| LumaA([v16(x, y, 0), v16(x, y, 3)])).into(),
+        (3, 16) => ImageBuffer::from_fn(W, H, |x, y| Rgb([0, 1, 2].map(|c| v16(x, y, c)))).into(),
+        (4, 16) => {
+            ImageBuffer::from_fn(W, H, |x, y| Rgba([0, 1, 2, 3].map(|c| v16(x, y, c)))).into()
+        }
+        (3, 32) => DynamicImage::ImageRgb32F(Rgb32FImage::from_fn(W, H, |x, y| {
+            Rgb([0, 1, 2].map(|c| val(x, y, c)))
+        })),
+        (4, 32) => DynamicImage::ImageRgba32F(Rgba32FImage::from_fn(W, H, |x, y| {
+            Rgba([0, 1, 2, 3].map(|c| val(x, y, c)))
+        })),
+        other => panic!("no sample for {other:?}"),
+    };
+    (img, expected)
+}
+
+/// Largest absolute difference, with the first place it occurs.
+fn max_diff(a: &Rgb32FImage, b: &Rgb32FImage) -> (f32, (u32, u32)) {
+    assert_eq!(a.dimensions(), b.dimensions());
+    let mut worst = (0.0f32, (0, 0));
+    for (x, y, p) in a.enumerate_pixels() {
+        let q = b.get_pixel(x, y);
+        for c in 0..3 {
+            let d = (p.0[c] - q.0[c]).abs();
+            if d > worst.0 || d.is_nan() {
+                worst = (d, (x, y));
+            }
+        }
+    }
+    worst
+}
+
+#[test]
+fn every_format_depth_and_layout() {
+    // (format, extension, channels, bits, expected channels_in_file, tolerance)
+    #[rustfmt::skip]
+    let cases: &[(ImageFormat, &str, u32, u32, u8, f32)] = &[
+        (ImageFormat::Png, "png", 1, 8, 1, 1e-6),
+        (ImageFormat::Png, "png", 2, 8, 2, 1e-6),
+        (ImageFormat::Png, "png", 3, 8, 3, 1e-6),
+        (ImageFormat::Png, "png", 4, 8, 4, 1e-6),
+        (ImageFormat::Png, "png", 1, 16, 1, 1e-6),
+        (ImageFormat::Png, "png", 2, 16, 2, 1e-6),
+        (ImageFormat::Png, "png", 3, 16, 3, 1e-6),
+        (ImageFormat::Png, "png", 4, 16, 4, 1e-6),
+        (ImageFormat::Jpeg, "jpg", 1, 8, 1, 0.03),
+        (ImageFormat::Jpeg, "jpg", 3, 8, 3, 0.06),
+        (ImageFormat::Tiff, "tif", 1, 8, 1, 1e-6),
+        (ImageFormat::Tiff, "tif", 3, 8, 3, 1e-6),
+        (ImageFormat::Tiff, "tif", 4, 8, 4, 1e-6),
+        (ImageFormat::Tiff, "tif", 1, 16, 1, 1e-6),
+        (ImageFormat::Tiff, "tif", 3, 16, 3, 1e-6),
+        (ImageFormat::Tiff, "tif", 4, 16, 4, 1e-6),
+        (ImageFormat::Tiff, "tif", 3, 32, 3, 1e-6),
+        (ImageFormat::Tiff, "tif", 4, 32, 4, 1e-6),
+        (ImageFormat::WebP, "webp", 1, 8, 3, 1e-6),
+        (ImageFormat::WebP, "webp", 2, 8, 4, 1e-6),
+        (ImageFormat::WebP, "webp", 3, 8, 3, 1e-6),
+        (ImageFormat::WebP, "webp", 4, 8, 4, 1e-6),
+        (ImageFormat::Bmp, "bmp", 1, 8, 3, 1e-6),
+        (ImageFormat::Bmp, "bmp", 3, 8, 3, 1e-6),
+        (ImageFormat::Bmp, "bmp", 4, 8, 4, 1e-6),
+    ];
+    for &(fmt, ext, channels, bits, in_file, tol) in cases {
+        let (img, expected) = sample(channels, bits);
+        let bytes = match fmt {
+            ImageFormat::Jpeg => jpeg(&img),
+            _ => encode(&img, fmt),
+        };
+        let name = format!("sample-{channels}ch-{bits}bit.{ext}");
+        let p = dec(&bytes, &name).unwrap_or_else(|e| panic!("{e}"));
+        let what = format!("{fmt:?} {channels} channels {bits} bit");
+        assert_eq!(p.rgb.dimensions(), (W, H), "{what}");
+        assert_eq!(
+            p.format,
+            photo::format_for_extension(Path::new(&name)).unwrap()
+        );
+        assert_eq!(p.bit_depth as u32, bits, "{what}: bit depth");
+        assert_eq!(p.channels_in_file, in_file, "{what}: channels in file");
+        assert!(!p.linear_input, "{what}");
+        assert_eq!(p.orientation, Orientation::NoTransforms, "{what}");
+        let (d, at) = max_diff(&p.rgb, &expected);
+        assert!(
+            d <= tol,
+            "{what}: max difference {d} at {at:?} (found {:?}, expected {:?})",
+            p.rgb.get_pixel(at.0, at.1),
+            expected.get_pixel(at.0, at.1)
+        );
+    }
+}
+
+#[test]
+fn float_tiff_is_clamped_and_nan_is_zero() {
+    let img = Rgb32FImage::from_fn(3, 1, |x, _| match x {
+        0 => Rgb([-0.5, 0.25, 2.0]),
+        1 => Rgb([f32::NAN, 1.0, 0.0]),
+        _ => Rgb([0.5, 0.5, 0.5]),
+    });
+    let p = dec(&encode(&img.into(), ImageFormat::Tiff), "f.tiff").unwrap();
+    assert_eq!(p.rgb.get_pixel(0, 0).0, [0.0, 0.25, 1.0]);
+    assert_eq!(p.rgb.get_pixel(1, 0).0, [0.0, 1.0, 0.0]);
+    assert_eq!(p.rgb.get_pixel(2, 0).0, [0.5, 0.5, 0.5]);
+}
+
+/// A JPEG with an APP1 EXIF segment holding `orientation`, inserted right
+/// after the start-of-image marker.
+fn jpeg_with_orientation(img: &DynamicImage, orientation: u16) -> Vec<u8> {
+    let plain = jpeg(img);
+    let mut tiff = Vec::new();
+    tiff.extend_from_slice(b"MM\0\x2a"); // big-endian TIFF header
+    tiff.extend_from_slice(&8u32.to_be_bytes()); // IFD0 offset
+    tiff.extend_from_slice(&1u16.to_be_bytes()); // one entry
+    tiff.extend_from_slice(&0x0112u16.to_be_bytes()); // Orientation
+    tiff.extend_from_slice(&3u16.to_be_bytes()); // SHORT
+    tiff.extend_from_slice(&1u32.to_be_bytes()); // count
+    tiff.extend_from_slice(&orientation.to_be_bytes());
+    tiff.extend_from_slice(&[0, 0]); // value padding
+    tiff.extend_from_slice(&0u32.to_be_bytes()); // no next IFD
+    let mut payload = b"Exif\0\0".to_vec();
+    payload.extend_from_slice(&tiff);
+    let mut out = plain[..2].to_vec();
+    out.extend_from_slice(&[0xFF, 0xE1]);
+    out.extend_from_slice(&(payload.len() as u16 + 2).to_be_bytes());
+    out.extend_from_slice(&payload);
+    out.extend_from_slice(&plain[2..]);
+    out
+}
+
+#[test]
+fn all_eight_exif_orientations() {
+    // 4 × 2 blocks of 8 × 8 pixels, each block its own colour, so JPEG keeps
+    // block centres nearly exact and every orientation looks different.
+    let colours: [[u8; 3]; 8] = [
+        [250, 10, 10],
+        [10, 250, 10],
+        [10, 10, 250],
+        [250, 250, 10],
+        [10, 250, 250],
+        [250, 10, 250],
+        [128, 128, 128],
+        [250, 250, 250],
+    ];
+    let (bw, bh) = (4u32, 2u32);
+    let src = ImageBuffer::from_fn(bw * 8, bh * 8, |x, y| {
+        Rgb(colours[(y / 8 * bw + x / 8) as usize])
+    });
+    let img = DynamicImage::ImageRgb8(src);
+    // Which source block is shown at block (x, y) of the displayed photo,
+    // per EXIF orientation (the TIFF/EXIF 2.3 definitions).
+    let (w, h) = (bw, bh);
+    let source_block = |o: u16, x: u32, y: u32| -> (u32, u32) {
+        match o {
+            1 => (x, y),
+            2 => (w - 1 - x, y),
+            3 => (w - 1 - x, h - 1 - y),
+            4 => (x, h - 1 - y),
+            5 => (y, x),
+            6 => (y, h - 1 - x),
+            7 => (w - 1 - y, h - 1 - x),
+            8 => (w - 1 - y, x),
+            _ => unreachable!(),
+        }
+    };
+    for o in 1..=8u16 {
+        let p = dec(&jpeg_with_orientation(&img, o), "oriented.jpg").unwrap();
+        assert_eq!(p.orientation, Orientation::from_exif(o as u8).unwrap());
+        let (dw, dh) = if o >= 5 { (bh, bw) } else { (bw, bh) };
+        assert_eq!(p.rgb.dimensions(), (dw * 8, dh * 8), "orientation {o}");
+        for by in 0..dh {
+            for bx in 0..dw {
+                let (sx, sy) = source_block(o, bx, by);
+                let want = colours[(sy * bw + sx) as usize].map(|c| c as f32 / 255.0);
+                let got = p.rgb.get_pixel(bx * 8 + 4, by * 8 + 4).0;
+                for c in 0..3 {
+                    assert!(
+                        (got[c] - want[c]).abs() < 0.05,
+                        "orientation {o}, displayed block ({bx}, {by}): found {got:?}, expected source block ({sx}, {sy}) {want:?}"
+                    );
+                }
+            }
+        }
+    }
+}
+
+/// The sRGB encoding, written out independently of the library.
+fn srgb(c: f32) -> f32 {
+    if c <= 0.0031308 {
+        12.92 * c
+    } else {
+        1.055 * c.powf(1.0 / 2.4) - 0.055
+    }
+}
+
+#[test]
+fn exr_is_linear_exposed_at_the_99th_percentile() {
+    // 100 grey pixels 0.0, 0.1, …, 9.9 (luminance = grey); the first three
+    // are NaN, -inf, +inf and count as 0. The 99th percentile (index 98 of
+    // 100) is 9.8, so everything is divided by 9.8.
+    let img = Rgb32FImage::from_fn(10, 10, |x, y| {
+        let i = y * 10 + x;
+        Rgb([match i {
+            0 => f32::NAN,
+            1 => f32::NEG_INFINITY,
+            2 => f32::INFINITY,
+            _ => i as f32 * 0.1,
+        }; 3])
+    });
+    let p = dec(&encode(&img.into(), ImageFormat::OpenExr), "scene.exr").unwrap();
+    assert!(p.linear_input);
+    assert_eq!(
+        (p.format.as_str(), p.bit_depth, p.channels_in_file),
+        ("exr", 32, 3)
+    );
+    for (x, y, px) in p.rgb.enumerate_pixels() {
+        let i = y * 10 + x;
+        let want = if i < 3 {
+            0.0
+        } else {
+            srgb(i as f32 * 0.1 / 9.8).min(1.0)
+        };
+        for c in 0..3 {
+            assert!(
+                (px.0[c] - want).abs() < 1e-5,
+                "pixel {i}: {:?} vs {want}",
+                px.0
+            );
+        }
+    }
+    assert_eq!(
+        p.rgb.get_pixel(9, 9).0,
+        [1.0; 3],
+        "above the 99th percentile clips"
+    );
+}
+
+#[test]
+fn dim_exr_is_not_brightened_and_alpha_is_dropped() {
+    let img = Rgba32FImage::from_fn(4, 3, |x, y| {
+        Rgba([0.02 * x as f32, 0.5, 0.1 * y as f32, 0.25 * x as f32])
+    });
+    let p = dec(
+        &encode(&img.clone().into(), ImageFormat::OpenExr),
+        "dim.exr",
+    )
+    .unwrap();
+    assert_eq!(p.channels_in_file, 4);
+    for (x, y, px) in p.rgb.enumerate_pixels() {
+        let src = img.get_pixel(x, y).0;
+        for (found, linear) in px.0.iter().zip(src) {
+            assert!((found - srgb(linear)).abs() < 1e-5, "({x}, {y})");
+        }
+    }
+}
+
+#[test]
+fn radiance_hdr_is_linear() {
+    let pixels: Vec<Rgb<f32>> = (0..12)
+        .map(|i| Rgb([0.5, 0.25 * (i % 4) as f32, 8.0]))
+        .collect();
+    let mut bytes = Vec::new();
+    image::codecs::hdr::HdrEncoder::new(&mut bytes)
+        .encode(&pixels, 4, 3)
+        .unwrap();
+    let p = dec(&bytes, "sky.hdr").unwrap();
+    assert!(p.linear_input);
+    assert_eq!((p.format.as_str(), p.rgb.dimensions()), ("hdr", (4, 3)));
+    // Luminance 0.2126·0.5 + 0.7152·g + 0.0722·8 is 1.22 for g = 0.75: the
+    // 99th percentile (index 10 of 12) is that, so it maps to 1.
+    let p99 = 0.2126 * 0.5 + 0.7152 * 0.75 + 0.0722 * 8.0;
+    for (i, px) in p.rgb.pixels().enumerate() {
+        let want = [0.5, 0.25 * (i % 4) as f32, 8.0].map(|v| srgb(v / p99).min(1.0));
+        for c in 0..3 {
+            // RGBE keeps 8 bits of mantissa.
+            assert!(
+                (px.0[c] - want[c]).abs() < 0.01,
+                "pixel {i}: {:?} vs {want:?}",
+                px.0
+            );
+        }
+    }
+}
+
+#[test]
+fn empty_file() {
+    assert_eq!(
+        err(b"", "photo.png"),
+        "photo.png: the file is empty (0 bytes)"
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("empty.jpg");
+    std::fs::write(&path, b"").unwrap();
+    let msg = photo::load(&path, &PhotoLimits::default())
+        .unwrap_err()
+        .to_string();
+    assert_eq!(
+        msg,
+        format!("{}: the file is empty (0 bytes)", path.display())
+    );
+}
+
+#[test]
+fn missing_file_names_the_operation() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("nope.png");
+    let e = photo::load(&path, &PhotoLimits::default()).unwrap_err();
+    assert!(matches!(e, PhotoError::Io { .. }));
+    assert_eq!(e.path(), path);
+    let msg = e.to_string();
+    assert!(
+        msg.starts_with(&format!("{}: opening the file failed: ", path.display())),
+        "{msg}"
+    );
+}
+
+#[test]
+fn truncated_files() {
+    let (img, _) = sample(3, 8);
+    let big = DynamicImage::ImageRgb8(ImageBuffer::from_fn(64, 48, |x, y| {
+        Rgb([(x * 4) as u8, (y * 5) as u8, ((x * y) % 256) as u8])
+    }));
+    let cases = [
+        ("cut.png", "PNG", encode(&big, ImageFormat::Png)),
+        ("cut.jpg", "JPEG", jpeg(&big)),
+        ("cut.webp", "WebP", encode(&big, ImageFormat::WebP)),
+        ("cut.tif", "TIFF", encode(&big, ImageFormat::Tiff)),
+        ("cut.bmp", "BMP", encode(&big, ImageFormat::Bmp)),
+        (
+            "cut.exr",
+            "OpenEXR",
+            encode(&big.to_rgb32f().into(), ImageFormat::OpenExr),
+        ),
+        (
+            "cut.hdr",
+            "Radiance HDR",
+            encode(&big.to_rgb32f().into(), ImageFormat::Hdr),
+        ),
+        ("small.png", "PNG", encode(&img, ImageFormat::Png)),
+    ];
+    for (name, format, full) in cases {
+        dec(&full, name).unwrap_or_else(|e| panic!("the whole file must decode: {e}"));
+        for cut in [full.len() / 2, full.len() * 9 / 10] {
+            let msg = err(&full[..cut], name);
+            let want = format!("{name}: the {format} data is truncated");
+            assert!(
+                msg.starts_with(&want),
+                "cut at {cut} of {}: {msg}",
+                full.len()
+            );
+        }
+    }
+}
+
+#[test]
+fn mislabelled_png_named_jpg_decodes_by_content() {
+    let (img, expected) = sample(3, 8);
+    let p = dec(&encode(&img, ImageFormat::Png), "holiday.jpg").unwrap();
+    assert_eq!(p.format, "png");
+    assert_ne!(
+        photo::format_for_extension(Path::new("holiday.jpg")),
+        Some("png")
+    );
+    assert_eq!(max_diff(&p.rgb, &expected).0, 0.0);
+}
+
+#[test]
+fn mislabelled_and_broken_says_both() {
+    let (img, _) = sample(3, 8);
+    let mut bytes = encode(&img, ImageFormat::Png);
+    // Corrupt the zlib stream inside IDAT (after its 8-byte chunk header).
+    let idat = bytes.windows(4).position(|w| w == b"IDAT").unwrap();
+    bytes[idat + 4] ^= 0xFF;
+    bytes[idat + 5] ^= 0xFF;
+    let msg = err(&bytes, "x.jpg");
+    assert!(
+        msg.starts_with(
+            "x.jpg: the file is named .jpg but its content is PNG, which could not be decoded: "
+        ),
+        "{msg}"
+    );
+    // The same bytes correctly named: a plain decode error.
+    let msg = err(&bytes, "x.png");
+    assert!(
+        msg.starts_with("x.png: cannot decode the PNG data: "),
+        "{msg}"
+    );
+}
+
+const SUPPORTED: &str = "supported: PNG, JPEG, TIFF, WebP, BMP, OpenEXR, Radiance HDR";
+
+#[test]
+fn not_images() {
+    let mut state = 0x2545_F491_4F6C_DD1Du64;
+    let random: Vec<u8> = (0..4096)
+        .map(|_| {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 24) as u8
+        })
+        .collect();
+    let mut random = random;
+    random[0] = 0xAB; // no format starts so
+    let cases: [(&str, &[u8], &str); 7] = [
+        ("noise.png", &random, "unrecognised bytes"),
+        ("notes.png", b"shopping list:\n- milk\n- eggs\n", "text"),
+        (
+            "scan.png",
+            b"%PDF-1.7\n%\xE2\xE3\xCF\xD3\n1 0 obj",
+            "a PDF document",
+        ),
+        (
+            "anim.png",
+            b"GIF89a\x01\x00\x01\x00\x00\x00\x00;",
+            "a Gif image, which is not supported",
+        ),
+        (
+            "IMG_0001.jpg",
+            b"\0\0\0\x18ftypheic\0\0\0\0mif1heic",
+            "a HEIF/HEIC photo, which is not supported: export it as JPEG or PNG",
+        ),
+        (
+            "logo.png",
+            b"<?xml version=\"1.0\"?>\n<svg xmlns=\"http://www.w3.org/2000/svg\"/>",
+            "an SVG drawing (vector graphics)",
+        ),
+        (
+            "page.jpg",
+            b"<!DOCTYPE html><html><body>404</body></html>",
+            "an HTML page",
+        ),
+    ];
+    for (name, bytes, content) in cases {
+        assert_eq!(
+            err(bytes, name),
+            format!("{name}: not a supported image (the content is {content}); {SUPPORTED}")
+        );
+    }
+}
+
+/// CRC-32 (PNG's), bitwise.
+fn crc32(data: &[u8]) -> u32 {
+    let mut crc = !0u32;
+    for &b in data {
+        crc ^= b as u32;
+        for _ in 0..8 {
+            crc = if crc & 1 != 0 {
+                (crc >> 1) ^ 0xEDB8_8320
+            } else {
+                crc >> 1
+            };
+        }
+    }
+    !crc
+}
+
+fn png_chunk(out: &mut Vec<u8>, kind: &[u8; 4], data: &[u8]) {
+    out.extend_from_slice(&(data.len() as u32).to_be_bytes());
+    let start = out.len();
+    out.extend_from_slice(kind);
+    out.extend_from_slice(data);
+    let crc = crc32(&out[start..]);
+    out.extend_from_slice(&crc.to_be_bytes());
+}
+
+/// A well-formed PNG whose IHDR claims `w × h` RGB8 but whose IDAT holds a
+/// few bytes only.
+fn lying_png(w: u32, h: u32) -> Vec<u8> {
+    let mut out = b"\x89PNG\r\n\x1a\n".to_vec();
+    let mut ihdr = Vec::new();
+    ihdr.extend_from_slice(&w.to_be_bytes());
+    ihdr.extend_from_slice(&h.to_be_bytes());
+    ihdr.extend_from_slice(&[8, 2, 0, 0, 0]); // 8-bit RGB, deflate, no interlace
+    png_chunk(&mut out, b"IHDR", &ihdr);
+    // zlib: a stored empty block would do; any small stream will.
+    png_chunk(
+        &mut out,
+        b"IDAT",
+        &[0x78, 0x9C, 0x03, 0x00, 0x00, 0x00, 0x00, 0x01],
+    );
+    png_chunk(&mut out, b"IEND", &[]);
+    out
+}
+
+#[test]
+fn decompression_bomb_fails_fast_without_allocating() {
+    let start = Instant::now();
+    let msg = err(&lying_png(100_000, 100_000), "bomb.png");
+    let took = start.elapsed();
+    assert_eq!(
+        msg,
+        "bomb.png: 100000 × 100000 = 10000 megapixels exceeds the limit of 100 megapixels (--max-megapixels)"
+    );
+    assert!(took < Duration::from_millis(200), "took {took:?}");
+    assert_eq!(
+        err(&lying_png(50_000, 50_000), "x.png"),
+        "x.png: 50000 × 50000 = 2500 megapixels exceeds the limit of 100 megapixels (--max-megapixels)"
+    );
+}
+
+#[test]
+fn exr_header_is_checked_before_decoding() {
+    // A real EXR whose data and display windows are patched to claim
+    // 100000 × 100000 pixels.
+    let img = Rgb32FImage::from_pixel(4, 4, Rgb([0.5; 3]));
+    let mut bytes = encode(&img.into(), ImageFormat::OpenExr);
+    for attr in [&b"dataWindow\0box2i\0"[..], &b"displayWindow\0box2i\0"[..]] {
+        let at = bytes.windows(attr.len()).position(|w| w == attr).unwrap() + attr.len() + 4;
+        bytes[at + 8..at + 12].copy_from_slice(&99_999i32.to_le_bytes());
+        bytes[at + 12..at + 16].copy_from_slice(&99_999i32.to_le_bytes());
+    }
+    let start = Instant::now();
+    let msg = err(&bytes, "huge.exr");
+    assert!(start.elapsed() < Duration::from_millis(500));
+    assert_eq!(
+        msg,
+        "huge.exr: 100000 × 100000 = 10000 megapixels exceeds the limit of 100 megapixels (--max-megapixels)"
+    );
+}
+
+#[test]
+fn limits_are_configurable() {
+    let (img, _) = sample(3, 8);
+    let bytes = encode(&img, ImageFormat::Png);
+    let tight = PhotoLimits {
+        max_pixels: 34,
+        ..PhotoLimits::default()
+    };
+    let msg = photo::decode(&bytes, Path::new("a.png"), &tight)
+        .unwrap_err()
+        .to_string();
+    assert_eq!(msg, "a.png: 7 × 5 = 0.000035 megapixels exceeds the limit of 0.000034 megapixels (--max-megapixels)");
+    let exact = PhotoLimits {
+        max_pixels: 35,
+        ..PhotoLimits::default()
+    };
+    photo::decode(&bytes, Path::new("a.png"), &exact).unwrap();
+    let little = PhotoLimits {
+        max_alloc: 1000,
+        ..PhotoLimits::default()
+    };
+    let msg = photo::decode(&bytes, Path::new("a.png"), &little)
+        .unwrap_err()
+        .to_string();
+    assert_eq!(
+        msg,
+        "a.png: decoding 7 × 5 pixels needs about 1 MiB (at 32 bytes per pixel), over the memory limit of 1 MiB (--max-megapixels)"
+    );
+    let defaults = PhotoLimits::default();
+    assert_eq!(
+        (defaults.max_pixels, defaults.max_alloc),
+        (100_000_000, 4 << 30)
+    );
+    assert!(defaults.max_pixels * photo::PEAK_BYTES_PER_PIXEL <= defaults.max_alloc);
+}
+
+#[test]
+fn zero_sized_image() {
+    let msg = err(&lying_png(0, 10), "empty.png");
+    assert!(msg.starts_with("empty.png: "), "{msg}");
+}
+
+#[test]
+fn supported_extensions() {
+    for name in [
+        "a.png", "b.JPG", "c.jpeg", "d.Tif", "e.tiff", "f.webp", "g.BMP", "h.exr", "i.hdr",
+    ] {
+        assert!(photo::is_supported_extension(Path::new(name)), "{name}");
+    }
+    for name in ["a.gif", "b.heic", "c", "d.png.txt", ".png"] {
+        assert!(!photo::is_supported_extension(Path::new(name)), "{name}");
+    }
+    assert_eq!(photo::SUPPORTED_EXTENSIONS.len(), 9);
+}
+
+#[test]
+fn working_size_keeps_aspect() {
+    assert_eq!(photo::working_size(600, 400, 320), (320, 213));
+    assert_eq!(photo::working_size(400, 600, 320), (213, 320));
+    assert_eq!(photo::working_size(37, 53, 320), (223, 320));
+    assert_eq!(photo::working_size(1000, 1, 320), (320, 1));
+    assert_eq!(photo::working_size(5, 5, 320), (320, 320));
+}
+
+#[test]
+fn resize_is_the_triangle_filter() {
+    let (img, _) = sample(3, 16);
+    let rgb = img.to_rgb32f();
+    let ours = photo::resize(&rgb, 4, 9);
+    let theirs = image::imageops::resize(&rgb, 4, 9, image::imageops::FilterType::Triangle);
+    assert_eq!(ours.as_raw(), theirs.as_raw());
+    assert_eq!(photo::resize(&rgb, W, H).as_raw(), rgb.as_raw());
+}
+
+#[test]
+fn planar_layout() {
+    let mut img = Rgb32FImage::new(2, 1);
+    img.put_pixel(0, 0, Rgb([0.1, 0.2, 0.3]));
+    img.put_pixel(1, 0, Rgb([0.4, 0.5, 0.6]));
+    assert_eq!(photo::to_planar(&img), vec![0.1, 0.4, 0.2, 0.5, 0.3, 0.6]);
+}
