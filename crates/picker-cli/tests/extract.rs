@@ -488,3 +488,32 @@ fn extraction_is_deterministic() {
         );
     }
 }
+
+#[test]
+fn regressions_extract_without_error() {
+    let tmp = tempfile::tempdir().unwrap();
+    let w = repo().join("fixtures/weights/tiny");
+    for (file, pick) in [("tiny_47x45.jpg", "23,22"), ("tiny_68x30.bmp", "34,15")] {
+        let photo = repo().join("fixtures/regress").join(file);
+        let out = tmp.path().join(file);
+        for uv in ["auto", "net", "plane"] {
+            ok(&[
+                "extract",
+                photo.to_str().unwrap(),
+                "--weights",
+                w.to_str().unwrap(),
+                "--pick",
+                pick,
+                "--work-size",
+                "48",
+                "--max-size",
+                "32",
+                "--uv",
+                uv,
+                "--out",
+                out.to_str().unwrap(),
+            ]);
+            assert!(out.join("material.json").exists(), "{file} --uv {uv}");
+        }
+    }
+}

@@ -338,11 +338,20 @@ pub fn extract(
     let full = mask::refine(&pm.mask, &p.luma, fw, fh);
     let full = if full.count() == 0 {
         // A material thinner than a photo-resolution edge: keep the coarse mask.
+        // Each masked working pixel also marks the photo pixel under its centre,
+        // so a non-empty coarse mask never becomes empty (tiny or downscaled photos).
         let up = resample::bilinear_plane(&pm.mask.to_image().data, w, h, fw, fh);
+        let mut data: Vec<bool> = up.iter().map(|&v| v >= 0.5).collect();
+        for (i, _) in pm.mask.data.iter().enumerate().filter(|(_, &m)| m) {
+            let (x, y) = (i % w, i / w);
+            let fx = (((x as f64 + 0.5) * fw as f64 / w as f64) as usize).min(fw - 1);
+            let fy = (((y as f64 + 0.5) * fh as f64 / h as f64) as usize).min(fh - 1);
+            data[fy * fw + fx] = true;
+        }
         Mask {
             width: fw,
             height: fh,
-            data: up.iter().map(|&v| v >= 0.5).collect(),
+            data,
         }
     } else {
         full
