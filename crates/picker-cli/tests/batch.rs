@@ -554,3 +554,25 @@ fn write_folder() {
     std::fs::create_dir_all(&input).unwrap();
     make_folder(&input, n);
 }
+
+#[test]
+fn output_inside_the_input_folder_is_not_read_back() {
+    let tmp = tempfile::tempdir().unwrap();
+    let input = tmp.path().join("photos");
+    std::fs::create_dir_all(&input).unwrap();
+    make_folder(&input, 6);
+    let out = input.join("results");
+    for _ in 0..2 {
+        let o = run(batch_cmd(&input, &out, &["--all"]));
+        assert!(
+            matches!(o.status.code(), Some(0 | 1)),
+            "{}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        let r = report(&out);
+        assert_eq!(r["counts"]["photos"], 6, "{r:#}");
+        for p in r["photos"].as_array().unwrap() {
+            assert!(!p["photo"].as_str().unwrap().starts_with("results/"), "{p}");
+        }
+    }
+}
