@@ -21,6 +21,8 @@
 //!   kernel threads.
 //! - **Ctrl-C / SIGTERM**: no new photo starts, the ones in flight finish;
 //!   a second signal removes their partial folders and exits at once (130).
+//!   A full output disk stops the batch the same way (every later photo
+//!   would fail), with exit status 1.
 //! - **Report**: a progress bar (plain lines when stderr is not a terminal),
 //!   a summary and `OUT_DIR/batch-report.json`. Exit status 0 when every
 //!   photo is ok or up to date, 1 when some failed, 2 for usage errors, 130
@@ -352,6 +354,7 @@ struct Shared<'a> {
     next: AtomicUsize,
     results: Mutex<Vec<Option<Outcome>>>,
     stop: Arc<AtomicBool>,
+    disk_full: AtomicBool,
     in_flight: Arc<Mutex<BTreeSet<PathBuf>>>,
     out: &'a Path,
     flags: &'a Flags,
@@ -436,6 +439,19 @@ fn process(s: &Shared<'_>, photo: &Photo, req: &Request) -> Result<Outcome> {
     }
 }
 
+/// True when an error comes from a full disk (or quota), where every later
+/// photo would fail the same way.
+fn is_disk_full(e: &anyhow::Error) -> bool {
+    e.chain().any(|c| {
+        c.downcast_ref::<std::io::Error>().is_some_and(|io| {
+            matches!(
+                io.kind(),
+                std::io::ErrorKind::StorageFull | std::io::ErrorKind::QuotaExceeded
+            )
+        })
+    })
+}
+
 fn worker(s: &Shared<'_>) {
     loop {
         if s.stop.load(Ordering::SeqCst) {
@@ -451,7 +467,15 @@ fn worker(s: &Shared<'_>) {
             match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| process(s, photo, req)))
             {
                 Ok(Ok(o)) => o,
-                Ok(Err(e)) => Outcome::Failed(crate::one_line(&e)),
+                Ok(Err(e)) => {
+                    if is_disk_full(&e) && !s.stop.swap(true, Ordering::SeqCst) {
+                        s.disk_full.store(true, Ordering::SeqCst);
+                        s.progress.note(
+                            "the output disk is full: stopping (photos in progress finish or fail); free some space and run the same command again to resume",
+                        );
+                    }
+                    Outcome::Failed(crate::one_line(&e))
+                }
                 Err(p) => {
                     let msg = p
                         .downcast_ref::<&str>()
@@ -518,6 +542,13 @@ impl Progress {
             b.inc(1);
         } else if self.lines {
             eprintln!("[{k}/{}] {what}", self.total);
+        }
+    }
+
+    fn note(&self, msg: &str) {
+        match &self.bar {
+            Some(b) => b.println(msg),
+            None => eprintln!("{msg}"),
         }
     }
 
@@ -640,6 +671,7 @@ pub fn run(a: Args) -> Result<ExitCode> {
         next: AtomicUsize::new(0),
         results: Mutex::new(vec![None; n]),
         stop: stop.clone(),
+        disk_full: AtomicBool::new(false),
         in_flight,
         out: &a.out,
         flags: &a.flags,
@@ -669,7 +701,8 @@ pub fn run(a: Args) -> Result<ExitCode> {
     shared.progress.finish();
 
     let results = shared.results.into_inner().unwrap_or_default();
-    let interrupted = stop.load(Ordering::SeqCst);
+    let disk_full = shared.disk_full.load(Ordering::SeqCst);
+    let interrupted = stop.load(Ordering::SeqCst) && !disk_full;
     let mut rows = Vec::new();
     let (mut ok, mut fresh, mut failed, mut skipped, mut not_started) = (0, 0, 0, 0, 0);
     for ((photo, _), r) in shared.photos.iter().zip(&results) {
@@ -722,6 +755,7 @@ pub fn run(a: Args) -> Result<ExitCode> {
         "jobs": jobs,
         "threads_per_job": per_job,
         "interrupted": interrupted,
+        "disk_full": disk_full,
         "counts": {"photos": rows.len(), "ok": ok, "up_to_date": fresh, "failed": failed, "skipped": skipped, "not_started": not_started},
         "seconds": elapsed,
         "photos": rows,
@@ -732,8 +766,6 @@ pub fn run(a: Args) -> Result<ExitCode> {
             None => "batch-report.json".into(),
         })
     });
-    let text = serde_json::to_string_pretty(&report).context("serialising the batch report")?;
-    crate::output::write_atomic(&report_path, format!("{text}\n").as_bytes())?;
     eprintln!(
         "{} photos: {ok} ok, {fresh} up to date, {failed} failed, {skipped} skipped{} in {elapsed:.1} s; report: {}",
         rows.len(),
@@ -752,9 +784,12 @@ pub fn run(a: Args) -> Result<ExitCode> {
             );
         }
     }
+    // After the summary, so a full disk still shows what happened.
+    let text = serde_json::to_string_pretty(&report).context("serialising the batch report")?;
+    crate::output::write_atomic(&report_path, format!("{text}\n").as_bytes())?;
     Ok(if interrupted {
         ExitCode::from(130)
-    } else if failed > 0 {
+    } else if failed > 0 || disk_full {
         ExitCode::from(1)
     } else {
         ExitCode::SUCCESS

@@ -576,3 +576,59 @@ fn output_inside_the_input_folder_is_not_read_back() {
         }
     }
 }
+
+/// A full output disk stops the batch (every later photo would fail) and
+/// loses nothing: visible results are whole, and a re-run with space resumes.
+/// Needs a small tmpfs (root in a container); skipped, saying so, elsewhere.
+#[test]
+fn full_disk_stops_and_resumes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mnt = tmp.path().join("small");
+    std::fs::create_dir_all(&mnt).unwrap();
+    let mounted = Command::new("mount")
+        .args(["-t", "tmpfs", "-o", "size=400k", "tmpfs"])
+        .arg(&mnt)
+        .stderr(Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success());
+    if !mounted {
+        eprintln!("SKIPPED full_disk_stops_and_resumes: cannot mount a small tmpfs here");
+        return;
+    }
+    struct Unmount<'a>(&'a Path);
+    impl Drop for Unmount<'_> {
+        fn drop(&mut self) {
+            let _ = Command::new("umount").arg(self.0).status();
+        }
+    }
+    let _guard = Unmount(&mnt);
+    let input = tmp.path().join("photos");
+    std::fs::create_dir_all(&input).unwrap();
+    make_folder(&input, 40);
+    let out = mnt.join("out");
+    let o = run(batch_cmd(&input, &out, &["--jobs", "1"]));
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("disk is full"), "{stderr}");
+    assert!(stderr.contains("No space left"), "{stderr}");
+    assert_only_whole_results(&out);
+    let done = manifests(&out);
+    assert!(done < 35, "the disk was meant to fill up ({done} done)");
+    // Move the partial results to a roomy disk and resume there.
+    let roomy = tmp.path().join("roomy");
+    let cp = Command::new("cp")
+        .arg("-a")
+        .arg(&out)
+        .arg(&roomy)
+        .status()
+        .unwrap();
+    assert!(cp.success());
+    let o = run(batch_cmd(&input, &roomy, &[]));
+    assert_eq!(o.status.code(), Some(1));
+    let r = report(&roomy);
+    assert_eq!(r["counts"]["up_to_date"], done as u64, "{r:#}");
+    assert_eq!(r["counts"]["not_started"], 0);
+    let full = tmp.path().join("full");
+    run(batch_cmd(&input, &full, &[]));
+    assert_same_tree(&full, &roomy);
+}
