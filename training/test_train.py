@@ -1,0 +1,241 @@
+"""Self-test of the trainer (training/train.py, synth_data.py, evaluate.py) on fixtures/synth (two 24×32 scenes).
+
+    /tmp/venv/bin/python -m training.test_train          # ~30 s on one thread
+
+Reading and masks, target encoding round trips, reduction and mirroring conventions, a 4-step run that lowers
+the loss, bit-identical resume, export → ``picker weights inspect --check`` and ``picker infer`` (binary from
+$PICKER_BIN, else target*/release/picker; skipped with a message when absent), the evaluation helper.
+"""
+
+import csv
+import glob
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+import torch
+
+from training import conventions as conv
+from training import evaluate, train
+from training import synth_data as sd
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+FIXTURES = os.path.join(ROOT, "fixtures", "synth")
+SCENE0 = os.path.join(FIXTURES, "scene_000000")
+SCENE1 = os.path.join(FIXTURES, "scene_000001")
+
+
+def close(a, b, tol=1e-5):
+    d = float((torch.as_tensor(a) - torch.as_tensor(b)).abs().max())
+    assert d <= tol, f"max |a - b| = {d} > {tol}"
+
+
+def test_reading():
+    r = sd.load_scene(SCENE0, "irn")
+    assert r["image"].shape == (3, 24, 32) and 0 <= r["image"].min() and r["image"].max() <= 1
+    for name, c in [("diffuse_albedo", 3), ("specular_albedo", 3), ("normals", 3), ("glossiness", 1),
+                    ("view_vector", 3), ("uv", 3)]:
+        assert r[name].shape == (c, 24, 32), (name, r[name].shape)
+    close(np.linalg.norm(r["normals"], axis=0), 1.0)
+    assert r["surface"].all()  # scene 0 sees no sky
+    r1 = sd.load_scene(SCENE1, "irn")
+    sky = r1["surface"][0] == 0
+    assert sky.sum() == 355, sky.sum()  # material id 0 in material_id.png
+    assert (r1["diffuse_albedo"][:, sky] == 0).all() and (r1["textured"][0][sky] == 0).all()
+    assert set(np.unique(r["uv"][2])) <= {0.0, 1.0} and (r["uv"][:2] >= 0).all() and (r["uv"][:2] <= 1).all()
+    env = sd.load_scene(SCENE0, "envmap")["envmap"]
+    assert env.shape == (3, 3, 4) and env.min() >= 0, env.shape  # 1/8 of 24x32
+    seg = sd.load_scene(SCENE1, "msn")["segmentation"]
+    assert seg.shape == (3, 24, 32) and (seg[:, sky] == 0).all()
+    assert sd.seeds_of(sd.list_scenes([FIXTURES])) == [2026]
+
+
+def test_encoding_round_trip():
+    r = sd.load_scene(SCENE1, "irn")
+    r.update(sd.load_scene(SCENE1, "envmap"))
+    r["segmentation"] = sd.load_scene(SCENE1, "msn")["segmentation"]
+    t = sd.encode_targets(r)
+    for name in ("diffuse_albedo", "specular_albedo", "normals", "glossiness", "view_vector", "uv", "segmentation",
+                 "envmap"):
+        assert t[name].min() >= -1 and t[name].max() <= 1, name
+    for name in ("diffuse_albedo", "specular_albedo", "glossiness", "segmentation"):
+        close(conv.to_unit(t[name]), r[name])
+    close(conv.unit_vectors(t["normals"]), r["normals"])
+    close(conv.unit_vectors(t["view_vector"]), r["view_vector"])
+    uvt = conv.texture_coords(t["uv"])
+    u = torch.from_numpy(r["uv"])
+    close(uvt[2], u[2])
+    wrapped = (uvt[:2] - u[:2]).abs()
+    close(torch.minimum(wrapped, 1 - wrapped), 0.0)  # u = 1.0 (f32 wrap rounding) decodes to 0
+    close(conv.env_radiance(t["envmap"]) / (1 + torch.from_numpy(r["envmap"])),
+          torch.from_numpy(r["envmap"]) / (1 + torch.from_numpy(r["envmap"])), 1e-4)
+    g = torch.tensor([0.0, 0.3, 1.0])
+    close(conv.encode_phong_exponent(conv.phong_exponent(conv.from_unit(g))), conv.from_unit(g), 1e-5)
+
+
+class _Always:
+    """A stand-in for numpy's Generator: crops at the origin, mirrors always."""
+
+    def integers(self, lo, hi):
+        return lo
+
+    def random(self):
+        return 0.0
+
+
+def test_reduce_and_mirror():
+    raw = sd.load_scene(SCENE1, "irn")
+    raw.update(sd.load_scene(SCENE1, "envmap"))
+    plain = sd.prepare(raw, (24, 32), None, flip=False, crop="centre")
+    mirrored = sd.prepare(raw, (24, 32), _Always(), flip=True)
+    close(mirrored["input"], plain["input"].flip(-1))
+    close(mirrored["normals"][0], -plain["normals"][0].flip(-1))
+    close(mirrored["normals"][1:], plain["normals"][1:].flip(-1))
+    close(mirrored["view_vector"][0], -plain["view_vector"][0].flip(-1))
+    close(mirrored["uv"], plain["uv"].flip(-1))
+    close(mirrored["envmap"], plain["envmap"].flip(-1))
+    close(mirrored["surface"], plain["surface"].flip(-1))
+    half = sd.prepare(raw, (12, 16), None, flip=False, crop="centre")  # factor 2
+    assert half["input"].shape == (3, 12, 16) and half["envmap"].shape == (3, 1, 2)
+    close(half["input"], conv.encode_input(torch.from_numpy(raw["image"]).reshape(3, 12, 2, 16, 2).mean((2, 4))))
+    close(torch.linalg.vector_norm(half["normals"], dim=0), 1.0)
+    s = torch.from_numpy(raw["surface"][0]).reshape(12, 2, 16, 2)
+    close(half["surface"][0], s.amin((1, 3)))
+    close(half["uv"], sd.encode_targets({"uv": raw["uv"][:, 1::2, 1::2]})["uv"])
+    sd.check_disjoint({"train": [SCENE0], "val": []})
+    try:
+        sd.check_disjoint({"train": [SCENE0], "val": [SCENE1]})
+        raise AssertionError("shared seeds were not refused")
+    except ValueError as e:
+        assert "2026" in str(e)
+
+
+def _run(out, *extra):
+    return train.main(["--net", "irn", "--preset", "tiny", "--data", FIXTURES, "--size", "24x32", "--steps", "4",
+                       "--batch", "2", "--threads", "1", "--log-every", "1", "--quiet", "--out", out, *extra])
+
+
+def _losses(run_dir):
+    with open(os.path.join(run_dir, "train.csv"), newline="") as f:
+        return [float(r["loss"]) for r in csv.DictReader(f)]
+
+
+def test_training_and_resume(tmp):
+    straight = os.path.join(tmp, "straight")
+    path = _run(straight, "--no-flip")
+    losses = _losses(straight)
+    assert len(losses) == 4 and losses[-1] < losses[0], losses
+    assert os.path.exists(path) and glob.glob(os.path.join(straight, "samples", "*.png"))
+    # Interrupted after 2 steps, resumed: bit-identical weights and optimiser state.
+    parted = os.path.join(tmp, "parted")
+    assert _run(parted, "--no-flip", "--until", "2") is None
+    assert not os.path.exists(os.path.join(parted, "irn.safetensors"))
+    train.main(["--resume", "--out", parted, "--threads", "1", "--quiet"])
+    a = torch.load(os.path.join(straight, "checkpoints", "last.pt"), weights_only=False)
+    b = torch.load(os.path.join(parted, "checkpoints", "last.pt"), weights_only=False)
+    assert a["step"] == b["step"] == 4
+    for k in a["model"]:
+        assert torch.equal(a["model"][k], b["model"][k]), k
+    for i, st in a["optimizer"]["state"].items():
+        for k, v in st.items():
+            assert torch.equal(v, b["optimizer"]["state"][i][k]), (i, k)
+    assert _losses(parted) == losses
+    # Data-loader workers give the same batches (samples are functions of (seed, k)).
+    workers = os.path.join(tmp, "workers")
+    _run(workers, "--no-flip", "--workers", "2")
+    c = torch.load(os.path.join(workers, "checkpoints", "last.pt"), weights_only=False)
+    for k in a["model"]:
+        assert torch.equal(a["model"][k], c["model"][k]), k
+    return path
+
+
+def test_other_nets(tmp):
+    paths = {}
+    for net in ("msn", "envmap"):
+        out = os.path.join(tmp, net)
+        paths[net] = train.main(["--net", net, "--preset", "tiny", "--data", FIXTURES, "--size", "24x32",
+                                 "--steps", "4", "--batch", "2", "--threads", "1", "--log-every", "1", "--quiet",
+                                 "--out", out])
+        losses = _losses(out)
+        assert losses[-1] < losses[0], (net, losses)
+    return paths
+
+
+def picker_bin():
+    cands = [os.environ.get("PICKER_BIN", "")] + [os.path.join(ROOT, p, "release", "picker")
+                                                  for p in ("target", "../target-main")]
+    return next((c for c in cands if c and os.access(c, os.X_OK)), None)
+
+
+def test_export_loads_in_rust(tmp, irn_path, other_paths):
+    wdir = os.path.join(tmp, "weights")
+    os.makedirs(wdir)
+    for p in [irn_path, *other_paths.values()]:
+        shutil.copy(p, wdir)
+    net, _, meta = evaluate.load_weights(irn_path)
+    assert net == "irn" and meta["preset"] == "tiny" and json.loads(meta["training.data_seeds"]) == [2026]
+    assert meta["training.steps"] == "4" and "training.date" in meta and "train_loss" in meta["training.metrics"]
+    from safetensors import safe_open
+    with safe_open(irn_path, framework="pt") as f:
+        assert f.get_tensor("enc.conv_in.conv.weight").dtype == torch.float16
+    exe = picker_bin()
+    if exe is None:
+        print("  SKIPPED: no picker binary (set PICKER_BIN) for the Rust load check")
+        return
+    for f in sorted(os.listdir(wdir)):
+        r = subprocess.run([exe, "weights", "inspect", os.path.join(wdir, f), "--check"], capture_output=True,
+                           text=True)
+        assert r.returncode == 0 and "check:       ok" in r.stdout, r.stdout + r.stderr
+    out = os.path.join(tmp, "infer")
+    r = subprocess.run([exe, "infer", os.path.join(ROOT, "fixtures", "examples", "coffee.jpg"), "--weights", wdir,
+                        "--out", out, "--threads", "1"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stdout + r.stderr
+    for name in ("diffuse_albedo.exr", "segmentation.exr", "envmap.exr"):
+        assert os.path.exists(os.path.join(out, name)), name
+
+
+def test_evaluate(tmp, irn_path, other_paths):
+    out = os.path.join(tmp, "metrics.json")
+    res = evaluate.main(["--weights", irn_path, "--weights", other_paths["msn"], "--weights", other_paths["envmap"],
+                         "--data", FIXTURES, "--out", out, "--allow-overlap", "--threads", "1"])
+    for k in ("albedo_si_mse", "normals_deg", "uv_error", "uv_t_accuracy", "envmap_log_l1", "segmentation_l1"):
+        m = res["metrics"][k]
+        assert m["scenes"] == 2 and np.isfinite(m["model"]) and np.isfinite(m["baseline"]), (k, m)
+    assert json.load(open(out))["test_seeds"] == [2026]
+    assert 0 < res["metrics"]["normals_deg"]["baseline"] < 90
+    try:
+        evaluate.main(["--weights", irn_path, "--data", FIXTURES, "--threads", "1"])
+        raise AssertionError("evaluation on training seeds was not refused")
+    except SystemExit as e:
+        assert "2026" in str(e)
+
+
+def main():
+    torch.set_num_threads(1)
+    t_all = time.perf_counter()
+    with tempfile.TemporaryDirectory() as tmp:
+        results = {}
+
+        def step(name, fn, *a):
+            t = time.perf_counter()
+            results[name] = fn(*a)
+            print(f"ok  {name} ({time.perf_counter() - t:.1f} s)", flush=True)
+            return results[name]
+
+        step("reading", test_reading)
+        step("encoding round trip", test_encoding_round_trip)
+        step("reduce and mirror", test_reduce_and_mirror)
+        irn = step("4-step run lowers the loss; resume and workers are bit-identical", test_training_and_resume, tmp)
+        others = step("msn and envmap runs lower the loss", test_other_nets, tmp)
+        step("export loads and runs in picker", test_export_loads_in_rust, tmp, irn, others)
+        step("evaluate", test_evaluate, tmp, irn, others)
+    print(f"all passed in {time.perf_counter() - t_all:.1f} s")
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,469 @@
+"""Trainer of the IRN, MSN and EnvMap on ``picker synth`` scenes (issue 5, item 1).
+
+Recipe (thesis / Sengupta et al. 2019): L1 on every element, Adam (lr 1e-3 MSN, 1e-4 IRN, 1e-3 EnvMap),
+multi-resolution fine-tuning (stages of sizes and steps, e.g. 120×160 then 240×320). Losses are computed in the
+networks' tanh space on targets encoded with the exact inverses of :mod:`training.conventions` (see
+:mod:`training.synth_data` for the targets, masks and augmentation): for albedos, glossiness, uv and
+segmentation this is 2× the L1 of the decoded values, for normals and view vectors the L1 of the unit
+vectors, for the env map the L1 of ln(1 + L) scaled by 2/ln(1001) (a log-radiance loss).
+
+Usage (from the repository root; ``-m`` so that ``training`` is a package)::
+
+    python -m training.train --net msn --preset tiny --data DATA/train --val DATA/val --out runs/msn \\
+        --size 120x160 --steps 200 --batch 4
+    python -m training.train --resume --out runs/msn [--steps 400]       # continue (bit-identical on CPU)
+    python -m training.train --export-only --out runs/msn                # (re)write runs/msn/msn.safetensors
+
+Run folder: ``config.json`` (the effective training config), ``train.csv`` / ``val.csv`` (logs),
+``samples/step_NNNNNNN.png`` (input | target | prediction per element for a few fixed scenes),
+``checkpoints/last.pt`` (model, optimiser, step, RNG states, elapsed time), and at the end
+``<net>.safetensors`` (F16, the documented weights format, loadable by ``picker --weights RUN_DIR``).
+"""
+
+import argparse
+import copy
+import csv
+import datetime
+import json
+import os
+import random
+import time
+
+import numpy as np
+import torch
+
+from training import synth_data as sd
+from training.picker_nets import build, named_outputs, save_weights
+from training.presets import PRESETS, preset, validate_config
+
+DEFAULT_LR = {"irn": 1e-4, "msn": 1e-3, "envmap": 1e-3}
+
+DEFAULTS = {
+    "net": None,
+    "preset": "tiny",          # a preset of training/presets.py, used when "model" is null
+    "model": None,             # or a full net config dict (the contract's keys)
+    "label": None,             # metadata "preset" of the export; default: the preset name, "custom" for "model"
+    "seed": 0,
+    "batch": 4,
+    "lr": None,                # default DEFAULT_LR[net]
+    "adam_betas": [0.9, 0.999],
+    "stages": [{"size": [120, 160], "steps": 100}],
+    "flip": True,
+    "loss_weights": {},        # element → weight (default 1 each)
+    "data": [],
+    "val": [],
+    "val_scenes": 64,          # at most this many validation scenes per evaluation
+    "log_every": 10,
+    "val_every": 1000,
+    "sample_every": 500,
+    "sample_scenes": 4,
+    "ckpt_every": 1000,
+    "workers": 0,
+    "cache": False,
+    "amp": False,              # bf16 autocast on CUDA
+    "export_dtype": "f16",
+}
+
+DTYPES = {"f16": torch.float16, "bf16": torch.bfloat16, "f32": torch.float32}
+
+
+def parse_size(text):
+    """``"120x160"`` → [120, 160] (height × width)."""
+    try:
+        h, w = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"size {text!r}: expected HEIGHTxWIDTH, e.g. 120x160") from None
+    return [h, w]
+
+
+def arg_parser():
+    p = argparse.ArgumentParser(prog="python -m training.train", description=__doc__.split("\n\n")[0])
+    p.add_argument("--net", choices=("irn", "msn", "envmap"))
+    p.add_argument("--preset", help="network preset of training/presets.py (tiny, thesis, ...)")
+    p.add_argument("--config", help="JSON training config (keys of DEFAULTS; CLI flags override it)")
+    p.add_argument("--data", action="append", help="picker synth output folder for training (repeatable)")
+    p.add_argument("--val", action="append", help="validation folder (repeatable; seeds disjoint from --data)")
+    p.add_argument("--out", required=True, help="run folder")
+    p.add_argument("--steps", type=int, help="total steps (the last stage is extended or cut to reach it)")
+    p.add_argument("--size", type=parse_size, help="training size HxW: one stage (overrides the config's stages)")
+    p.add_argument("--batch", type=int)
+    p.add_argument("--lr", type=float)
+    p.add_argument("--seed", type=int)
+    p.add_argument("--no-flip", action="store_true", help="no random left-right mirroring")
+    p.add_argument("--workers", type=int, help="data-loader worker processes")
+    p.add_argument("--device", choices=("cpu", "cuda"), help="default: cuda when available")
+    p.add_argument("--threads", type=int, help="torch CPU threads")
+    p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoints/last.pt")
+    p.add_argument("--until", type=int, help="stop (checkpoint, no export) once this step is reached")
+    p.add_argument("--export-only", action="store_true", help="export OUT/checkpoints/last.pt and exit")
+    p.add_argument("--log-every", type=int)
+    p.add_argument("--val-every", type=int)
+    p.add_argument("--sample-every", type=int)
+    p.add_argument("--ckpt-every", type=int)
+    p.add_argument("--quiet", action="store_true")
+    return p
+
+
+def effective_config(args, base=None):
+    """DEFAULTS < the checkpoint's config (resume) < --config < flags."""
+    cfg = copy.deepcopy(DEFAULTS if base is None else base)
+    if args.config:
+        with open(args.config) as f:
+            user = json.load(f)
+        unknown = set(user) - set(DEFAULTS)
+        if unknown:
+            raise SystemExit(f"{args.config}: unknown keys {sorted(unknown)}; known: {sorted(DEFAULTS)}")
+        cfg.update(user)
+    flags = {"net": args.net, "preset": args.preset, "batch": args.batch, "lr": args.lr, "seed": args.seed,
+             "workers": args.workers, "log_every": args.log_every, "val_every": args.val_every,
+             "sample_every": args.sample_every, "ckpt_every": args.ckpt_every}
+    for k, v in flags.items():
+        if v is not None:
+            cfg[k] = v
+    if args.preset is not None:
+        cfg["model"] = None
+    if args.data:
+        cfg["data"] = args.data
+    if args.val:
+        cfg["val"] = args.val
+    if args.no_flip:
+        cfg["flip"] = False
+    if args.size is not None:
+        cfg["stages"] = [{"size": args.size, "steps": args.steps or sum(s["steps"] for s in cfg["stages"])}]
+    if args.steps is not None:
+        cfg["stages"] = set_total_steps(cfg["stages"], args.steps)
+    if cfg["net"] not in DEFAULT_LR:
+        raise SystemExit("--net irn|msn|envmap is required")
+    if cfg["lr"] is None:
+        cfg["lr"] = DEFAULT_LR[cfg["net"]]
+    if cfg["model"] is None:
+        cfg["model"] = preset(cfg["net"], cfg["preset"])
+        cfg["label"] = cfg["label"] or cfg["preset"]
+    else:
+        cfg["label"] = cfg["label"] or "custom"
+    validate_config(cfg["net"], cfg["model"])
+    if cfg["label"] in PRESETS[cfg["net"]] and PRESETS[cfg["net"]][cfg["label"]] != cfg["model"]:
+        raise SystemExit(f"label {cfg['label']!r} names a preset but the model config differs from it")
+    for s in cfg["stages"]:
+        h, w = s["size"]
+        if cfg["net"] != "envmap" and (h % 4 or w % 4):
+            raise SystemExit(f"training size {h}x{w}: IRN/MSN need multiples of 4")
+        if min(h, w) < 16:
+            raise SystemExit(f"training size {h}x{w}: at least 16x16")
+    if not cfg["data"]:
+        raise SystemExit("--data is required")
+    return cfg
+
+
+def set_total_steps(stages, total):
+    """Stages cut or extended (the last one) so that their steps sum to ``total``."""
+    out, left = [], total
+    for s in stages:
+        if left <= 0:
+            break
+        n = min(s["steps"], left)
+        out.append({"size": list(s["size"]), "steps": n})
+        left -= n
+    if left > 0:
+        if out:
+            out[-1]["steps"] += left
+        else:
+            out = [{"size": list(stages[-1]["size"]), "steps": left}]
+    return out
+
+
+def stage_of(stages, step):
+    """(stage index, size) used by step number ``step`` (0-based)."""
+    end = 0
+    for i, s in enumerate(stages):
+        end += s["steps"]
+        if step < end:
+            return i, tuple(s["size"])
+    return len(stages) - 1, tuple(stages[-1]["size"])
+
+
+class StageSize:
+    """Training size of global sample number k (a picklable callable for data-loader workers)."""
+
+    def __init__(self, stages, batch):
+        self.stages, self.batch = stages, batch
+
+    def __call__(self, k):
+        return stage_of(self.stages, k // self.batch)[1]
+
+
+def seed_everything(seed):
+    random.seed(seed)
+    np.random.seed(seed % 2**32)
+    torch.manual_seed(seed)
+
+
+def rng_state():
+    return {"python": random.getstate(), "numpy": np.random.get_state(), "torch": torch.get_rng_state(),
+            "cuda": torch.cuda.get_rng_state_all() if torch.cuda.is_available() else None}
+
+
+def set_rng_state(s):
+    random.setstate(s["python"])
+    np.random.set_state(s["numpy"])
+    torch.set_rng_state(s["torch"])
+    if s.get("cuda") is not None and torch.cuda.is_available():
+        torch.cuda.set_rng_state_all(s["cuda"])
+
+
+def atomic_save(obj, path):
+    tmp = path + ".tmp"
+    torch.save(obj, tmp)
+    os.replace(tmp, path)
+
+
+def elements_of(net, model_config):
+    if net == "irn":
+        return [h["name"] for h in model_config["heads"]]
+    return ["segmentation"] if net == "msn" else ["envmap"]
+
+
+def to_device(batch, device):
+    return {k: v.to(device, non_blocking=True) for k, v in batch.items()}
+
+
+def losses(net, model, batch, elements, weights):
+    """(total, dict element → loss) of one batch (model in its current train/eval mode)."""
+    out = named_outputs(net, model(batch["input"]))
+    per = {}
+    for name in elements:
+        if name not in batch:
+            raise KeyError(f"the data has no target for head {name!r} (synth writes {sd.IRN_ELEMENTS})")
+        per[name] = sd.element_loss(name, out[name].float(), batch)
+    total = sum(weights.get(k, 1.0) * v for k, v in per.items())
+    return total, per, out
+
+
+class CsvLog:
+    """Appends rows to a CSV file; on resume, rows after the checkpoint's step are dropped first."""
+
+    def __init__(self, path, fields, resume_step=None):
+        self.path, self.fields = path, fields
+        rows = []
+        if resume_step is not None and os.path.exists(path):
+            with open(path, newline="") as f:
+                rows = [r for r in csv.DictReader(f) if int(r["step"]) <= resume_step]
+        with open(path, "w", newline="") as f:
+            w = csv.DictWriter(f, fields)
+            w.writeheader()
+            w.writerows(rows)
+
+    def write(self, row):
+        with open(self.path, "a", newline="") as f:
+            csv.DictWriter(f, self.fields).writerow(row)
+
+
+def fmt(v):
+    return f"{v:.6g}" if isinstance(v, float) else v
+
+
+def evaluate_val(net, model, scenes, size, elements, weights, batch, device):
+    """Mean losses over validation scenes (eval mode, centre crops, no mirroring)."""
+    ds = sd.SynthDataset(scenes, net, 0, lambda k: size, flip=False, crop="centre", shuffle=False)
+    sums, count = {}, 0
+    was_training = model.training
+    model.eval()
+    with torch.no_grad():
+        for start in range(0, len(scenes), batch):
+            items = [ds[k] for k in range(start, min(start + batch, len(scenes)))]
+            b = to_device(torch.utils.data.default_collate(items), device)
+            total, per, _ = losses(net, model, b, elements, weights)
+            n = len(items)
+            for k, v in [("loss", total)] + list(per.items()):
+                sums[k] = sums.get(k, 0.0) + float(v) * n
+            count += n
+    model.train(was_training)
+    return {k: v / count for k, v in sums.items()}
+
+
+def save_samples(path, net, model, scenes, size, elements, device):
+    """A PNG grid: one row per scene: input, then target | prediction of each element."""
+    from PIL import Image  # noqa: PLC0415
+
+    ds = sd.SynthDataset(scenes, net, 0, lambda k: size, flip=False, crop="centre", shuffle=False)
+    items = [ds[k] for k in range(len(scenes))]
+    b = to_device(torch.utils.data.default_collate(items), device)
+    was_training = model.training
+    model.eval()
+    with torch.no_grad():
+        out = named_outputs(net, model(b["input"]))
+    model.train(was_training)
+    h, w = size
+
+    def full(img):
+        img = img.float().cpu()
+        if img.shape[-2:] != (h, w):
+            img = torch.nn.functional.interpolate(img, size=(h, w), mode="nearest")
+        return img
+
+    cols = [sd.picture("input", b["input"].cpu())]
+    for name in elements:
+        cols += [full(sd.picture(name, b[name].cpu())), full(sd.picture(name, out[name].float().cpu()))]
+    gap = 2
+    grid = torch.ones(3, len(items) * (h + gap) - gap, len(cols) * (w + gap) - gap)
+    for r in range(len(items)):
+        for c, img in enumerate(cols):
+            grid[:, r * (h + gap):r * (h + gap) + h, c * (w + gap):c * (w + gap) + w] = img[r]
+    arr = (grid.clamp(0, 1).permute(1, 2, 0).numpy() * 255 + 0.5).astype(np.uint8)
+    Image.fromarray(arr).save(path)
+
+
+def export(run_dir, cfg, model, step, metrics, train_seeds, val_seeds, device_name):
+    """Writes RUN_DIR/<net>.safetensors (the documented format; floats as cfg["export_dtype"])."""
+    net = cfg["net"]
+    path = os.path.join(run_dir, f"{net}.safetensors")
+    epoch = os.environ.get("SOURCE_DATE_EPOCH")
+    when = (datetime.datetime.fromtimestamp(int(epoch), datetime.timezone.utc) if epoch
+            else datetime.datetime.now(datetime.timezone.utc))
+    recipe = {k: cfg[k] for k in ("seed", "batch", "lr", "adam_betas", "stages", "flip", "loss_weights")}
+    meta = {
+        "created_by": "training/train.py",
+        "training.date": when.strftime("%Y-%m-%dT%H:%M:%SZ"),
+        "training.steps": str(step),
+        "training.data_seeds": json.dumps(train_seeds),
+        "training.val_seeds": json.dumps(val_seeds),
+        "training.recipe": json.dumps(recipe, separators=(",", ":")),
+        "training.metrics": json.dumps({k: round(v, 6) for k, v in metrics.items()}, separators=(",", ":")),
+        "training.loss": "L1 in tanh space on encoded targets (training/synth_data.py)",
+        "training.device": device_name,
+        "training.torch": torch.__version__,
+    }
+    model = copy.deepcopy(model).cpu().eval()
+    save_weights(model, net, cfg["label"], cfg["model"], path, dtype=DTYPES[cfg["export_dtype"]],
+                 extra_metadata=meta)
+    return path
+
+
+def main(argv=None):
+    args = arg_parser().parse_args(argv)
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    say = (lambda *a: None) if args.quiet else (lambda *a: print(*a, flush=True))
+    run_dir = args.out
+    ckpt_path = os.path.join(run_dir, "checkpoints", "last.pt")
+    ckpt = None
+    if args.resume or args.export_only:
+        if not os.path.exists(ckpt_path):
+            raise SystemExit(f"{ckpt_path}: no checkpoint to resume from")
+        ckpt = torch.load(ckpt_path, map_location="cpu", weights_only=False)
+        cfg = effective_config(args, base=ckpt["config"])
+    else:
+        if os.path.exists(ckpt_path):
+            raise SystemExit(f"{run_dir} already holds a run; use --resume or another --out")
+        cfg = effective_config(args)
+    net = cfg["net"]
+    device = torch.device(args.device or ("cuda" if torch.cuda.is_available() else "cpu"))
+    if device.type == "cpu":
+        torch.use_deterministic_algorithms(True)
+    else:
+        torch.backends.cudnn.benchmark = True
+    device_name = torch.cuda.get_device_name(device) if device.type == "cuda" else "cpu"
+
+    train_scenes = sd.list_scenes(cfg["data"])
+    val_scenes = sd.list_scenes(cfg["val"])[:cfg["val_scenes"]] if cfg["val"] else []
+    try:
+        sd.check_disjoint({"train": train_scenes, "val": val_scenes})
+    except ValueError as e:
+        raise SystemExit(str(e)) from None
+    train_seeds, val_seeds = sd.seeds_of(train_scenes), sd.seeds_of(val_scenes)
+    sample_scenes = (val_scenes or train_scenes)[:cfg["sample_scenes"]]
+    elements = elements_of(net, cfg["model"])
+    total_steps = sum(s["steps"] for s in cfg["stages"])
+
+    seed_everything(cfg["seed"])
+    model = build(net, cfg["model"]).to(device)
+    opt = torch.optim.Adam(model.parameters(), lr=cfg["lr"], betas=tuple(cfg["adam_betas"]))
+    step, elapsed, metrics = 0, 0.0, {}
+    if ckpt is not None:
+        model.load_state_dict(ckpt["model"])
+        opt.load_state_dict(ckpt["optimizer"])
+        for g in opt.param_groups:
+            g["lr"] = cfg["lr"]
+        step, elapsed, metrics = ckpt["step"], ckpt["seconds"], ckpt.get("metrics", {})
+        set_rng_state(ckpt["rng"])
+    if args.export_only:
+        path = export(run_dir, cfg, model, step, metrics, train_seeds, val_seeds, ckpt.get("device", "?"))
+        say(f"wrote {path}")
+        return path
+
+    os.makedirs(os.path.join(run_dir, "checkpoints"), exist_ok=True)
+    os.makedirs(os.path.join(run_dir, "samples"), exist_ok=True)
+    with open(os.path.join(run_dir, "config.json"), "w") as f:
+        json.dump(cfg, f, indent=2)
+        f.write("\n")
+    resume_step = step if ckpt is not None else None
+    fields = ["step", "stage", "height", "width", "lr", "loss"] + elements + ["seconds"]
+    train_log = CsvLog(os.path.join(run_dir, "train.csv"), fields, resume_step)
+    val_log = CsvLog(os.path.join(run_dir, "val.csv"), ["step", "loss"] + elements + ["seconds"], resume_step)
+
+    def checkpoint():
+        atomic_save({"model": model.state_dict(), "optimizer": opt.state_dict(), "step": step,
+                     "seconds": elapsed, "rng": rng_state(), "config": cfg, "metrics": metrics,
+                     "device": device_name}, ckpt_path)
+
+    def validate():
+        nonlocal metrics
+        if not val_scenes:
+            return
+        size = stage_of(cfg["stages"], max(step - 1, 0))[1]
+        metrics = evaluate_val(net, model, val_scenes, size, elements, cfg["loss_weights"], cfg["batch"], device)
+        val_log.write({"step": step, **{k: fmt(v) for k, v in metrics.items()}, "seconds": fmt(elapsed)})
+        say(f"step {step} val loss {metrics['loss']:.4f}")
+
+    batch = cfg["batch"]
+    ds = sd.SynthDataset(train_scenes, net, cfg["seed"], StageSize(cfg["stages"], batch), flip=cfg["flip"],
+                         cache=cfg["cache"])
+    stop = min(total_steps, args.until) if args.until else total_steps
+    loader = torch.utils.data.DataLoader(
+        ds, batch_size=batch, sampler=sd.RangeSampler(step * batch, stop * batch), num_workers=cfg["workers"],
+        pin_memory=device.type == "cuda", persistent_workers=False)
+    say(f"{net} ({cfg['label']}) on {device_name}: {len(train_scenes)} training scenes (seeds {train_seeds}), "
+        f"{len(val_scenes)} validation; steps {step} → {stop} of {total_steps}")
+    model.train()
+    use_amp = cfg["amp"] and device.type == "cuda"
+    t0 = time.perf_counter()
+    total_f, per_f = None, {}
+    for b in loader:
+        stage, size = stage_of(cfg["stages"], step)
+        b = to_device(b, device)
+        with torch.autocast(device_type="cuda", dtype=torch.bfloat16, enabled=use_amp):
+            total, per, _ = losses(net, model, b, elements, cfg["loss_weights"])
+        total_f, per_f = float(total.detach()), {k: float(v.detach()) for k, v in per.items()}
+        opt.zero_grad(set_to_none=True)
+        total.backward()
+        opt.step()
+        step += 1
+        now = time.perf_counter()
+        elapsed += now - t0
+        t0 = now
+        if step % cfg["log_every"] == 0 or step == 1 or step == stop:
+            row = {"step": step, "stage": stage, "height": size[0], "width": size[1], "lr": cfg["lr"],
+                   "loss": fmt(total_f), "seconds": fmt(elapsed)}
+            row.update({k: fmt(v) for k, v in per_f.items()})
+            train_log.write(row)
+            say(f"step {step}/{total_steps} {size[0]}x{size[1]} loss {total_f:.4f} ({elapsed:.1f} s)")
+        if step % cfg["sample_every"] == 0 or step == stop:
+            save_samples(os.path.join(run_dir, "samples", f"step_{step:07d}.png"), net, model, sample_scenes,
+                         size, elements, device)
+        if step % cfg["val_every"] == 0 or step == total_steps:
+            validate()
+        if step % cfg["ckpt_every"] == 0 or step == stop:
+            checkpoint()
+        t0 = time.perf_counter()  # evaluation, pictures and checkpoints are not training time
+    if step < total_steps:
+        say(f"stopped at step {step} (--until); continue with --resume --out {run_dir}")
+        return None
+    if not metrics and total_f is not None:  # no validation data: record the last training losses
+        metrics = {f"train_{k}": v for k, v in [("loss", total_f)] + list(per_f.items())}
+    path = export(run_dir, cfg, model, step, metrics, train_seeds, val_seeds, device_name)
+    say(f"wrote {path}")
+    return path
+
+
+if __name__ == "__main__":
+    main()
