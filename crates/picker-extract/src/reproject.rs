@@ -62,42 +62,6 @@ impl Coords {
         a.is_finite().then_some(a)
     }
 
-    /// The UV Jacobian of pixel `i`, `[∂u/∂x, ∂v/∂x, ∂u/∂y, ∂v/∂y]`, by central
-    /// differences of the wrapped coordinates where both neighbours along an
-    /// axis are in `mask`, one-sided differences where only one is, and `None`
-    /// where the pixel has no picked neighbour along some axis (or is unpicked).
-    pub fn jacobian(&self, mask: &[bool], i: usize) -> Option<[f32; 4]> {
-        let w = self.width;
-        let (x, y) = (i % w, i / w);
-        if !mask[i] {
-            return None;
-        }
-        let diff = |prev: Option<usize>, next: Option<usize>| -> Option<(f32, f32)> {
-            let prev = prev.filter(|&j| mask[j]);
-            let next = next.filter(|&j| mask[j]);
-            let (a, b, k) = match (prev, next) {
-                (Some(p), Some(n)) => (p, n, 0.5),
-                (None, Some(n)) => (i, n, 1.0),
-                (Some(p), None) => (p, i, 1.0),
-                (None, None) => return None,
-            };
-            Some((
-                k * self.delta(self.u[a], self.u[b]),
-                k * self.delta(self.v[a], self.v[b]),
-            ))
-        };
-        let (ux, vx) = diff(
-            (x > 0).then(|| i - 1),
-            (x + 1 < w).then_some(i + 1),
-        )?;
-        let (uy, vy) = diff(
-            (y > 0).then(|| i - w),
-            (y + 1 < self.height).then_some(i + w),
-        )?;
-        let j = [ux, vx, uy, vy];
-        j.iter().all(|d| d.is_finite()).then_some(j)
-    }
-
     /// The `q`-quantile (0 = smallest) of the texture-square area per picked pixel.
     pub fn area_quantile(&self, mask: &[bool], q: f32) -> Option<f32> {
         let mut a: Vec<f32> = (0..mask.len())
@@ -116,102 +80,7 @@ impl Coords {
     /// [`DENSITY_QUANTILE`] quantile, i.e. the density of the best-seen part
     /// of the material (the closest pixels show the finest detail).
     pub fn sizing_area(&self, mask: &[bool]) -> Option<f32> {
-        match sizing_mode() {
-            0 => self.area_quantile(mask, DENSITY_QUANTILE),
-            1 => self.minor_quantile(mask, DENSITY_QUANTILE).map(|s| s * s),
-            _ => {
-                let a = self.area_quantile(mask, DENSITY_QUANTILE)?;
-                let m = self.minor_quantile(mask, DENSITY_QUANTILE)?;
-                Some(a.sqrt() * m)
-            }
-        }
-    }
-
-    /// The `q`-quantile of the minor-axis length (smallest singular value of
-    /// the Jacobian, UV units) of the picked pixels' footprints: the finest
-    /// resolved direction.
-    pub fn minor_quantile(&self, mask: &[bool], q: f32) -> Option<f32> {
-        let mut a: Vec<f32> = (0..mask.len())
-            .filter_map(|i| self.jacobian(mask, i))
-            .map(|j| Footprint::singular_values(j).1)
-            .filter(|&s| s > 0.0 && s.is_finite())
-            .collect();
-        if a.is_empty() {
-            return None;
-        }
-        let k = ((a.len() - 1) as f32 * q.clamp(0.0, 1.0)).round() as usize;
-        a.select_nth_unstable_by(k, |x, y| x.total_cmp(y));
-        Some(a[k])
-    }
-}
-
-fn sizing_mode() -> u32 {
-    std::env::var("PICKER_EXP_SIZING").ok().and_then(|s| s.parse().ok()).unwrap_or(0)
-}
-fn kernel_mode() -> u32 {
-    std::env::var("PICKER_EXP_KERNEL").ok().and_then(|s| s.parse().ok()).unwrap_or(1)
-}
-
-/// A pixel's footprint in the texture: the covariance `Σ = size²·J·Jᵀ` in
-/// texels² with its principal radii clamped to `[1, MAX_SPLAT_RADIUS]`
-/// (magnified textures still splat a one-texel tent; very distant pixels are
-/// blurred, not spread further).
-#[derive(Clone, Copy, Debug, PartialEq)]
-struct Footprint {
-    sxx: f32,
-    sxy: f32,
-    syy: f32,
-}
-
-impl Footprint {
-    /// Singular values `(major, minor)` of the Jacobian `[ux, vx, uy, vy]`.
-    fn singular_values(j: [f32; 4]) -> (f32, f32) {
-        let [ux, vx, uy, vy] = j;
-        let (a, b, c) = (ux * ux + uy * uy, ux * vx + uy * vy, vx * vx + vy * vy);
-        let l1 = 0.5 * (a + c) + (0.25 * (a - c) * (a - c) + b * b).sqrt();
-        let s1 = l1.max(0.0).sqrt();
-        let det = (ux * vy - uy * vx).abs();
-        let s2 = if s1 > 0.0 { (det / s1).min(s1) } else { 0.0 };
-        (s1, s2)
-    }
-
-    /// An isotropic footprint of radius `r` texels (clamped).
-    fn isotropic(r: f32) -> Self {
-        let r = r.clamp(1.0, MAX_SPLAT_RADIUS);
-        Footprint {
-            sxx: r * r,
-            sxy: 0.0,
-            syy: r * r,
-        }
-    }
-
-    /// The clamped footprint of Jacobian `j` in a `size`-texel texture.
-    fn from_jacobian(j: [f32; 4], size: usize) -> Self {
-        let s = size as f32;
-        let [ux, vx, uy, vy] = j.map(|d| d * s);
-        let (a, b, c) = (ux * ux + uy * uy, ux * vx + uy * vy, vx * vx + vy * vy);
-        let h = (0.25 * (a - c) * (a - c) + b * b).sqrt();
-        let (l1, l2) = (0.5 * (a + c) + h, (0.5 * (a + c) - h).max(0.0));
-        if !(l1.is_finite()) {
-            return Self::isotropic(MAX_SPLAT_RADIUS);
-        }
-        // Major eigenvector (from the better-conditioned row of Σ − λ₁I).
-        let (ex, ey) = if a >= c { (l1 - c, b) } else { (b, l1 - a) };
-        let n = (ex * ex + ey * ey).sqrt();
-        let (ex, ey) = if n > 1e-12 { (ex / n, ey / n) } else { (1.0, 0.0) };
-        let r1 = l1.sqrt().clamp(1.0, MAX_SPLAT_RADIUS);
-        let r2 = l2.sqrt().clamp(1.0, MAX_SPLAT_RADIUS);
-        let (q1, q2) = (r1 * r1, r2 * r2);
-        Footprint {
-            sxx: q1 * ex * ex + q2 * ey * ey,
-            sxy: (q1 - q2) * ex * ey,
-            syy: q1 * ey * ey + q2 * ex * ex,
-        }
-    }
-
-    /// Area of the ellipse `dᵀΣ⁻¹d ≤ 1` over π (the product of the radii).
-    fn radii_product(&self) -> f32 {
-        (self.sxx * self.syy - self.sxy * self.sxy).max(1e-12).sqrt()
+        self.area_quantile(mask, DENSITY_QUANTILE)
     }
 }
 
@@ -257,7 +126,7 @@ struct Sample {
     v: f32,
     colour: Vec3,
     weight: f32,
-    footprint: Footprint,
+    radius: f32,
 }
 
 fn splat(
@@ -273,23 +142,21 @@ fn splat(
     for s in samples {
         let px = s.u * size as f32 - 0.5;
         let py = s.v * size as f32 - 0.5;
-        // Elliptical tent max(0, 1 − √(dᵀΣ⁻¹d)) over the ellipse's bounding box.
-        let Footprint { sxx, sxy, syy } = s.footprint;
-        let det = sxx * syy - sxy * sxy;
-        let (ia, ib, ic) = (syy / det, -sxy / det, sxx / det);
-        let (hx, hy) = (sxx.sqrt(), syy.sqrt());
-        let (x0, x1) = ((px - hx).ceil() as i64, (px + hx).floor() as i64);
-        let (y0, y1) = ((py - hy).ceil() as i64, (py + hy).floor() as i64);
+        let r = s.radius;
+        let (x0, x1) = ((px - r).ceil() as i64, (px + r).floor() as i64);
+        let (y0, y1) = ((py - r).ceil() as i64, (py + r).floor() as i64);
         for ty in y0..=y1 {
-            let dy = ty as f32 - py;
+            let wy = 1.0 - (ty as f32 - py).abs() / r;
+            if wy <= 0.0 {
+                continue;
+            }
             let yy = if wrap { ty.rem_euclid(n) } else { ty };
             if yy < 0 || yy >= n {
                 continue;
             }
             for tx in x0..=x1 {
-                let dx = tx as f32 - px;
-                let q = ia * dx * dx + 2.0 * ib * dx * dy + ic * dy * dy;
-                if q >= 1.0 {
+                let wx = 1.0 - (tx as f32 - px).abs() / r;
+                if wx <= 0.0 {
                     continue;
                 }
                 let xx = if wrap { tx.rem_euclid(n) } else { tx };
@@ -297,7 +164,7 @@ fn splat(
                     continue;
                 }
                 let t = yy as usize * size + xx as usize;
-                let mut w = s.weight * (1.0 - q.max(0.0).sqrt());
+                let mut w = s.weight * wx * wy;
                 if let Some(mean) = reference {
                     let d = (s.colour - mean[t]).length() / scale;
                     w /= 1.0 + d * d;
@@ -332,29 +199,18 @@ pub fn reproject(
         if !u.is_finite() || !v.is_finite() || !c.is_finite() {
             continue;
         }
-        // Footprint: the pixel's ellipse in texels (one-texel tent where the
-        // pixel has no picked neighbour to difference against).
-        let footprint = if kernel_mode() == 0 {
-            Footprint::isotropic(
-                coords
-                    .pixel_area(mask, i)
-                    .map(|a| a.sqrt() * size as f32)
-                    .unwrap_or(1.0),
-            )
-        } else {
-            coords
-                .jacobian(mask, i)
-                .map(|j| Footprint::from_jacobian(j, size))
-                .unwrap_or(Footprint::isotropic(1.0))
-        };
-        // The tent integrates to π·r₁·r₂/3: a pixel contributes ~its confidence.
-        let weight = confidence[i] * 3.0 / (std::f32::consts::PI * footprint.radii_product());
+        // Footprint: the side of the pixel's area in texels (½ a texel at least).
+        let side = coords
+            .pixel_area(mask, i)
+            .map(|a| a.sqrt() * size as f32)
+            .unwrap_or(1.0);
+        let radius = side.clamp(1.0, MAX_SPLAT_RADIUS);
         samples.push(Sample {
             u,
             v,
             colour: c,
-            weight,
-            footprint,
+            weight: confidence[i] / (radius * radius),
+            radius,
         });
     }
     let (sum, wsum) = splat(&samples, size, coords.wrap, None, 1.0);
