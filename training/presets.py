@@ -67,6 +67,12 @@ def preset(net, name):
     return copy.deepcopy(PRESETS[net][name])
 
 
+# Bounds of every configuration (picker_nets::config::{MAX_WIDTH, MAX_BLOCKS, MAX_HEADS}).
+MAX_WIDTH = 16384
+MAX_BLOCKS = 1024
+MAX_HEADS = 64
+
+
 def validate_config(net, config):
     """Raises ValueError unless ``config`` has exactly the contract's keys for ``net`` and sane values."""
     expected = CONFIG_KEYS[net]
@@ -74,16 +80,23 @@ def validate_config(net, config):
         raise ValueError(f"{net} config keys {sorted(config)} != contract keys {sorted(expected)}")
     if not isinstance(config["conv_bias"], bool) or not config["bn_eps"] > 0:
         raise ValueError(f"conv_bias must be a bool and bn_eps > 0, got {config}")
-    if len(config["widths"]) != 3 or min(config["widths"]) < 1:
-        raise ValueError(f"widths must be three positive ints, got {config['widths']}")
-    if config["blocks"] < 0:
-        raise ValueError(f"blocks must be >= 0, got {config['blocks']}")
+    if len(config["widths"]) != 3 or min(config["widths"]) < 1 or max(config["widths"]) > MAX_WIDTH:
+        raise ValueError(f"widths must be three ints in 1..={MAX_WIDTH}, got {config['widths']}")
+    if not 0 <= config["blocks"] <= MAX_BLOCKS:
+        raise ValueError(f"blocks must be in 0..={MAX_BLOCKS}, got {config['blocks']}")
+    for key in ("out_channels", "channels"):
+        if key in config and not 1 <= config[key] <= MAX_WIDTH:
+            raise ValueError(f"{key} must be in 1..={MAX_WIDTH}, got {config[key]}")
+    if net == "envmap" and not all(1 <= t <= MAX_WIDTH for t in config["tail_widths"]):
+        raise ValueError(f"tail_widths must be ints in 1..={MAX_WIDTH}, got {config['tail_widths']}")
     if net == "irn":
         names = [h["name"] for h in config["heads"]]
         if not names or len(set(names)) != len(names):
             raise ValueError(f"head names must be non-empty and unique, got {names}")
+        if len(names) > MAX_HEADS:
+            raise ValueError(f"at most {MAX_HEADS} heads, got {len(names)}")
         for h in config["heads"]:
-            if set(h) != {"name", "channels"} or h["channels"] < 1:
+            if set(h) != {"name", "channels"} or not 1 <= h["channels"] <= MAX_WIDTH:
                 raise ValueError(f"bad head {h}")
     if net == "inpaint" and config["channels"] < 1:
         raise ValueError(f"channels must be >= 1, got {config['channels']}")

@@ -561,6 +561,9 @@ fn classify(e: ImageError, kind: Kind, path: &Path, mislabelled: Option<&str>) -
         }
         other => other.to_string(),
     };
+    // Decoders' texts may hold newlines (e.g. zune-jpeg's "Not enough bytes…\n");
+    // every message is one line.
+    let reason = reason.split_whitespace().collect::<Vec<_>>().join(" ");
     if is_truncation(&e, &reason) {
         return PhotoError::Truncated {
             path: path.to_path_buf(),

@@ -698,3 +698,26 @@ fn planar_layout() {
     img.put_pixel(1, 0, Rgb([0.4, 0.5, 0.6]));
     assert_eq!(photo::to_planar(&img), vec![0.1, 0.4, 0.2, 0.5, 0.3, 0.6]);
 }
+
+/// Every file of the fuzzers' regression folder decodes or fails with one line
+/// naming the file (a JPEG decoder message once ended in a newline).
+#[test]
+fn fuzz_regressions_give_one_line_errors() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fuzz/regressions/photo_decode");
+    let mut n = 0;
+    for e in std::fs::read_dir(&dir).unwrap() {
+        let p = e.unwrap().path();
+        let bytes = std::fs::read(&p).unwrap();
+        let limits = PhotoLimits {
+            max_pixels: 4_000_000,
+            max_alloc: 256 << 20,
+        };
+        if let Err(e) = photo::decode(&bytes, Path::new("fuzz.img"), &limits) {
+            let msg = e.to_string();
+            assert!(msg.starts_with("fuzz.img: "), "{msg:?}");
+            assert!(!msg.contains('\n') && !msg.ends_with(' '), "{msg:?}");
+        }
+        n += 1;
+    }
+    assert!(n >= 1);
+}

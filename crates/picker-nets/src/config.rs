@@ -359,10 +359,34 @@ fn invalid(reason: impl Into<String>) -> Error {
     }
 }
 
+/// Largest width or channel count a configuration may have (the thesis nets
+/// use 256). The bound keeps parameter and FLOP counts far from overflow and
+/// refuses absurd configurations before any allocation.
+pub const MAX_WIDTH: usize = 16384;
+/// Largest number of residual blocks (per IRN head) a configuration may have.
+pub const MAX_BLOCKS: usize = 1024;
+/// Largest number of IRN heads.
+pub const MAX_HEADS: usize = 64;
+
 fn check_widths(what: &str, widths: &[usize]) -> Result<()> {
     if let Some(i) = widths.iter().position(|&w| w == 0) {
         return Err(invalid(format!(
             "{what}[{i}] is 0; every width must be positive (found {widths:?})"
+        )));
+    }
+    if let Some(i) = widths.iter().position(|&w| w > MAX_WIDTH) {
+        return Err(invalid(format!(
+            "{what}[{i}] is {}; widths may be at most {MAX_WIDTH} (found {widths:?})",
+            widths[i]
+        )));
+    }
+    Ok(())
+}
+
+fn check_blocks(blocks: usize) -> Result<()> {
+    if blocks > MAX_BLOCKS {
+        return Err(invalid(format!(
+            "blocks is {blocks}; at most {MAX_BLOCKS} residual blocks are allowed"
         )));
     }
     Ok(())
@@ -380,6 +404,11 @@ fn check_eps(eps: f64) -> Result<()> {
 fn check_channels(what: &str, c: usize) -> Result<()> {
     if c == 0 {
         return Err(invalid(format!("{what} is 0; it must be at least 1")));
+    }
+    if c > MAX_WIDTH {
+        return Err(invalid(format!(
+            "{what} is {c}; it may be at most {MAX_WIDTH}"
+        )));
     }
     Ok(())
 }
@@ -434,6 +463,16 @@ impl NetConfig {
         }
     }
 
+    /// Residual blocks (IRN: per head).
+    pub fn blocks(&self) -> usize {
+        match self {
+            NetConfig::Irn(c) => c.blocks,
+            NetConfig::Msn(c) => c.blocks,
+            NetConfig::EnvMap(c) => c.blocks,
+            NetConfig::Inpaint(c) => c.blocks,
+        }
+    }
+
     /// Whether convolutions before a BatchNorm carry a bias.
     pub fn conv_bias(&self) -> bool {
         match self {
@@ -455,15 +494,23 @@ impl NetConfig {
     }
 
     /// Checks the configuration describes a buildable network: positive
-    /// widths and channel counts, a positive finite ε, at least one IRN head,
+    /// widths and channel counts (at most [`MAX_WIDTH`], at most [`MAX_BLOCKS`]
+    /// blocks and [`MAX_HEADS`] heads), a positive finite ε, at least one IRN head,
     /// head names unique and made of letters, digits and `_`.
     pub fn validate(&self) -> Result<()> {
         check_widths("widths", &self.widths())?;
+        check_blocks(self.blocks())?;
         check_eps(self.bn_eps())?;
         match self {
             NetConfig::Irn(c) => {
                 if c.heads.is_empty() {
                     return Err(invalid("heads is empty; an IRN needs at least one head"));
+                }
+                if c.heads.len() > MAX_HEADS {
+                    return Err(invalid(format!(
+                        "{} heads; an IRN may have at most {MAX_HEADS}",
+                        c.heads.len()
+                    )));
                 }
                 for (i, h) in c.heads.iter().enumerate() {
                     let ok = !h.name.is_empty()
@@ -583,7 +630,7 @@ impl NetConfig {
         let enc = conv(ConvSpec::square(w1, w2, 3, 2, 1), s);
         let block = |n: usize, (h, w): (usize, usize)| -> u64 {
             let f = ConvSpec::square(w2, w2, 3, 1, 0).flops(h + 2, w + 2);
-            2 * f * n as u64
+            f.saturating_mul(2).saturating_mul(n as u64)
         };
         let decoder = |c: usize, (h, w): (usize, usize)| -> u64 {
             let up0 = ConvTransposeSpec::square(w2, w1, 3, 2, 1, 1);
@@ -591,17 +638,17 @@ impl NetConfig {
             let (h1, w1_) = up0.out_hw(h, w).unwrap_or((0, 0));
             let (h2, w2_) = up1.out_hw(h1, w1_).unwrap_or((0, 0));
             up0.flops(h, w)
-                + up1.flops(h1, w1_)
-                + ConvSpec::square(w0, c, 7, 1, 0).flops(h2 + 6, w2_ + 6)
+                .saturating_add(up1.flops(h1, w1_))
+                .saturating_add(ConvSpec::square(w0, c, 7, 1, 0).flops(h2 + 6, w2_ + 6))
         };
         let rest = match self {
             NetConfig::Irn(c) => c
                 .heads
                 .iter()
-                .map(|hd| block(c.blocks, enc) + decoder(hd.channels, enc))
-                .sum::<u64>(),
-            NetConfig::Msn(c) => block(c.blocks, enc) + decoder(c.out_channels, enc),
-            NetConfig::Inpaint(c) => block(c.blocks, enc) + decoder(c.channels, enc),
+                .map(|hd| block(c.blocks, enc).saturating_add(decoder(hd.channels, enc)))
+                .fold(0u64, u64::saturating_add),
+            NetConfig::Msn(c) => block(c.blocks, enc).saturating_add(decoder(c.out_channels, enc)),
+            NetConfig::Inpaint(c) => block(c.blocks, enc).saturating_add(decoder(c.channels, enc)),
             NetConfig::EnvMap(c) => {
                 let [t0, t1] = c.tail_widths;
                 let t0s = ConvSpec::square(w2, t0, 1, 2, 0);
@@ -610,9 +657,9 @@ impl NetConfig {
                 let a = t0s.out_hw(enc.0, enc.1).unwrap_or((0, 0));
                 let b = t1s.out_hw(a.0, a.1).unwrap_or((0, 0));
                 block(c.blocks, enc)
-                    + t0s.flops(enc.0, enc.1)
-                    + t1s.flops(a.0, a.1)
-                    + t2s.flops(b.0, b.1)
+                    .saturating_add(t0s.flops(enc.0, enc.1))
+                    .saturating_add(t1s.flops(a.0, a.1))
+                    .saturating_add(t2s.flops(b.0, b.1))
             }
         };
         total.saturating_add(rest)
@@ -622,6 +669,44 @@ impl NetConfig {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn counts_at_the_configuration_bounds_do_not_overflow() {
+        let heads = (0..MAX_HEADS)
+            .map(|i| HeadConfig {
+                name: format!("h{i}"),
+                channels: MAX_WIDTH,
+            })
+            .collect();
+        let c: NetConfig = IrnConfig {
+            widths: [MAX_WIDTH; 3],
+            blocks: MAX_BLOCKS,
+            heads,
+            ..IrnConfig::thesis()
+        }
+        .into();
+        c.validate().unwrap();
+        // Exact in u128: encoder + heads × (blocks × 2 convs + decoder).
+        let w = MAX_WIDTH as u128;
+        let conv = |ci: u128, co: u128, k: u128| ci * co * k * k + co;
+        let dec = conv(w, w, 3) + conv(w, w, 3) + conv(w, w, 7);
+        let want = conv(3, w, 7)
+            + conv(w, w, 3) * 2
+            + MAX_HEADS as u128 * (MAX_BLOCKS as u128 * 2 * conv(w, w, 3) + dec);
+        assert!(want < u64::MAX as u128);
+        assert_eq!(c.param_count() as u128, want);
+        // FLOPs saturate instead of wrapping.
+        assert_eq!(c.flops(1 << 20, 1 << 20), u64::MAX);
+        let mut too_wide = c.clone();
+        if let NetConfig::Irn(i) = &mut too_wide {
+            i.widths[2] = MAX_WIDTH + 1;
+        }
+        assert!(too_wide
+            .validate()
+            .unwrap_err()
+            .to_string()
+            .contains("at most 16384"));
+    }
 
     #[test]
     fn thesis_parameter_counts() {

@@ -78,7 +78,7 @@ impl ConvSpec {
     /// Floating-point operations (2 × multiply-adds) for one `h × w` input image.
     pub fn flops(&self, h: usize, w: usize) -> u64 {
         match self.out_hw(h, w) {
-            Ok((oh, ow)) => 2 * (self.weight_len() * oh * ow) as u64,
+            Ok((oh, ow)) => sat_flops(self.weight_len(), oh, ow),
             Err(_) => 0,
         }
     }
@@ -166,8 +166,15 @@ impl ConvTransposeSpec {
 
     /// Floating-point operations (2 × multiply-adds, direct form) for one `h × w` input image.
     pub fn flops(&self, h: usize, w: usize) -> u64 {
-        2 * (self.weight_len() * h * w) as u64
+        sat_flops(self.weight_len(), h, w)
     }
+}
+
+/// `2 · weights · h · w`, saturating at `u64::MAX` instead of overflowing.
+fn sat_flops(weight_len: usize, h: usize, w: usize) -> u64 {
+    2u64.saturating_mul(weight_len as u64)
+        .saturating_mul(h as u64)
+        .saturating_mul(w as u64)
 }
 
 fn check_weight(op: &'static str, len: usize, expected: usize) -> Result<()> {
