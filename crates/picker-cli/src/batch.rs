@@ -387,7 +387,24 @@ fn remove_dir_if_exists(d: &Path) -> Result<()> {
 fn process(s: &Shared<'_>, photo: &Photo, req: &Request) -> Result<Outcome> {
     let t = Instant::now();
     let (target, partial) = out_dirs(s.out, &photo.rel);
-    let input_sha = sha256_file(&photo.path)?;
+    // Read the photo once: hashed here, decoded from the same bytes. A file too
+    // big to hold is streamed through the hash and refused by the decoder.
+    let limits = s.flags.photo_limits();
+    let size = std::fs::metadata(&photo.path)
+        .with_context(|| format!("{}: reading the file's metadata", photo.path.display()))?
+        .len();
+    let bytes = if size <= limits.max_alloc {
+        Some(
+            std::fs::read(&photo.path)
+                .with_context(|| format!("{}: reading the file", photo.path.display()))?,
+        )
+    } else {
+        None
+    };
+    let input_sha = match &bytes {
+        Some(b) => hex(&Sha256::digest(b)),
+        None => sha256_file(&photo.path)?,
+    };
     let key = manifest_key(&input_sha, s.weights, s.flags, req);
     if !s.force && up_to_date(&target, &key) {
         return Ok(Outcome::UpToDate);
@@ -395,8 +412,13 @@ fn process(s: &Shared<'_>, photo: &Photo, req: &Request) -> Result<Outcome> {
     remove_dir_if_exists(&partial)?;
     s.in_flight.lock().unwrap().insert(partial.clone());
     let result = (|| -> Result<usize> {
-        let loaded =
-            extract::load_inputs(&Source::Nets(s.models), &photo.path, &photo.rel, s.flags)?;
+        let loaded = extract::load_inputs_from(
+            &Source::Nets(s.models),
+            &photo.path,
+            bytes,
+            &photo.rel,
+            s.flags,
+        )?;
         let layout = Layout {
             always_subdirs: true,
             timings: false,

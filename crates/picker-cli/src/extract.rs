@@ -371,9 +371,24 @@ pub fn load_inputs(
     label: &str,
     flags: &Flags,
 ) -> Result<Loaded> {
+    load_inputs_from(source, photo_path, None, label, flags)
+}
+
+/// [`load_inputs`] with the photo file's bytes when the caller has read them
+/// already (`picker batch` hashes them first); they are dropped once decoded.
+pub fn load_inputs_from(
+    source: &Source<'_>,
+    photo_path: &Path,
+    bytes: Option<Vec<u8>>,
+    label: &str,
+    flags: &Flags,
+) -> Result<Loaded> {
     let mut timings = serde_json::Map::new();
     let t = Instant::now();
-    let p = photo::load_with(photo_path, &flags.photo_limits())?;
+    let p = match bytes {
+        Some(b) => photo::decode_with(&b, photo_path, &flags.photo_limits())?,
+        None => photo::load_with(photo_path, &flags.photo_limits())?,
+    };
     let (w, h) = p.rgb.dimensions();
     let photo_img = Image::new(3, h as usize, w as usize, photo::to_planar(&p.rgb))
         .map_err(|e| anyhow!("{}: {e}", photo_path.display()))?;

@@ -54,6 +54,11 @@ pub fn load_with(path: &Path, limits: &PhotoLimits) -> Result<Photo> {
     Ok(lib::load(path, limits)?.into())
 }
 
+/// Decodes the bytes of the file at `path` (already read) within `limits`.
+pub fn decode_with(bytes: &[u8], path: &Path, limits: &PhotoLimits) -> Result<Photo> {
+    Ok(lib::decode(bytes, path, limits)?.into())
+}
+
 /// The working size `(width, height)` for a `w × h` photo; see
 /// [`picker_extract::photo::working_size`].
 pub fn working_size(w: u32, h: u32, work_size: u32) -> (u32, u32) {
