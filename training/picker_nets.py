@@ -10,6 +10,7 @@ Self-test (thesis parameter counts, key names, tiny forward passes, any-size pad
 """
 
 import json
+import os
 import struct
 
 import torch
@@ -315,10 +316,17 @@ def save_safetensors(tensors, path, metadata):
 
     safetensors writes the ``__metadata__`` map in hash order, which changes from process to process; the
     header is rewritten in place with the metadata keys sorted (same JSON length, so offsets are unchanged).
+    Written to ``path + ".tmp"`` and renamed, so an interrupted export never leaves a half-written file.
     """
-    save_file(tensors, path, metadata=metadata)
-    if not metadata:
-        return
+    tmp = os.fspath(path) + ".tmp"
+    save_file(tensors, tmp, metadata=metadata)
+    if metadata:
+        _sort_metadata(tmp)
+    os.replace(tmp, path)
+
+
+def _sort_metadata(path):
+    """Rewrites the safetensors header of ``path`` in place with its metadata keys sorted."""
     with open(path, "r+b") as f:
         (n,) = struct.unpack("<Q", f.read(8))
         raw = f.read(n)

@@ -36,16 +36,20 @@ PRESETS = {
     "irn": {
         "thesis": {"widths": [64, 128, 256], "blocks": 15, "heads": _heads(), "conv_bias": False,
                    "bn_eps": 1e-5},
+        "lite": {"widths": [16, 32, 64], "blocks": 3, "heads": _heads(), "conv_bias": False, "bn_eps": 1e-5},
         "tiny": {"widths": [8, 12, 16], "blocks": 2, "heads": _heads(), "conv_bias": True, "bn_eps": 1e-5},
     },
     "msn": {
         "thesis": {"widths": [64, 128, 256], "blocks": 9, "out_channels": 3, "conv_bias": False,
                    "bn_eps": 1e-5},
+        "lite": {"widths": [24, 48, 96], "blocks": 4, "out_channels": 3, "conv_bias": False, "bn_eps": 1e-5},
         "tiny": {"widths": [8, 12, 16], "blocks": 2, "out_channels": 3, "conv_bias": False, "bn_eps": 1e-5},
     },
     "envmap": {
         "thesis": {"widths": [64, 128, 256], "blocks": 4, "tail_widths": [256, 128], "out_channels": 3,
                    "conv_bias": False, "bn_eps": 1e-5},
+        "lite": {"widths": [16, 32, 64], "blocks": 2, "tail_widths": [64, 32], "out_channels": 3,
+                 "conv_bias": False, "bn_eps": 1e-5},
         "tiny": {"widths": [8, 12, 16], "blocks": 1, "tail_widths": [16, 12], "out_channels": 3,
                  "conv_bias": True, "bn_eps": 1e-5},
     },
@@ -59,7 +63,8 @@ PRESETS = {
 
 
 def preset(net, name):
-    """Returns a fresh copy of the config of preset ``name`` (``thesis`` | ``tiny``) for ``net``."""
+    """Returns a fresh copy of the config of preset ``name`` (``thesis`` | ``lite`` | ``tiny``) for ``net``
+    (``lite``, the embedded default, exists for irn, msn and envmap only)."""
     if net not in PRESETS:
         raise ValueError(f"unknown net {net!r}; expected one of {NETS}")
     if name not in PRESETS[net]:

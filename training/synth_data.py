@@ -301,8 +301,10 @@ class SynthDataset(torch.utils.data.Dataset):
 
     Sample k of a run is scene ``perm_e[k mod n]`` with e = k // n the epoch and ``perm_e`` a permutation drawn
     from ``default_rng([seed, e])``; its crop and mirror come from ``default_rng([seed, 2**32 + k])``. The
-    training size is looked up per sample with ``size_of(k)`` (multi-resolution stages). ``cache`` keeps the
-    decoded scenes in memory (small datasets only).
+    training size is looked up per sample with ``size_of(k)`` (multi-resolution stages). Only scenes at least
+    as large as that size are drawn (a 120×160 scene cannot give a 240×320 sample): when some scenes are too
+    small, the permutation runs over the n' eligible ones and is drawn from ``default_rng([seed, e, H, W])``
+    with e = k // n'. ``cache`` keeps the decoded scenes in memory (small datasets only).
     """
 
     def __init__(self, scenes, net, seed, size_of, flip=True, crop="random", shuffle=True, cache=False):
@@ -312,20 +314,41 @@ class SynthDataset(torch.utils.data.Dataset):
         self.size_of, self.flip, self.crop, self.shuffle = size_of, flip, crop, shuffle
         self.cache = {} if cache else None
         self._perms = {}
+        self._sizes = None
+        self._eligible = {}
 
     def __len__(self):
         return 1 << 62  # indexed by global sample number; the sampler bounds it
 
-    def scene_index(self, k):
-        n = len(self.scenes)
+    def eligible(self, size):
+        """Indices of the scenes at least ``size`` = (H, W) large (all of them: ``None``); raises ValueError
+        when there is none."""
+        size = tuple(size)
+        if size not in self._eligible:
+            if self._sizes is None:
+                self._sizes = [scene_info(sc)[2:] for sc in self.scenes]
+            idx = [i for i, (h, w) in enumerate(self._sizes) if h >= size[0] and w >= size[1]]
+            if not idx:
+                biggest = max(self._sizes)
+                raise ValueError(f"no training scene is at least {size[0]}x{size[1]} (the largest is "
+                                 f"{biggest[0]}x{biggest[1]}); generate data at that size for this stage")
+            self._eligible[size] = None if len(idx) == len(self.scenes) else idx
+        return self._eligible[size]
+
+    def scene_index(self, k, size=None):
+        subset = self.eligible(size) if size is not None else None
+        n = len(self.scenes) if subset is None else len(subset)
         if not self.shuffle:
-            return k % n
-        epoch = k // n
-        perm = self._perms.get(epoch)
-        if perm is None:
-            perm = np.random.default_rng([self.seed, epoch]).permutation(n)
-            self._perms = {epoch: perm}
-        return int(perm[k % n])
+            j = k % n
+        else:
+            epoch = k // n
+            key = (epoch,) if subset is None else (epoch, *size)
+            perm = self._perms.get(key)
+            if perm is None:
+                perm = np.random.default_rng([self.seed, *key]).permutation(n)
+                self._perms = {key: perm}
+            j = int(perm[k % n])
+        return j if subset is None else subset[j]
 
     def raw(self, i):
         if self.cache is not None and i in self.cache:
@@ -336,9 +359,10 @@ class SynthDataset(torch.utils.data.Dataset):
         return r
 
     def __getitem__(self, k):
-        i = self.scene_index(k)
+        size = tuple(self.size_of(k))
+        i = self.scene_index(k, size)
         rng = np.random.default_rng([self.seed, (1 << 32) + int(k)])
-        return prepare(self.raw(i), self.size_of(k), rng, flip=self.flip, crop=self.crop)
+        return prepare(self.raw(i), size, rng, flip=self.flip, crop=self.crop)
 
 
 class RangeSampler(torch.utils.data.Sampler):

@@ -125,6 +125,24 @@ def _losses(run_dir):
         return [float(r["loss"]) for r in csv.DictReader(f)]
 
 
+def test_mixed_scene_sizes():
+    """Stages larger than some scenes draw only from the scenes that are large enough; none: a clear error."""
+    ds = sd.SynthDataset([SCENE0, SCENE1], "msn", 3, lambda k: (24, 32) if k < 4 else (12, 16))
+    assert ds.eligible((24, 32)) is None and ds.eligible((12, 16)) is None
+    try:
+        ds.eligible((48, 64))
+        raise AssertionError("a size larger than every scene was accepted")
+    except ValueError as e:
+        assert "no training scene is at least 48x64" in str(e), e
+    # Pretend scene 1 were 48×64: at 48×64 only it is drawn, at 24×32 both, in the unchanged order.
+    ds._sizes = [(24, 32), (48, 64)]
+    ds._eligible.clear()
+    assert ds.eligible((48, 64)) == [1]
+    assert {ds.scene_index(k, (48, 64)) for k in range(6)} == {1}
+    plain = sd.SynthDataset([SCENE0, SCENE1], "msn", 3, None)
+    assert [ds.scene_index(k, (24, 32)) for k in range(6)] == [plain.scene_index(k) for k in range(6)]
+
+
 def test_training_and_resume(tmp):
     straight = os.path.join(tmp, "straight")
     path = _run(straight, "--no-flip")
@@ -230,6 +248,7 @@ def main():
         step("reading", test_reading)
         step("encoding round trip", test_encoding_round_trip)
         step("reduce and mirror", test_reduce_and_mirror)
+        step("mixed scene sizes", test_mixed_scene_sizes)
         irn = step("4-step run lowers the loss; resume and workers are bit-identical", test_training_and_resume, tmp)
         others = step("msn and envmap runs lower the loss", test_other_nets, tmp)
         step("export loads and runs in picker", test_export_loads_in_rust, tmp, irn, others)

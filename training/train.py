@@ -418,6 +418,11 @@ def main(argv=None):
     batch = cfg["batch"]
     ds = sd.SynthDataset(train_scenes, net, cfg["seed"], StageSize(cfg["stages"], batch), flip=cfg["flip"],
                          cache=cfg["cache"])
+    for st in cfg["stages"]:  # every stage needs scenes at least its size: fail now, not hours later
+        try:
+            ds.eligible(st["size"])
+        except ValueError as e:
+            raise SystemExit(f"stage {st['size'][0]}x{st['size'][1]}: {e}") from None
     stop = min(total_steps, args.until) if args.until else total_steps
     loader = torch.utils.data.DataLoader(
         ds, batch_size=batch, sampler=sd.RangeSampler(step * batch, stop * batch), num_workers=cfg["workers"],

@@ -283,11 +283,13 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
 
 /// The `__metadata__` of a weights file for `config`: `format`, `format_version`,
 /// `net`, `preset`, `config` and `created_by`. `preset` is free-form (`lite`,
-/// `custom`, ...), but naming a known preset (`thesis`, `tiny`) whose configuration
+/// `custom`, ...), but naming a known preset of the net (`thesis`, `lite`, `tiny`) whose configuration
 /// differs is refused, as the loader would refuse the file.
 pub fn metadata_for(config: &NetConfig, preset: &str) -> Result<BTreeMap<String, String>> {
     config.validate()?;
-    if KNOWN_PRESETS.contains(&preset) && NetConfig::preset(config.kind(), preset)? != *config {
+    if KNOWN_PRESETS.contains(&preset)
+        && NetConfig::preset(config.kind(), preset).is_ok_and(|p| p != *config)
+    {
         return Err(Error::InvalidConfig {
             reason: format!(
                 "preset label {preset:?} given for a config that differs from that preset; use \"custom\""

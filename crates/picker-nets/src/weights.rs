@@ -14,7 +14,7 @@ use std::sync::Mutex;
 
 use safetensors::{Dtype, SafeTensorError, SafeTensors};
 
-use crate::config::{NetConfig, NetKind, KNOWN_PRESETS};
+use crate::config::{NetConfig, NetKind};
 use crate::error::{Error, Result, ACCEPTED_DTYPES};
 
 /// The `format` metadata value of Material Picker weights.
@@ -675,8 +675,9 @@ fn parse_metadata(
         .get("preset")
         .cloned()
         .unwrap_or_else(|| "custom".to_string());
-    if KNOWN_PRESETS.contains(&preset.as_str()) {
-        let p = NetConfig::preset(kind, &preset)?;
+    // A known preset of this net must match its configuration (`lite` has no
+    // inpainter, so there it is a free-form label).
+    if let Ok(p) = NetConfig::preset(kind, &preset) {
         if p != config {
             return Err(meta_err(
                 path,

@@ -410,12 +410,19 @@ fn metadata_errors() {
         );
         assert_has(&msg, &parts);
     }
-    // Free-form keys and a `custom`/`lite` label are fine.
+    // Free-form keys and labels that name no preset are fine.
     let mut m2 = m.clone();
     m2.insert("training.epochs".into(), "40".into());
-    m2.insert("preset".into(), "lite".into());
+    m2.insert("preset".into(), "my-experiment".into());
     let w = Weights::open(save("freeform", &t, &m2).path()).unwrap();
-    assert_eq!(w.preset(), "lite");
+    assert_eq!(w.preset(), "my-experiment");
+    // `lite` is a preset now: a file labelled so must have its configuration.
+    m2.insert("preset".into(), "lite".into());
+    let e = Weights::open(save("not_lite", &t, &m2).path()).unwrap_err();
+    assert_has(
+        &e.to_string(),
+        &["says \"lite\"", "differs from that preset"],
+    );
 }
 
 #[test]
