@@ -57,7 +57,7 @@ train() {
     local net=$1 out="$WORK/runs/lite-$1"
     if [ -f "$out/$net.safetensors" ]; then return 0; fi
     if [ -f "$out/checkpoints/last.pt" ]; then
-        "$PYTHON" -m training.train --resume --out "$out" --threads 1
+        "$PYTHON" -m training.train --resume --config "training/recipes/lite-cpu-$net.json" --out "$out" --threads 1
     else
         "$PYTHON" -m training.train --net "$net" --preset lite --config "training/recipes/lite-cpu-$net.json" \
             "${DATA[@]}" --val "$D/val" --out "$out" --threads 1

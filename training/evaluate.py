@@ -196,8 +196,10 @@ def main(argv=None):
     result = evaluate(args.weights, args.data, args.size, args.limit, args.allow_overlap)
     text = json.dumps(result, indent=2) + "\n"
     if args.out:
-        with open(args.out, "w") as f:
+        tmp = args.out + ".tmp"
+        with open(tmp, "w") as f:
             f.write(text)
+        os.replace(tmp, args.out)  # never a half-written metrics file
     else:
         print(text, end="")
     return result

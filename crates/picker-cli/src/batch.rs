@@ -598,11 +598,6 @@ pub fn run(a: Args) -> Result<ExitCode> {
             "nothing to extract: give --picks picks.csv and/or --all".into(),
         ));
     }
-    if a.flags.weights.is_empty() {
-        return Err(usage(
-            "give --weights DIR (irn.safetensors + msn.safetensors [+ envmap.safetensors])".into(),
-        ));
-    }
     if !a.in_dir.is_dir() {
         return Err(usage(format!("{}: not a folder", a.in_dir.display())));
     }
@@ -654,7 +649,14 @@ pub fn run(a: Args) -> Result<ExitCode> {
     let weights: Vec<(String, String)> = models
         .paths()
         .into_iter()
-        .map(|p| Ok((p.display().to_string(), sha256_file(p)?)))
+        .zip(models.embedded_bytes())
+        .map(|(p, embedded)| {
+            let digest = match embedded {
+                Some(bytes) => hex(&Sha256::digest(bytes)),
+                None => sha256_file(p)?,
+            };
+            Ok((p.display().to_string(), digest))
+        })
         .collect::<Result<_>>()?;
     let inpainter = extract::inpainter(&a.flags.inpainter)?;
 

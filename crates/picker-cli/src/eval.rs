@@ -16,6 +16,11 @@
 //!   true texture's own;
 //! - for single-colour materials, the RMSE of the diffuse colour.
 //!
+//! - the IoU of a baseline without networks: a 4-connected flood fill from the
+//!   pick over the photo's sRGB colours, for each of [`FLOOD_TOLERANCES`]; the
+//!   aggregate reports every tolerance's mean and the best one (an oracle
+//!   choice, generous to the baseline).
+//!
 //! Prints a table and writes the rows and their aggregates as JSON (`--json-out`).
 
 use std::path::{Path, PathBuf};
@@ -40,8 +45,11 @@ pub struct Args {
     #[arg(long, default_value_t = 0.05)]
     pub min_area: f64,
     /// Network weights (else the ground-truth elements stand in for the networks).
-    #[arg(long, value_name = "DIR_OR_FILE")]
+    #[arg(long, value_name = "DIR_OR_FILE", conflicts_with = "embedded")]
     pub weights: Vec<PathBuf>,
+    /// Run the default weights embedded in the binary.
+    #[arg(long)]
+    pub embedded: bool,
     /// Write the rows and aggregates as JSON here.
     #[arg(long, value_name = "FILE")]
     pub json_out: Option<PathBuf>,
@@ -62,6 +70,8 @@ pub struct Row {
     textured_truth: bool,
     textured_extracted: bool,
     iou: f64,
+    /// IoU of the flood-fill baseline, one per [`FLOOD_TOLERANCES`] entry.
+    flood_iou: Vec<f64>,
     albedo_rmse: f64,
     normal_error_deg: f64,
     texture_psnr_db: Option<f64>,
@@ -138,6 +148,62 @@ fn inner_distance(mask: &[bool], w: usize, h: usize) -> Vec<u32> {
     d
 }
 
+/// Colour tolerances (Euclidean sRGB distance in `[0, 1]` units) of the flood-fill baseline.
+pub const FLOOD_TOLERANCES: [f32; 6] = [0.04, 0.08, 0.12, 0.16, 0.24, 0.32];
+
+/// The baseline pick mask without networks: the 4-connected region around
+/// `pick` whose sRGB colour lies within `tol` of the pick's colour (the mean of
+/// its 3×3 neighbourhood, clipped to the image). `rgb` is planar `[3, h, w]`.
+pub fn flood_fill(rgb: &[f32], w: usize, h: usize, pick: [u32; 2], tol: f32) -> Vec<bool> {
+    assert_eq!(rgb.len(), 3 * w * h, "flood_fill: rgb is not 3×{h}×{w}");
+    let (px, py) = (pick[0] as usize, pick[1] as usize);
+    assert!(px < w && py < h, "flood_fill: pick outside the image");
+    let n = w * h;
+    let mut seed = [0.0f32; 3];
+    let mut count = 0.0f32;
+    for y in py.saturating_sub(1)..(py + 2).min(h) {
+        for x in px.saturating_sub(1)..(px + 2).min(w) {
+            for (c, s) in seed.iter_mut().enumerate() {
+                *s += rgb[c * n + y * w + x];
+            }
+            count += 1.0;
+        }
+    }
+    seed.iter_mut().for_each(|s| *s /= count);
+    let close = |i: usize| {
+        (0..3)
+            .map(|c| (rgb[c * n + i] - seed[c]).powi(2))
+            .sum::<f32>()
+            <= tol * tol
+    };
+    let mut mask = vec![false; n];
+    let start = py * w + px;
+    mask[start] = true;
+    let mut stack = vec![start];
+    while let Some(i) = stack.pop() {
+        let (x, y) = (i % w, i / w);
+        let mut visit = |j: usize| {
+            if !mask[j] && close(j) {
+                mask[j] = true;
+                stack.push(j);
+            }
+        };
+        if x > 0 {
+            visit(i - 1);
+        }
+        if x + 1 < w {
+            visit(i + 1);
+        }
+        if y > 0 {
+            visit(i - w);
+        }
+        if y + 1 < h {
+            visit(i + w);
+        }
+    }
+    mask
+}
+
 fn f(v: &serde_json::Value) -> Option<f32> {
     v.as_f64().map(|x| x as f32)
 }
@@ -172,6 +238,13 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
             ),
         }
     };
+    let photo = rio::read_png(&photo_path)?;
+    if photo.channels != 3 || (photo.width, photo.height) != (w, h) {
+        bail!(
+            "{}: not a {w}×{h} RGB image like material_id.png",
+            photo_path.display()
+        );
+    }
     let prepared = Prepared::new(inputs)?;
     let inpainter = PatchMatchInpainter::default();
     let opts = pipeline::Options {
@@ -221,6 +294,10 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
             textured_truth,
             textured_extracted: mat.textured,
             iou: metrics::mask_iou(&got.data, &true_mask),
+            flood_iou: FLOOD_TOLERANCES
+                .iter()
+                .map(|&t| metrics::mask_iou(&flood_fill(&photo.data, w, h, pick, t), &true_mask))
+                .collect(),
             albedo_rmse: metrics::albedo_error(&el.diffuse, &truth.diffuse, &true_mask),
             normal_error_deg: metrics::normal_error_deg(&el.normals, &truth.normals, &true_mask),
             texture_psnr_db: None,
@@ -285,9 +362,10 @@ fn opt(v: Option<f64>, prec: usize) -> String {
 pub fn run(a: Args) -> Result<()> {
     crate::threads::init(a.threads)?;
     let dirs = scene_dirs(&a.dir)?;
-    let models = if a.weights.is_empty() {
+    let models = if a.weights.is_empty() && !a.embedded {
         None
     } else {
+        // No --weights with --embedded: the embedded defaults.
         Some(crate::extract::Models::load(&a.weights)?)
     };
     let mut rows = Vec::new();
@@ -336,6 +414,14 @@ pub fn run(a: Args) -> Result<()> {
         "textured": tex.len(),
         "mean_iou": mean(rows.iter().map(|r| r.iou)),
         "min_iou": min(rows.iter().map(|r| r.iou)),
+        "fraction_iou_at_least_0_8": mean(rows.iter().map(|r| f64::from(u8::from(r.iou >= 0.8)))),
+        "flood_fill_mean_iou": FLOOD_TOLERANCES.iter().enumerate().map(|(k, t)| json!({
+            "tolerance": (f64::from(*t) * 1e4).round() / 1e4,
+            "mean_iou": mean(rows.iter().map(|r| r.flood_iou[k])),
+        })).collect::<Vec<_>>(),
+        "flood_fill_best_mean_iou": (0..FLOOD_TOLERANCES.len())
+            .filter_map(|k| mean(rows.iter().map(|r| r.flood_iou[k])))
+            .max_by(|a, b| a.total_cmp(b)),
         "mean_texture_psnr_db": mean(tex.iter().filter_map(|r| r.texture_psnr_db)),
         "min_texture_psnr_db": min(tex.iter().filter_map(|r| r.texture_psnr_db)),
         "mean_texture_colour_distance": mean(tex.iter().filter_map(|r| r.texture_colour_distance)),
@@ -351,10 +437,65 @@ pub fn run(a: Args) -> Result<()> {
         let text = serde_json::to_string_pretty(&json!({
             "format": "material-picker-eval", "format_version": 1,
             "dir": a.dir.display().to_string(),
-            "elements": if a.weights.is_empty() { "ground truth" } else { "networks" },
+            "elements": if models.is_none() { "ground truth" } else { "networks" },
+            "weights": models.as_ref().map(|m| m.paths().iter().map(|p| p.display().to_string()).collect::<Vec<_>>()),
             "min_area": a.min_area, "aggregate": agg, "rows": rows,
         }))?;
         crate::output::write_atomic(p, format!("{text}\n").as_bytes())?;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Planar RGB from a per-pixel colour function.
+    fn image(w: usize, h: usize, f: impl Fn(usize, usize) -> [f32; 3]) -> Vec<f32> {
+        let mut v = vec![0.0; 3 * w * h];
+        for y in 0..h {
+            for x in 0..w {
+                let c = f(x, y);
+                for k in 0..3 {
+                    v[k * w * h + y * w + x] = c[k];
+                }
+            }
+        }
+        v
+    }
+
+    #[test]
+    fn flood_fill_stops_at_a_colour_edge_and_at_disconnection() {
+        // Left half red, right half blue, with a red island inside the blue part.
+        let (w, h) = (10, 6);
+        let rgb = image(w, h, |x, y| {
+            if x < 5 || (x == 8 && y == 3) {
+                [0.8, 0.1, 0.1]
+            } else {
+                [0.1, 0.1, 0.8]
+            }
+        });
+        let m = flood_fill(&rgb, w, h, [0, 0], 0.1);
+        for y in 0..h {
+            for x in 0..w {
+                assert_eq!(m[y * w + x], x < 5, "({x}, {y})");
+            }
+        }
+        // A tolerance above the colour distance (≈ 0.99) takes everything.
+        assert!(flood_fill(&rgb, w, h, [9, 5], 1.0).iter().all(|&b| b));
+    }
+
+    #[test]
+    fn flood_fill_uses_the_mean_colour_around_the_pick() {
+        // A gradient: the region is the band of columns within tol of the pick's column.
+        let (w, h) = (21, 3);
+        let rgb = image(w, h, |x, _| [x as f32 * 0.01; 3]);
+        let m = flood_fill(&rgb, w, h, [10, 1], 0.0525);
+        // |x − 10|·0.01·√3 ≤ 0.0525 ⇔ |x − 10| ≤ 3.
+        for x in 0..w {
+            assert_eq!(m[w + x], (7..=13).contains(&x), "column {x}");
+        }
+        // Picks on the border work (1-pixel image too).
+        assert_eq!(flood_fill(&[0.5, 0.5, 0.5], 1, 1, [0, 0], 0.0), vec![true]);
+    }
 }

@@ -44,6 +44,7 @@ pub enum UvArg {
 #[derive(Clone, Debug, clap::Args)]
 pub struct Flags {
     /// Network weights: a directory with irn/msn[/envmap].safetensors, or files.
+    /// Default: the `lite` weights embedded in the binary.
     #[arg(long, value_name = "DIR_OR_FILE")]
     pub weights: Vec<PathBuf>,
     /// Smallest image fraction of a material for --all.
@@ -233,6 +234,7 @@ fn ms(t: Instant) -> f64 {
 /// One loaded network.
 struct LoadedNet {
     path: PathBuf,
+    embedded: Option<&'static [u8]>,
     kind: NetKind,
     preset: String,
     net: Net,
@@ -244,7 +246,8 @@ pub struct Models {
 }
 
 impl Models {
-    /// Loads the weights of `--weights` (directories or files); IRN and MSN are required.
+    /// Loads the weights of `--weights` (directories or files; none: the embedded
+    /// defaults); IRN and MSN are required.
     pub fn load(weights: &[PathBuf]) -> Result<Self> {
         let chosen = crate::infer::resolve_weights(weights)?;
         let has = |k| chosen.iter().any(|c| c.weights.kind() == k);
@@ -262,15 +265,22 @@ impl Models {
                 kind: c.weights.kind(),
                 preset: c.weights.preset().to_string(),
                 path: c.path,
+                embedded: c.embedded,
                 net,
             });
         }
         Ok(Self { nets })
     }
 
-    /// The weights files, in network order.
+    /// The weights files, in network order (`<embedded lite>/FILE` for the defaults).
     pub fn paths(&self) -> Vec<&Path> {
         self.nets.iter().map(|n| n.path.as_path()).collect()
+    }
+
+    /// The bytes of each weights file that is embedded in the binary (`None` for
+    /// a file on disk), in the order of [`Models::paths`].
+    pub fn embedded_bytes(&self) -> Vec<Option<&'static [u8]>> {
+        self.nets.iter().map(|n| n.embedded).collect()
     }
 
     /// Runs the networks on the photo (sRGB, `[0, 1]`) at `work_size` (long side).
@@ -797,9 +807,6 @@ pub fn run(a: Args) -> Result<()> {
     }
     a.flags.validate()?;
     let photo_path = photo_path(&a)?;
-    if a.elements.is_none() && a.flags.weights.is_empty() {
-        bail!("give --weights DIR (irn.safetensors + msn.safetensors [+ envmap.safetensors]) or --elements DIR");
-    }
     let inpainter = inpainter(&a.flags.inpainter)?;
     let out_dir = match &a.out {
         Some(o) => o.clone(),

@@ -28,8 +28,8 @@ pub struct Args {
     pub photo: PathBuf,
     /// A directory holding irn.safetensors, msn.safetensors and/or envmap.safetensors
     /// (those present run), or one weights file (its metadata says which network).
-    /// May be repeated.
-    #[arg(long, value_name = "DIR_OR_FILE", required = true)]
+    /// May be repeated. Default: the embedded `lite` weights.
+    #[arg(long, value_name = "DIR_OR_FILE")]
     pub weights: Vec<PathBuf>,
     /// Output directory (created if needed; existing files of the same names are replaced).
     #[arg(long, value_name = "DIR")]
@@ -110,12 +110,36 @@ fn encoding(name: &str) -> (&'static str, &'static str) {
 
 /// A weights file chosen to run.
 pub(crate) struct Chosen {
+    /// The file, or `<embedded lite>/FILE` for the default weights.
     pub(crate) path: PathBuf,
     pub(crate) weights: Weights,
+    /// The file's bytes when it is one of the embedded defaults.
+    pub(crate) embedded: Option<&'static [u8]>,
 }
 
-/// Resolves every `--weights` argument to opened weights files, one per network.
+/// The default weights compiled into the binary (`picker_weights`), parsed.
+pub(crate) fn embedded_weights() -> Result<Vec<Chosen>> {
+    picker_weights::FILES
+        .iter()
+        .map(|f| {
+            let path = PathBuf::from(picker_weights::label(f));
+            let weights = Weights::from_static(&path, f.bytes)
+                .context("reading the embedded default weights (a broken build)")?;
+            Ok(Chosen {
+                path,
+                weights,
+                embedded: Some(f.bytes),
+            })
+        })
+        .collect()
+}
+
+/// Resolves every `--weights` argument to opened weights files, one per
+/// network; no argument at all means the embedded default weights.
 pub(crate) fn resolve_weights(args: &[PathBuf]) -> Result<Vec<Chosen>> {
+    if args.is_empty() {
+        return embedded_weights();
+    }
     let mut chosen: Vec<Chosen> = Vec::new();
     for arg in args {
         let meta =
@@ -164,7 +188,11 @@ pub(crate) fn resolve_weights(args: &[PathBuf]) -> Result<Vec<Chosen>> {
                     weights.kind()
                 );
             }
-            chosen.push(Chosen { path, weights });
+            chosen.push(Chosen {
+                path,
+                weights,
+                embedded: None,
+            });
         }
     }
     chosen.sort_by_key(|c| c.weights.kind());

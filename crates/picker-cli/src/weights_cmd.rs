@@ -27,7 +27,7 @@ pub struct RandomArgs {
     /// Which network.
     #[arg(long, value_enum)]
     pub net: NetArg,
-    /// Size preset: `thesis` (the thesis networks) or `tiny` (test-sized).
+    /// Size preset: `thesis` (the thesis networks), `lite` (the embedded default's size) or `tiny` (test-sized).
     #[arg(long, default_value = "thesis")]
     pub preset: String,
     /// Seed of the random values.
@@ -45,8 +45,12 @@ pub struct RandomArgs {
 #[derive(Debug, clap::Args)]
 pub struct InspectArgs {
     /// The weights file.
-    #[arg(value_name = "FILE.safetensors")]
-    pub file: PathBuf,
+    #[arg(value_name = "FILE.safetensors", required_unless_present = "default")]
+    pub file: Option<PathBuf>,
+    /// Describe the default weights embedded in this binary (all three nets)
+    /// instead of a file: preset, parameters and how they were trained.
+    #[arg(long = "default", conflicts_with = "file")]
+    pub default: bool,
     /// Print one JSON object instead of text.
     #[arg(long)]
     pub json: bool,
@@ -99,9 +103,31 @@ pub fn write_random(
 }
 
 fn inspect(a: InspectArgs) -> Result<()> {
-    let w = Weights::open(&a.file).context("reading weights")?;
-    let check = if a.check {
-        picker_nets::Net::load(&w).context("checking weights")?;
+    let Some(file) = &a.file else {
+        let mut all = Vec::new();
+        for (i, c) in crate::infer::embedded_weights()?.into_iter().enumerate() {
+            if i > 0 && !a.json {
+                println!();
+            }
+            all.push(describe(&c.path, &c.weights, a.check, a.json)?);
+        }
+        if a.json {
+            println!("{}", serde_json::Value::Array(all));
+        }
+        return Ok(());
+    };
+    let w = Weights::open(file).context("reading weights")?;
+    let obj = describe(file, &w, a.check, a.json)?;
+    if a.json {
+        println!("{obj}");
+    }
+    Ok(())
+}
+
+/// Prints `w` as text, or returns it as a JSON object when `json`.
+fn describe(file: &Path, w: &Weights, do_check: bool, json: bool) -> Result<serde_json::Value> {
+    let check = if do_check {
+        picker_nets::Net::load(w).context("checking weights")?;
         Some("ok")
     } else {
         None
@@ -109,9 +135,9 @@ fn inspect(a: InspectArgs) -> Result<()> {
     let config = w.config();
     let params = config.param_count();
     let dtypes = w.dtypes();
-    if a.json {
+    if json {
         let obj = serde_json::json!({
-            "file": a.file.display().to_string(),
+            "file": file.display().to_string(),
             "net": w.kind().as_str(),
             "preset": w.preset(),
             "config": serde_json::from_str::<serde_json::Value>(&config.to_json())
@@ -125,10 +151,9 @@ fn inspect(a: InspectArgs) -> Result<()> {
             "metadata": w.metadata(),
             "check": check,
         });
-        println!("{obj}");
-        return Ok(());
+        return Ok(obj);
     }
-    println!("file:        {}", a.file.display());
+    println!("file:        {}", file.display());
     println!("net:         {}", w.kind());
     println!("preset:      {}", w.preset());
     println!("parameters:  {}", args::param_count(params));
@@ -161,5 +186,5 @@ fn inspect(a: InspectArgs) -> Result<()> {
             println!("  {k}: {v}");
         }
     }
-    Ok(())
+    Ok(serde_json::Value::Null)
 }

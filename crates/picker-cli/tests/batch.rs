@@ -496,7 +496,6 @@ fn usage_errors_exit_2() {
             ],
             "not a folder",
         ),
-        (vec!["batch", i, "--out", o, "--all"], "--weights"),
     ];
     for (args, want) in cases {
         let r = picker().args(&args).output().unwrap();
@@ -522,6 +521,57 @@ fn usage_errors_exit_2() {
     let err = String::from_utf8_lossy(&r.stderr);
     assert_eq!(r.status.code(), Some(2), "{err}");
     assert!(err.contains("bad.csv line 1"), "{err}");
+}
+
+#[test]
+fn embedded_default_weights_without_a_weights_flag() {
+    use sha2::{Digest, Sha256};
+    let tmp = tempfile::tempdir().unwrap();
+    let input = tmp.path().join("photos");
+    std::fs::create_dir_all(&input).unwrap();
+    photo(7, 64, 48).save(input.join("a.png")).unwrap();
+    let picks = tmp.path().join("picks.csv");
+    std::fs::write(&picks, "a.png,10,40\n").unwrap();
+    let out = tmp.path().join("out");
+    let r = picker()
+        .args([
+            "batch",
+            input.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ])
+        .args(["--picks", picks.to_str().unwrap()])
+        .args(["--work-size", "48", "--max-size", "32", "--quiet"])
+        .output()
+        .unwrap();
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let m: Value =
+        serde_json::from_slice(&std::fs::read(out.join("a.png.material/manifest.json")).unwrap())
+            .unwrap();
+    let files: Vec<&str> = m["weights"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|w| w["file"].as_str().unwrap())
+        .collect();
+    assert_eq!(
+        files,
+        [
+            "<embedded lite>/irn.safetensors",
+            "<embedded lite>/msn.safetensors",
+            "<embedded lite>/envmap.safetensors"
+        ]
+    );
+    // The manifest's digest is that of the committed file the binary embeds.
+    for w in m["weights"].as_array().unwrap() {
+        let name = w["file"].as_str().unwrap().rsplit('/').next().unwrap();
+        let bytes = std::fs::read(repo().join("crates/picker-weights/weights").join(name)).unwrap();
+        let want: String = Sha256::digest(&bytes)
+            .iter()
+            .map(|b| format!("{b:02x}"))
+            .collect();
+        assert_eq!(w["sha256"].as_str().unwrap(), want, "{name}");
+    }
 }
 
 #[test]

@@ -1,0 +1,41 @@
+#!/usr/bin/env bash
+# The real-photo pictures of docs/model-card.md: `picker extract` with the embedded default weights on
+# photographs the networks never saw (Debian's opencv-doc sample images and the repository's coffee.jpg),
+# each report sheet saved as a JPEG under docs/model-card/.
+#
+#   scripts/model-card-photos.sh
+#
+# Requirements: cargo, apt-get + dpkg (opencv-doc is downloaded, not installed), python3 with Pillow
+# (PYTHON=... to choose the interpreter).
+set -euo pipefail
+
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+PYTHON="${PYTHON:-python3}"
+cd "$ROOT"
+cargo build --release -p picker-cli
+PICKER="${CARGO_TARGET_DIR:-$ROOT/target}/release/picker"
+
+TMP="$(mktemp -d)"
+trap 'rm -rf "$TMP"' EXIT
+(cd "$TMP" && apt-get download opencv-doc >/dev/null && dpkg -x opencv-doc_*.deb pkg)
+DATA="$TMP/pkg/usr/share/doc/opencv-doc/examples/data"
+
+OUT="$ROOT/docs/model-card"
+mkdir -p "$OUT"
+# name photo pick: what is picked
+while read -r name photo pick; do
+    "$PICKER" extract "$photo" --pick "$pick" --out "$TMP/$name" --no-timings --threads 2
+    "$PYTHON" - "$TMP/$name/report.png" "$OUT/$name.jpg" <<'EOF'
+import sys
+from PIL import Image
+im = Image.open(sys.argv[1]).convert("RGB")
+im.save(sys.argv[2], quality=82, optimize=True)
+EOF
+done <<EOF
+room fixtures/examples/room.png 200,150
+coffee fixtures/examples/coffee.jpg 20,190
+aloe $DATA/aloeL.jpg 150,150
+stuff $DATA/stuff.jpg 150,380
+board $DATA/left01.jpg 380,200
+EOF
+echo "model-card-photos: wrote $(ls "$OUT"/*.jpg | wc -l) pictures to $OUT"
