@@ -518,30 +518,30 @@ fn regressions_extract_without_error() {
     }
 }
 
-#[test]
-fn embedded_default_weights_run_without_any_weights_flag() {
+/// Runs `picker extract fixtures/examples/EXAMPLE --pick PICK` with the
+/// embedded weights (no `--weights`); returns the temporary folder and the
+/// output folder inside it (one pick: the material's files are directly there).
+fn extract_example_embedded(example: &str, pick: &str) -> (tempfile::TempDir, PathBuf) {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("out");
-    let photo = repo().join("fixtures/examples/coffee.jpg");
+    let photo = repo().join("fixtures/examples").join(example);
     ok(&[
         "extract",
         photo.to_str().unwrap(),
         "--pick",
-        "120,88",
+        pick,
         "--out",
         out.to_str().unwrap(),
+        "--threads",
+        "2",
     ]);
-    let dir = std::fs::read_dir(&out)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .find(|p| p.join("material.json").is_file())
-        .unwrap_or_else(|| out.clone());
-    assert!(
-        dir.join("material.json").is_file(),
-        "no material.json under {}",
-        out.display()
-    );
-    let text = std::fs::read_to_string(dir.join("material.json")).unwrap();
+    (tmp, out)
+}
+
+#[test]
+fn embedded_default_weights_run_without_any_weights_flag() {
+    let (_tmp, out) = extract_example_embedded("coffee.jpg", "120,88");
+    let text = std::fs::read_to_string(out.join("material.json")).unwrap();
     assert!(
         text.contains("<embedded lite>/irn.safetensors"),
         "material.json does not name the embedded weights:\n{text}"
@@ -585,19 +585,7 @@ fn weights_inspect_default_describes_the_trained_embedded_nets() {
 /// and on a pipeline that no longer follows the pick.
 #[test]
 fn embedded_weights_find_the_wall_of_the_readme_example() {
-    let tmp = tempfile::tempdir().unwrap();
-    let out = tmp.path().join("out");
-    let photo = repo().join("fixtures/examples/room.png");
-    ok(&[
-        "extract",
-        photo.to_str().unwrap(),
-        "--pick",
-        "200,150",
-        "--out",
-        out.to_str().unwrap(),
-        "--threads",
-        "2",
-    ]);
+    let (_tmp, out) = extract_example_embedded("room.png", "200,150");
     let mask = read_png(&out.join("mask.png")).unwrap();
     let truth = read_png(&repo().join("fixtures/examples/room-walls-true-mask.png")).unwrap();
     assert_eq!(
