@@ -208,8 +208,9 @@ impl ResBlock {
     }
     /// `x + bn2(conv2(pad(relu(bn1(conv1(pad(x)))))))`; needs `h, w ≥ 2`.
     pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
-        let h = self.conv1.forward(&reflect_pad(x, [1; 4])?)?;
-        Ok(self.conv2.forward_add(&reflect_pad(&h, [1; 4])?, x)?)
+        // The reflection padding is fused into the convolution's gather.
+        let h = self.conv1.forward_reflect(x, 1, None)?;
+        Ok(self.conv2.forward_reflect(&h, 1, Some(x))?)
     }
     /// Parameters after folding.
     pub fn param_count(&self) -> u64 {

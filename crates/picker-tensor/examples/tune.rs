@@ -8,8 +8,8 @@ use picker_tensor::{
 use std::time::Instant;
 
 /// Runs `f` 25 times and prints the median and minimum with their FLOP rates.
-fn time_it(name: &str, flops: u64, f: impl Fn() -> Tensor) {
-    let mut t: Vec<f64> = (0..25)
+fn time_it(name: &str, flops: u64, mut f: impl FnMut() -> Tensor) {
+    let mut t: Vec<f64> = (0..49)
         .map(|_| {
             let t0 = Instant::now();
             std::hint::black_box(f());
@@ -20,8 +20,8 @@ fn time_it(name: &str, flops: u64, f: impl Fn() -> Tensor) {
     let g = |s: f64| flops as f64 / s / 1e9;
     println!(
         "{name}: median {:.2} ms ({:.0} GFLOP/s), min {:.2} ms ({:.0} GFLOP/s)",
-        t[12] * 1e3,
-        g(t[12]),
+        t[24] * 1e3,
+        g(t[24]),
         t[0] * 1e3,
         g(t[0])
     );
@@ -35,6 +35,23 @@ fn main() {
         "up1" => Some((120, 160, ConvTransposeSpec::square(128, 64, 3, 2, 1, 1))),
         _ => None,
     };
+    if which == "resmany" {
+        // 24 different layers in turn, as in a network: the weights of each
+        // come from memory, not from the cache.
+        let s = ConvSpec::square(256, 256, 3, 1, 0);
+        let convs: Vec<Conv2d> = (0..24)
+            .map(|_| {
+                let wt = rng.normal_vec(s.weight_len(), 0.05);
+                Conv2d::new(s, &wt, None, Activation::Relu).expect("layer")
+            })
+            .collect();
+        let x = rng.tensor([1, 256, 62, 82]);
+        let mut i = 0;
+        return time_it("resmany (per layer)", s.flops(62, 82), || {
+            i = (i + 1) % convs.len();
+            convs[i].forward(&x).expect("forward")
+        });
+    }
     if let Some((h, w, s)) = transposed {
         let wt = rng.normal_vec(s.weight_len(), 0.05);
         let conv = ConvTranspose2d::new(s, &wt, None, Activation::Relu).expect("layer");

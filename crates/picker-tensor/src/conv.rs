@@ -1,16 +1,19 @@
 //! Convolution layers with packed weights: [`Conv2d`] and [`ConvTranspose2d`]
 //! (PyTorch semantics, zero padding, any kernel and stride).
 
-use rayon::prelude::*;
-
 use crate::activation::Activation;
 use crate::direct::{self, conv_direct, DirectProblem};
 use crate::error::{invalid, shape_err, Result};
 use crate::gemm::{gemm, BSource, DenseB, Epilogue, PackedA};
 use crate::isa::Isa;
+use rayon::prelude::*;
+
 use crate::microkernel::MicroKernel;
+use crate::pad::reflect_pad;
+use crate::params::MAX_NR;
+use crate::shifted::{padded_copy, shifted_gemm, Fill, OutMap, ShiftedB};
 use crate::tensor::Tensor;
-use crate::winograd::Winograd;
+use crate::winograd::{Border, Winograd};
 
 /// Shape of a 2-D convolution (PyTorch `Conv2d`, zero padding, no dilation, no groups).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -221,14 +224,18 @@ pub enum ConvAlgorithm {
     Direct,
     /// Winograd F(4×4, 3×3) (3×3 kernels, stride 1, any zero padding).
     Winograd,
+    /// Packed-A GEMM that reads the B rows in place from a padded copy of
+    /// the input (stride 1, any kernel): no im2col packing.
+    Shifted,
 }
 
 impl ConvAlgorithm {
     /// Every algorithm that can be asked for explicitly.
-    pub const EXPLICIT: [ConvAlgorithm; 3] = [
+    pub const EXPLICIT: [ConvAlgorithm; 4] = [
         ConvAlgorithm::Gemm,
         ConvAlgorithm::Direct,
         ConvAlgorithm::Winograd,
+        ConvAlgorithm::Shifted,
     ];
 
     /// True when the algorithm can run a layer of this shape.
@@ -237,12 +244,15 @@ impl ConvAlgorithm {
             ConvAlgorithm::Auto | ConvAlgorithm::Gemm => true,
             ConvAlgorithm::Direct => s.stride == 1 && s.pad == 0 && s.c_out <= direct::MAX_CO,
             ConvAlgorithm::Winograd => s.kh == 3 && s.kw == 3 && s.stride == 1,
+            ConvAlgorithm::Shifted => s.stride == 1,
         }
     }
 
     fn resolve(self, s: &ConvSpec) -> ConvAlgorithm {
         match self {
-            ConvAlgorithm::Auto if ConvAlgorithm::Direct.applies(s) => ConvAlgorithm::Direct,
+            ConvAlgorithm::Auto if s.stride == 1 && s.c_out <= FOLD_MAX_CO && s.kw > 1 => {
+                ConvAlgorithm::Shifted
+            }
             ConvAlgorithm::Auto
                 if ConvAlgorithm::Winograd.applies(s)
                     && s.c_in >= 16
@@ -250,6 +260,9 @@ impl ConvAlgorithm {
                     && std::env::var("PICKER_CONV").as_deref() != Ok("gemm") =>
             {
                 ConvAlgorithm::Winograd
+            }
+            ConvAlgorithm::Auto if s.stride == 1 && (s.kh > 1 || s.kw > 1 || s.pad > 0) => {
+                ConvAlgorithm::Shifted
             }
             ConvAlgorithm::Auto => ConvAlgorithm::Gemm,
             other => other,
@@ -269,7 +282,16 @@ enum ConvPath {
     Direct { isa: Isa, weight: Vec<f32> },
     /// Winograd F(4×4, 3×3).
     Winograd { isa: Isa, wino: Winograd },
+    /// Packed A, B rows read in place from a padded copy.
+    /// `fold_kx`: the rows of A are `(co, kx)` and the columns `(ci, ky)`, so
+    /// a layer with few outputs still fills the micro-kernel's rows; the `kw`
+    /// partial sums of an output are added, shifted, afterwards.
+    Shifted { packed: PackedA, fold_kx: bool },
 }
+
+/// Layers with at most this many outputs fold the kernel's columns into the
+/// rows of the product (see `ConvPath::Shifted`).
+const FOLD_MAX_CO: usize = 4;
 
 impl std::fmt::Debug for Conv2d {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -442,8 +464,25 @@ impl Conv2d {
             },
             ConvAlgorithm::Winograd => ConvPath::Winograd {
                 isa,
-                wino: Winograd::new(kernel, spec.c_in, spec.c_out, spec.pad, weight),
+                wino: Winograd::new(kernel, spec.c_in, spec.c_out, weight),
             },
+            ConvAlgorithm::Shifted if spec.c_out <= FOLD_MAX_CO && spec.kw > 1 => {
+                let (kh, kw, c_in) = (spec.kh, spec.kw, spec.c_in);
+                ConvPath::Shifted {
+                    packed: PackedA::pack(kernel, spec.c_out * kw, c_in * kh, |r, c| {
+                        let (co, kx, ci, ky) = (r / kw, r % kw, c / kh, c % kh);
+                        weight[((co * c_in + ci) * kh + ky) * kw + kx]
+                    }),
+                    fold_kx: true,
+                }
+            }
+            ConvAlgorithm::Shifted => {
+                let k = spec.c_in * spec.kh * spec.kw;
+                ConvPath::Shifted {
+                    packed: PackedA::pack(kernel, spec.c_out, k, |r, c| weight[r * k + c]),
+                    fold_kx: false,
+                }
+            }
             _ => {
                 let k = spec.c_in * spec.kh * spec.kw;
                 let p = spec.pad as isize;
@@ -475,7 +514,7 @@ impl Conv2d {
     /// The kernel family the weights are packed for.
     pub fn isa(&self) -> Isa {
         match &self.path {
-            ConvPath::Gemm { packed, .. } => packed.kernel.isa,
+            ConvPath::Gemm { packed, .. } | ConvPath::Shifted { packed, .. } => packed.kernel.isa,
             ConvPath::Direct { isa, .. } | ConvPath::Winograd { isa, .. } => *isa,
         }
     }
@@ -486,23 +525,64 @@ impl Conv2d {
             ConvPath::Gemm { .. } => ConvAlgorithm::Gemm,
             ConvPath::Direct { .. } => ConvAlgorithm::Direct,
             ConvPath::Winograd { .. } => ConvAlgorithm::Winograd,
+            ConvPath::Shifted { .. } => ConvAlgorithm::Shifted,
         }
     }
 
     /// `act(conv(x) + b)`.
     pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
-        self.run(x, None)
+        self.run(x, 0, None)
     }
 
     /// `act(conv(x) + b) + residual`; `residual` has the output's shape.
     pub fn forward_add(&self, x: &Tensor, residual: &Tensor) -> Result<Tensor> {
-        self.run(x, Some(residual))
+        self.run(x, 0, Some(residual))
     }
 
-    fn run(&self, x: &Tensor, residual: Option<&Tensor>) -> Result<Tensor> {
+    /// `act(conv(reflect_pad(x, pad)) + b) [+ residual]`: the convolution of
+    /// the input extended by PyTorch `ReflectionPad2d(pad)`, which needs `pad`
+    /// smaller than the input's height and width. The layer itself must have
+    /// no zero padding. The Winograd path reads the reflection in its gather;
+    /// the other paths pad a copy first.
+    pub fn forward_reflect(
+        &self,
+        x: &Tensor,
+        pad: usize,
+        residual: Option<&Tensor>,
+    ) -> Result<Tensor> {
+        if self.spec.pad != 0 {
+            return Err(invalid(
+                "conv2d",
+                format!(
+                    "forward_reflect needs a layer without zero padding, this one has pad {}",
+                    self.spec.pad
+                ),
+            ));
+        }
+        if pad >= x.h() || pad >= x.w() {
+            return Err(shape_err(
+                "conv2d",
+                "reflection pad",
+                format!("smaller than the input {}x{}", x.h(), x.w()),
+                pad,
+            ));
+        }
+        self.run(x, pad, residual)
+    }
+
+    fn run(&self, x: &Tensor, reflect: usize, residual: Option<&Tensor>) -> Result<Tensor> {
+        if reflect > 0
+            && !matches!(
+                self.path,
+                ConvPath::Winograd { .. } | ConvPath::Shifted { .. }
+            )
+        {
+            let padded = reflect_pad(x, [reflect; 4])?;
+            return self.run(&padded, 0, residual);
+        }
         let s = self.spec;
         check_input("conv2d", x, s.c_in)?;
-        let (oh, ow) = s.out_hw(x.h(), x.w())?;
+        let (oh, ow) = s.out_hw(x.h() + 2 * reflect, x.w() + 2 * reflect)?;
         let shape = [x.n(), s.c_out, oh, ow];
         if let Some(r) = residual {
             if r.shape() != shape {
@@ -538,15 +618,63 @@ impl Conv2d {
                     }
                 }
                 ConvPath::Winograd { wino, .. } => {
+                    let (pad, border) = if reflect > 0 {
+                        (reflect, Border::Reflect)
+                    } else {
+                        (s.pad, Border::Zero)
+                    };
                     wino.forward_image(
                         img,
                         x.h(),
                         x.w(),
+                        pad,
+                        border,
                         self.bias.as_deref(),
                         self.act,
                         residual,
                         c,
                     );
+                }
+                ConvPath::Shifted { packed, fold_kx } => {
+                    let (pad, fill) = if reflect > 0 {
+                        (reflect, Fill::Reflect)
+                    } else {
+                        (s.pad, Fill::Zero)
+                    };
+                    let slack = packed.kernel.nr + s.kw;
+                    let (src, hp, wp) =
+                        padded_copy(img, s.c_in, x.h(), x.w(), [pad; 4], fill, slack);
+                    let epi = Epilogue {
+                        bias: self.bias.as_deref(),
+                        act: self.act,
+                        residual,
+                    };
+                    if *fold_kx {
+                        self.folded(packed, &src, hp, wp, oh, ow, &epi, c);
+                    } else {
+                        let offs: Vec<usize> = (0..s.c_in)
+                            .flat_map(|ci| {
+                                (0..s.kh).flat_map(move |ky| {
+                                    (0..s.kw).map(move |kx| ci * hp * wp + ky * wp + kx)
+                                })
+                            })
+                            .collect();
+                        let b = ShiftedB {
+                            src: &src,
+                            offs: &offs,
+                            wp,
+                        };
+                        let map = OutMap {
+                            base: 0,
+                            cs: oh * ow,
+                            rs: ow,
+                            xs: 1,
+                            oh,
+                            ow,
+                        };
+                        shifted_gemm(packed, &b, &map, c, &epi);
+                    }
+                    crate::pool::give(src);
                 }
                 ConvPath::Gemm { packed, taps } => {
                     let epi = Epilogue {
@@ -575,6 +703,68 @@ impl Conv2d {
             }
         }
         Ok(out)
+    }
+}
+
+impl Conv2d {
+    /// The folded shifted product: `C'[(co, kx)][n] = Σ_(ci, ky) w · src[ci][n + ky·wp]`
+    /// on the padded-width grid, then `out[co][y][x] = epilogue(Σ_kx C'[(co, kx)][y·wp + x + kx])`.
+    #[allow(clippy::too_many_arguments)]
+    fn folded(
+        &self,
+        packed: &PackedA,
+        src: &[f32],
+        hp: usize,
+        wp: usize,
+        oh: usize,
+        ow: usize,
+        epi: &Epilogue<'_>,
+        out: &mut [f32],
+    ) {
+        let s = self.spec;
+        let offs: Vec<usize> = (0..s.c_in)
+            .flat_map(|ci| (0..s.kh).map(move |ky| ci * hp * wp + ky * wp))
+            .collect();
+        let b = ShiftedB {
+            src,
+            offs: &offs,
+            wp,
+        };
+        let wide = oh * wp;
+        let mut partial = crate::pool::take(s.c_out * s.kw * wide);
+        let map = OutMap {
+            base: 0,
+            cs: wide,
+            rs: wp,
+            xs: 1,
+            oh,
+            ow: wp,
+        };
+        let none = Epilogue {
+            bias: None,
+            act: Activation::None,
+            residual: None,
+        };
+        shifted_gemm(packed, &b, &map, &mut partial, &none);
+        let part = &partial;
+        let kw = s.kw;
+        out.par_chunks_mut(ow).enumerate().for_each(|(row, orow)| {
+            let (co, y) = (row / oh, row % oh);
+            let bias = epi.bias.map_or(0.0, |b| b[co]);
+            let base = co * kw * wide + y * wp;
+            orow.fill(bias);
+            for kx in 0..kw {
+                let p = &part[base + kx * wide + kx..][..ow];
+                orow.iter_mut().zip(p).for_each(|(o, &v)| *o += v);
+            }
+            epi.act.apply(orow);
+            if let Some(r) = epi.residual {
+                orow.iter_mut()
+                    .zip(&r[row * ow..(row + 1) * ow])
+                    .for_each(|(o, &v)| *o += v);
+            }
+        });
+        crate::pool::give(partial);
     }
 }
 
@@ -700,81 +890,80 @@ impl ConvTranspose2d {
         let sp = self.spec;
         check_input("conv_transpose2d", x, sp.c_in)?;
         let (oh, ow) = sp.out_hw(x.h(), x.w())?;
+        let (h, w) = (x.h(), x.w());
         let s = sp.stride;
         let per_out = sp.c_out * oh * ow;
         let mut out = Tensor::for_overwrite([x.n(), sp.c_out, oh, ow]);
-        // One buffer per x-phase of the current row phase, then one pass that
-        // writes whole output rows with the x-phases interleaved.
-        let mut tmps: Vec<Vec<f32>> = vec![Vec::new(); s];
+        // Each phase reads input (m + dy, n + dx) for its m < mh, n < mw: one
+        // zero-padded copy covers every phase's reach.
+        let mut pads = [0usize; 4];
+        for ph in &self.phases {
+            let mh = oh.saturating_sub(ph.ry).div_ceil(s);
+            let mw = ow.saturating_sub(ph.rx).div_ceil(s);
+            for &(dy, dx) in &ph.taps {
+                pads[0] = pads[0].max((-dy).max(0) as usize);
+                pads[1] = pads[1].max((mh as isize + dy - h as isize).max(0) as usize);
+                pads[2] = pads[2].max((-dx).max(0) as usize);
+                pads[3] = pads[3].max((mw as isize + dx - w as isize).max(0) as usize);
+            }
+        }
         let epi = Epilogue {
             bias: self.bias.as_deref(),
             act: self.act,
             residual: None,
         };
+        // One padded row of slack covers every tap's column offset.
+        let slack = MAX_NR + w + pads[2] + pads[3];
         for b in 0..x.n() {
             let dst = &mut out.data_mut()[b * per_out..(b + 1) * per_out];
-            for ry in 0..s {
-                let mh = oh.saturating_sub(ry).div_ceil(s);
-                if mh == 0 {
+            let (src, hp, wp) = padded_copy(x.image(b), sp.c_in, h, w, pads, Fill::Zero, slack);
+            for ph in &self.phases {
+                let mh = oh.saturating_sub(ph.ry).div_ceil(s);
+                let mw = ow.saturating_sub(ph.rx).div_ceil(s);
+                if mh == 0 || mw == 0 {
                     continue;
                 }
-                let mut mws = vec![0; s];
-                for ph in self.phases.iter().filter(|p| p.ry == ry) {
-                    let mw = ow.saturating_sub(ph.rx).div_ceil(s);
-                    mws[ph.rx] = mw;
-                    let tmp = &mut tmps[ph.rx];
-                    tmp.clear();
-                    tmp.resize(sp.c_out * mh * mw, 0.0);
-                    if mw == 0 {
-                        continue;
+                let map = OutMap {
+                    base: ph.ry * ow + ph.rx,
+                    cs: oh * ow,
+                    rs: s * ow,
+                    xs: s,
+                    oh: mh,
+                    ow: mw,
+                };
+                match &ph.packed {
+                    Some(packed) => {
+                        let nt = ph.taps.len();
+                        let offs: Vec<usize> = (0..sp.c_in * nt)
+                            .map(|k| {
+                                let (ci, (dy, dx)) = (k / nt, ph.taps[k % nt]);
+                                let row = (dy + pads[0] as isize) as usize;
+                                let col = (dx + pads[2] as isize) as usize;
+                                ci * hp * wp + row * wp + col
+                            })
+                            .collect();
+                        let bsrc = ShiftedB {
+                            src: &src,
+                            offs: &offs,
+                            wp,
+                        };
+                        shifted_gemm(packed, &bsrc, &map, dst, &epi);
                     }
-                    match &ph.packed {
-                        Some(packed) => {
-                            let src = Gather {
-                                x: x.image(b),
-                                h: x.h(),
-                                w: x.w(),
-                                stride: 1,
-                                taps: &ph.taps,
-                                ow: mw,
-                            };
-                            gemm(packed, &src, mh * mw, tmp, &epi);
-                        }
-                        None => {
-                            for (co, plane) in tmp.chunks_mut(mh * mw).enumerate() {
-                                plane.fill(self.bias.as_ref().map_or(0.0, |bb| bb[co]));
-                                self.act.apply(plane);
+                    None => {
+                        for co in 0..sp.c_out {
+                            let v = self
+                                .act
+                                .apply_one(self.bias.as_ref().map_or(0.0, |bb| bb[co]));
+                            for m in 0..mh {
+                                for n in 0..mw {
+                                    dst[map.base + co * map.cs + m * map.rs + n * map.xs] = v;
+                                }
                             }
                         }
                     }
                 }
-                let (tmps, mws) = (&tmps, &mws);
-                dst.par_chunks_mut(oh * ow)
-                    .enumerate()
-                    .for_each(|(co, plane)| {
-                        for m in 0..mh {
-                            let orow = &mut plane[(s * m + ry) * ow..][..ow];
-                            let rows: Vec<&[f32]> = (0..s)
-                                .map(|rx| &tmps[rx][(co * mh + m) * mws[rx]..][..mws[rx]])
-                                .collect();
-                            if s == 2 {
-                                let (r0, r1) = (rows[0], rows[1]);
-                                for (n, pair) in orow.chunks_mut(2).enumerate() {
-                                    pair[0] = r0[n];
-                                    if let Some(o) = pair.get_mut(1) {
-                                        *o = r1[n];
-                                    }
-                                }
-                            } else {
-                                for (n, chunk) in orow.chunks_mut(s).enumerate() {
-                                    for (o, r) in chunk.iter_mut().zip(&rows) {
-                                        *o = r[n];
-                                    }
-                                }
-                            }
-                        }
-                    });
             }
+            crate::pool::give(src);
         }
         Ok(out)
     }

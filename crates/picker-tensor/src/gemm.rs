@@ -23,9 +23,11 @@ pub(crate) struct PackedA {
     pub(crate) m: usize,
     pub(crate) k: usize,
     /// `(k0, kc, offset)` of each depth block.
-    kblocks: Vec<(usize, usize, usize)>,
-    m_panels: usize,
-    data: AlignedBuf,
+    pub(crate) kblocks: Vec<(usize, usize, usize)>,
+    /// Number of `MR`-row panels.
+    pub(crate) m_panels: usize,
+    /// The panels: depth block after depth block, each `m_panels` panels of `kc × MR`.
+    pub(crate) data: AlignedBuf,
 }
 
 impl PackedA {
@@ -122,18 +124,6 @@ thread_local! {
 /// `c = epilogue(a · b)` with `c` row-major `a.m × n`, on the rayon pool.
 pub(crate) fn gemm<B: BSource>(a: &PackedA, b: &B, n: usize, c: &mut [f32], epi: &Epilogue<'_>) {
     gemm_on(a, b, n, c, epi, rayon::current_num_threads().max(1));
-}
-
-/// As [`gemm`], all on the calling thread (for callers that parallelise over
-/// many independent products themselves).
-pub(crate) fn gemm_serial<B: BSource>(
-    a: &PackedA,
-    b: &B,
-    n: usize,
-    c: &mut [f32],
-    epi: &Epilogue<'_>,
-) {
-    gemm_on(a, b, n, c, epi, 1);
 }
 
 fn gemm_on<B: BSource>(

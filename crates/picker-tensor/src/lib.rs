@@ -40,6 +40,7 @@ mod pool;
 pub mod reference;
 mod resize;
 mod rng;
+mod shifted;
 mod tensor;
 mod tolerance;
 mod winograd;

@@ -16,3 +16,12 @@ pub const ALIGN: usize = 64;
 
 /// Widest micro-kernel tile of any family (`NR` of the AVX-512 kernel).
 pub const MAX_NR: usize = 48;
+
+/// Winograd: input tiles per block, in `NR`-wide panels of the micro-kernel. A
+/// block's transformed input (`36 × c_in × NR × this` floats) is shared by all
+/// threads and should stay in L2/L3 while every output-channel chunk reads it.
+pub const WINO_PANELS_PER_BLOCK: usize = 1;
+
+/// Winograd: output channels one task computes for a block (rounded to whole
+/// `MR` panels); its `36 × this × NR` products stay in L2 for the output transform.
+pub const WINO_CO_PER_TASK: usize = 32;

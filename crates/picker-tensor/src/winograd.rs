@@ -4,23 +4,53 @@
 //!
 //! With `d` a 6×6 input tile, `g` a 3×3 kernel: `Y = Aᵀ [Σ_ci (G g Gᵀ) ⊙ (Bᵀ d B)] A`.
 //! The weights are transformed (in f64) and packed once, as 36 `c_out × c_in`
-//! matrices `U[ξ]`. A forward pass transforms the input tiles into 36
-//! `c_in × tiles` matrices `V[ξ]` (parallel over channels), runs the 36
-//! independent products `M[ξ] = U[ξ] · V[ξ]` (parallel over ξ), and transforms
-//! `M` back per output channel, fusing bias, activation and residual add.
-//! Zero padding (and the overhang of the last tiles) is handled in the gather.
+//! matrices `U[ξ]` in the micro-kernel's A-panel layout.
+//!
+//! A forward pass walks the output tiles in blocks of `NR`-wide panels
+//! ([`WINO_PANELS_PER_BLOCK`]), so that no transformed tensor ever leaves the
+//! caches:
+//! 1. the block's input tiles are gathered (zero or reflection padding fused
+//!    into the gather) and transformed, in parallel over input channels,
+//!    straight into the micro-kernel's packed B layout: `V[ξ]` is `c_in × tiles`;
+//! 2. in parallel over chunks of output channels ([`WINO_CO_PER_TASK`]), the
+//!    36 products `M[ξ] = U[ξ] · V[ξ]` are run by the GEMM micro-kernel into a
+//!    per-thread buffer, which the output transform turns into output pixels
+//!    at once, fused with bias, activation and residual add.
+//!
+//! The tile transforms work on a panel of tiles at a time, with the tiles in
+//! the SIMD lanes; they are compiled once per ISA (`#[target_feature]`) and
+//! dispatched with the micro-kernel. Every output element is computed by one
+//! task with a fixed order of operations, so results do not depend on the
+//! number of threads.
+
+use std::cell::RefCell;
 
 use rayon::prelude::*;
 
 use crate::activation::Activation;
-use crate::conv::{copy_short, zero_short};
-use crate::gemm::{gemm_serial, BSource, Epilogue, PackedA};
+use crate::aligned::AlignedBuf;
+use crate::gemm::PackedA;
+use crate::isa::Isa;
 use crate::microkernel::MicroKernel;
+use crate::pad::reflect_index;
+use crate::params::{WINO_CO_PER_TASK, WINO_PANELS_PER_BLOCK};
 
-/// Points of the transformed tile.
+/// Points of the transformed tile along one axis.
 const T: usize = 6;
 /// Outputs per tile side.
 const M: usize = 4;
+/// Points of the transformed tile.
+const P: usize = T * T;
+
+/// How the input is extended past its edges before the convolution.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Border {
+    /// Zeros (PyTorch `Conv2d(padding=p)`).
+    Zero,
+    /// Reflection without repeating the edge (PyTorch `ReflectionPad2d(p)`,
+    /// which needs `p` smaller than both sides).
+    Reflect,
+}
 
 /// `Bᵀ x` for the points 0, ±1, ±2, ∞.
 #[inline(always)]
@@ -46,7 +76,7 @@ fn at(m: [f32; 6]) -> [f32; 4] {
     ]
 }
 
-/// Six disjoint `len`-long output lanes of `out`, at `base + i·stride` (`stride ≥ len`).
+/// `N` disjoint `len`-long lanes of `out`, at `base + i·stride` (`stride ≥ len`).
 #[inline(always)]
 fn lanes_mut<const N: usize>(
     out: &mut [f32],
@@ -74,6 +104,13 @@ fn lanes(buf: &[f32], base: usize, stride: usize, len: usize) -> [&[f32]; 6] {
 fn bt_lanes(s: [&[f32]; 6], o: [&mut [f32]; 6]) {
     let len = o[0].len();
     let [o0, o1, o2, o3, o4, o5] = o;
+    let (o1, o2, o3, o4, o5) = (
+        &mut o1[..len],
+        &mut o2[..len],
+        &mut o3[..len],
+        &mut o4[..len],
+        &mut o5[..len],
+    );
     let s: [&[f32]; 6] = std::array::from_fn(|r| &s[r][..len]);
     for k in 0..len {
         let v = bt([s[0][k], s[1][k], s[2][k], s[3][k], s[4][k], s[5][k]]);
@@ -91,6 +128,7 @@ fn bt_lanes(s: [&[f32]; 6], o: [&mut [f32]; 6]) {
 fn at_lanes(s: [&[f32]; 6], o: [&mut [f32]; 4]) {
     let len = o[0].len();
     let [o0, o1, o2, o3] = o;
+    let (o1, o2, o3) = (&mut o1[..len], &mut o2[..len], &mut o3[..len]);
     let s: [&[f32]; 6] = std::array::from_fn(|r| &s[r][..len]);
     for k in 0..len {
         let v = at([s[0][k], s[1][k], s[2][k], s[3][k], s[4][k], s[5][k]]);
@@ -114,43 +152,287 @@ const G: [[f64; 3]; 6] = [
 /// A 3×3 stride-1 convolution's weights, transformed and packed.
 #[derive(Clone)]
 pub(crate) struct Winograd {
+    kernel: MicroKernel,
     c_in: usize,
     c_out: usize,
-    pad: usize,
+    /// `U[ξ]`, `c_out × c_in`, packed as the micro-kernel's A panels.
     u: Vec<PackedA>,
 }
 
-/// `V[ξ]` inside the `[ci][ξ][tile]` buffer: row `ci` at `(ci·36 + ξ)·tiles`.
-struct TransformedInput<'a> {
-    v: &'a [f32],
-    xi: usize,
-    tiles: usize,
+/// Where one forward pass reads its input and writes its output.
+struct Geometry<'a> {
+    x: &'a [f32],
+    h: usize,
+    w: usize,
+    /// Tiles per row of tiles.
+    tw: usize,
+    /// Source row of each padded row `0..4·th + 2` (`None`: zero).
+    row_map: Vec<Option<usize>>,
+    /// Padding on each side, and how it is filled.
+    pad: usize,
+    border: Border,
 }
 
-impl BSource for TransformedInput<'_> {
-    fn pack(&self, k0: usize, kc: usize, n0: usize, cols: usize, nr: usize, dst: &mut [f32]) {
-        for kk in 0..kc {
-            let row = ((k0 + kk) * T * T + self.xi) * self.tiles;
-            let src = &self.v[row + n0..row + n0 + cols];
-            for (p, chunk) in src.chunks(nr).enumerate() {
-                let d = &mut dst[(p * kc + kk) * nr..(p * kc + kk + 1) * nr];
-                copy_short(&mut d[..chunk.len()], chunk);
-                zero_short(&mut d[chunk.len()..]);
+impl Geometry<'_> {
+    /// Writes padded row `src_row` (a source row index) as `pw` floats: padded
+    /// column `q` reads source column `q − pad`, reflected or zero outside.
+    #[inline(always)]
+    fn padded_row(&self, plane: &[f32], src_row: Option<usize>, dst: &mut [f32]) {
+        let Some(sy) = src_row else {
+            dst.fill(0.0);
+            return;
+        };
+        let (w, p) = (self.w, self.pad);
+        let src = &plane[sy * w..(sy + 1) * w];
+        let pw = dst.len();
+        for (q, d) in dst.iter_mut().enumerate().take(p.min(pw)) {
+            *d = match self.border {
+                Border::Zero => 0.0,
+                Border::Reflect => src[reflect_index(q as isize - p as isize, w)],
+            };
+        }
+        if p < pw {
+            let n = w.min(pw - p);
+            dst[p..p + n].copy_from_slice(&src[..n]);
+        }
+        let wp = w + 2 * p;
+        for q in (p + w)..pw {
+            dst[q] = if q < wp && self.border == Border::Reflect {
+                src[reflect_index(q as isize - p as isize, w)]
+            } else {
+                0.0
+            };
+        }
+    }
+}
+
+/// A run of consecutive tiles in one row of tiles: `(lane0, ty, tx0, len)`.
+fn segments(t0: usize, t1: usize, tw: usize, out: &mut Vec<(usize, usize, usize, usize)>) {
+    out.clear();
+    let mut t = t0;
+    while t < t1 {
+        let (ty, tx) = (t / tw, t % tw);
+        let len = (tw - tx).min(t1 - t);
+        out.push((t - t0, ty, tx, len));
+        t += len;
+    }
+}
+
+struct SharedPtr(*mut f32);
+// SAFETY: tasks write disjoint parts of the buffer; see the call sites.
+unsafe impl Sync for SharedPtr {}
+unsafe impl Send for SharedPtr {}
+
+thread_local! {
+    /// Per-thread scratch: the block's products `M` for one output-channel chunk.
+    static M_BUF: RefCell<AlignedBuf> = RefCell::new(AlignedBuf::default());
+}
+
+/// Input transform of one channel over one block of tiles `[t0, t1)`, written
+/// into `v` (the block's packed B panels; see [`Winograd::v_offset`]).
+///
+/// Per panel and padded row `r` of each tile row: the row is split into its
+/// four column phases (`q_c[k] = row[4k + c]`, so tile `k` reads `q_0..q_3` at
+/// `k` and `q_0, q_1` at `k + 1`), `Bᵀ` runs along the columns with the tiles
+/// in the lanes, then `Bᵀ` along the rows over the whole panel.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn input_channel_body(
+    g: &Geometry<'_>,
+    ci: usize,
+    t0: usize,
+    t1: usize,
+    nr: usize,
+    v_at: &dyn Fn(usize, usize) -> usize,
+    v: *mut f32,
+    scratch: &mut Vec<f32>,
+) {
+    let (h, w, tw) = (g.h, g.w, g.tw);
+    let plane = &g.x[ci * h * w..(ci + 1) * h * w];
+    // Padded row: tiles 0..tw need columns up to 4·tw + 1; one more phase
+    // group keeps the k + 1 reads of the last tile inside.
+    let pw = M * tw + M;
+    let qlen = tw + 1;
+    let d_len = P * nr;
+    scratch.resize(pw + M * qlen + d_len, 0.0);
+    let (row, rest) = scratch.split_at_mut(pw);
+    let (q, t1buf) = rest.split_at_mut(M * qlen);
+    let mut segs = Vec::with_capacity(4);
+    let mut p0 = t0;
+    let mut panel = 0;
+    while p0 < t1 {
+        let p1 = (p0 + nr).min(t1);
+        // t1buf[(j·6 + r)·nr + lane] = Σ_c Bᵀ[j][c] padded[4ty + r][4tx + c]
+        if p1 - p0 < nr {
+            t1buf.fill(0.0);
+        }
+        segments(p0, p1, tw, &mut segs);
+        for &(l0, ty, tx0, len) in &segs {
+            for r in 0..T {
+                g.padded_row(plane, g.row_map[M * ty + r], row);
+                // q_c[k] = row[4(tx0 + k) + c], k in 0..=len
+                {
+                    let [q0, q1, q2, q3] = lanes_mut::<4>(q, 0, qlen, len + 1);
+                    let src = &row[M * tx0..M * (tx0 + len + 1)];
+                    for (k, c) in src.chunks_exact(M).enumerate() {
+                        q0[k] = c[0];
+                        q1[k] = c[1];
+                        q2[k] = c[2];
+                        q3[k] = c[3];
+                    }
+                }
+                let s: [&[f32]; 6] = [
+                    &q[..len],
+                    &q[qlen..qlen + len],
+                    &q[2 * qlen..2 * qlen + len],
+                    &q[3 * qlen..3 * qlen + len],
+                    &q[1..1 + len],
+                    &q[qlen + 1..qlen + 1 + len],
+                ];
+                bt_lanes(s, lanes_mut(t1buf, r * nr + l0, T * nr, len));
+            }
+        }
+        // V[ξ = 6i + j] = Σ_r Bᵀ[i][r] t1[j][r]
+        for j in 0..T {
+            let src = lanes(t1buf, j * T * nr, nr, nr);
+            // SAFETY: `v_at(ξ, panel)` rows of channel `ci` are written by this
+            // task only, and lie inside the block buffer (see `v_offset`).
+            let o: [&mut [f32]; 6] = std::array::from_fn(|i| unsafe {
+                std::slice::from_raw_parts_mut(v.add(v_at(i * T + j, panel)), nr)
+            });
+            bt_lanes(src, o);
+        }
+        p0 = p1;
+        panel += 1;
+    }
+}
+
+/// Output transform of one channel over one panel of tiles: `m` holds the 36
+/// products (`m[ξ·stride ..][..nr]`), written to `plane` with bias, activation
+/// and residual.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn output_panel_body(
+    m: &[f32],
+    stride: usize,
+    nr: usize,
+    segs: &[(usize, usize, usize, usize)],
+    oh: usize,
+    ow: usize,
+    bias: f32,
+    act: Activation,
+    residual: Option<&[f32]>,
+    plane: &mut [f32],
+    scratch: &mut [f32],
+) {
+    let (t1, y) = scratch.split_at_mut(T * M * nr);
+    let y = &mut y[..M * M * nr];
+    // t1[(c·4 + i)·nr] = Σ_r Aᵀ[i][r] M[ξ = 6r + c]
+    for c in 0..T {
+        at_lanes(
+            lanes(m, c * stride, T * stride, nr),
+            lanes_mut(t1, c * M * nr, nr, nr),
+        );
+    }
+    // y[(i·4 + j)·nr] = Σ_c Aᵀ[j][c] t1[c][i]
+    for i in 0..M {
+        at_lanes(
+            lanes(t1, i * nr, M * nr, nr),
+            lanes_mut(y, i * M * nr, nr, nr),
+        );
+    }
+    for &(l0, ty, tx0, len) in segs {
+        let x0 = M * tx0;
+        let x1 = (M * (tx0 + len)).min(ow);
+        // Whole tiles, then the one cut by the right edge.
+        let full = ((x1 - x0) / M).min(len);
+        for i in 0..M {
+            let oy = ty * M + i;
+            if oy >= oh {
+                break;
+            }
+            let orow = &mut plane[oy * ow..(oy + 1) * ow];
+            let seg = &mut orow[x0..x1];
+            let yl: [&[f32]; 4] = std::array::from_fn(|j| &y[(i * M + j) * nr + l0..][..len]);
+            {
+                let [y0, y1, y2, y3] = yl;
+                let (y0, y1, y2, y3) = (&y0[..full], &y1[..full], &y2[..full], &y3[..full]);
+                for (k, o) in seg.chunks_exact_mut(M).take(full).enumerate() {
+                    o[0] = y0[k];
+                    o[1] = y1[k];
+                    o[2] = y2[k];
+                    o[3] = y3[k];
+                }
+            }
+            for (j, o) in seg[M * full..].iter_mut().enumerate() {
+                *o = yl[j][full];
+            }
+            match residual {
+                Some(r) => {
+                    let rr = &r[oy * ow + x0..oy * ow + x1];
+                    for (o, &r) in seg.iter_mut().zip(rr) {
+                        *o = act.apply_one(*o + bias) + r;
+                    }
+                }
+                None => {
+                    for o in seg.iter_mut() {
+                        *o = act.apply_one(*o + bias);
+                    }
+                }
             }
         }
     }
 }
 
+/// One instance of the transforms per ISA, so the lane loops are vectorised
+/// for the widest registers the micro-kernel family has.
+macro_rules! transforms_for {
+    ($input:ident, $output:ident, $($feat:literal)?) => {
+        $(#[target_feature(enable = $feat)])?
+        #[allow(clippy::too_many_arguments)]
+        unsafe fn $input(
+            g: &Geometry<'_>,
+            ci: usize,
+            t0: usize,
+            t1: usize,
+            nr: usize,
+            v_at: &dyn Fn(usize, usize) -> usize,
+            v: *mut f32,
+            scratch: &mut Vec<f32>,
+        ) {
+            input_channel_body(g, ci, t0, t1, nr, v_at, v, scratch)
+        }
+
+        $(#[target_feature(enable = $feat)])?
+        #[allow(clippy::too_many_arguments)]
+        unsafe fn $output(
+            m: &[f32],
+            stride: usize,
+            nr: usize,
+            segs: &[(usize, usize, usize, usize)],
+            oh: usize,
+            ow: usize,
+            bias: f32,
+            act: Activation,
+            residual: Option<&[f32]>,
+            plane: &mut [f32],
+            scratch: &mut [f32],
+        ) {
+            output_panel_body(m, stride, nr, segs, oh, ow, bias, act, residual, plane, scratch)
+        }
+    };
+}
+
+#[cfg(target_arch = "x86_64")]
+transforms_for!(input_avx512, output_avx512, "avx512f,avx2,fma");
+#[cfg(target_arch = "x86_64")]
+transforms_for!(input_avx2, output_avx2, "avx2,fma");
+transforms_for!(input_portable, output_portable,);
+
 impl Winograd {
-    /// Transforms `weight` (`[c_out, c_in, 3, 3]`) for padding `pad`.
-    pub(crate) fn new(
-        kernel: MicroKernel,
-        c_in: usize,
-        c_out: usize,
-        pad: usize,
-        weight: &[f32],
-    ) -> Self {
-        let mut u = vec![vec![0.0f32; c_out * c_in]; T * T];
+    /// Transforms `weight` (`[c_out, c_in, 3, 3]`) and packs it for `kernel`.
+    pub(crate) fn new(kernel: MicroKernel, c_in: usize, c_out: usize, weight: &[f32]) -> Self {
+        let mut u = vec![vec![0.0f32; c_out * c_in]; P];
         for co in 0..c_out {
             for ci in 0..c_in {
                 let g = &weight[(co * c_in + ci) * 9..][..9];
@@ -174,152 +456,199 @@ impl Winograd {
             .map(|m| PackedA::pack(kernel, c_out, c_in, |r, c| m[r * c_in + c]))
             .collect();
         Self {
+            kernel,
             c_in,
             c_out,
-            pad,
             u,
         }
     }
 
-    /// One image: `x` is `[c_in, h, w]`, `out` is `[c_out, oh, ow]`.
+    /// Offset in the block buffer of the `nr` floats of `V[ξ]`, channel `ci`,
+    /// panel `panel`, for blocks of `tpb` tiles: `ξ`-major, then depth block
+    /// `(k0, kc)`, then panel, then the `kc` rows of that panel.
+    #[inline(always)]
+    fn v_offset(&self, xi: usize, ci: usize, panel: usize, tpb: usize) -> usize {
+        let (k0, kc, _) = self.u[0]
+            .kblocks
+            .iter()
+            .copied()
+            .find(|&(k0, kc, _)| ci < k0 + kc)
+            .expect("ci < c_in");
+        let nr = self.kernel.nr;
+        xi * self.c_in * tpb + k0 * tpb + panel * kc * nr + (ci - k0) * nr
+    }
+
+    /// One image: `x` is `[c_in, h, w]`, extended by `pad` on every side as
+    /// `border` says; `out` is `[c_out, h + 2·pad − 2, w + 2·pad − 2]`.
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn forward_image(
         &self,
         x: &[f32],
         h: usize,
         w: usize,
+        pad: usize,
+        border: Border,
         bias: Option<&[f32]>,
         act: Activation,
         residual: Option<&[f32]>,
         out: &mut [f32],
     ) {
-        let p = self.pad as isize;
-        let (oh, ow) = (h + 2 * self.pad - 2, w + 2 * self.pad - 2);
+        let (oh, ow) = (h + 2 * pad - 2, w + 2 * pad - 2);
         let (th, tw) = (oh.div_ceil(M), ow.div_ceil(M));
         let tiles = th * tw;
-        let mut v = crate::pool::take(self.c_in * T * T * tiles);
-        let mut m = crate::pool::take(self.c_out * T * T * tiles);
-
-        // Input transform, one channel per task: V[ci][ξ][tile]. A whole row of
-        // tiles at a time: gather d[r][c][tx], then Bᵀ over r and over c with the
-        // tiles in the lanes, so every step is a contiguous, vectorisable loop.
-        v.par_chunks_mut(T * T * tiles)
-            .enumerate()
-            .for_each(|(ci, vc)| {
-                let plane = &x[ci * h * w..(ci + 1) * h * w];
-                let mut d = vec![0.0f32; T * T * tw];
-                let mut t1 = vec![0.0f32; T * T * tw];
-                for ty in 0..th {
-                    // d[(r·6 + c)·tw + tx] = x[4ty − p + r][4tx − p + c]
-                    for r in 0..T {
-                        let iy = (ty * M + r) as isize - p;
-                        let rows = &mut d[r * T * tw..(r + 1) * T * tw];
-                        if iy < 0 || iy >= h as isize {
-                            rows.fill(0.0);
-                            continue;
-                        }
-                        let src = &plane[iy as usize * w..(iy as usize + 1) * w];
-                        for (c, dst) in rows.chunks_exact_mut(tw).enumerate() {
-                            // ix = 4·tx + off lies in [0, w) for tx in [lo, hi)
-                            let off = c as isize - p;
-                            let lo = ((-off).max(0) as usize).div_ceil(M).min(tw);
-                            let hi = ((w as isize - off).max(0) as usize)
-                                .div_ceil(M)
-                                .clamp(lo, tw);
-                            dst[..lo].fill(0.0);
-                            let first = (lo * M) as isize + off;
-                            for (k, o) in dst[lo..hi].iter_mut().enumerate() {
-                                *o = src[first as usize + k * M];
-                            }
-                            dst[hi..].fill(0.0);
-                        }
-                    }
-                    // t1[(c·6 + i)·tw + tx] = Σ_r Bᵀ[i][r] d[r][c]
-                    for c in 0..T {
-                        bt_lanes(
-                            lanes(&d, c * tw, T * tw, tw),
-                            lanes_mut(&mut t1, c * T * tw, tw, tw),
-                        );
-                    }
-                    // V[ξ = 6i + j][ty·tw + tx] = Σ_c Bᵀ[j][c] t1[c][i]
-                    for i in 0..T {
-                        bt_lanes(
-                            lanes(&t1, i * tw, T * tw, tw),
-                            lanes_mut(vc, i * T * tiles + ty * tw, tiles, tw),
-                        );
-                    }
+        let (mr, nr) = (self.kernel.mr, self.kernel.nr);
+        let hp = h + 2 * pad;
+        let row_map = (0..M * th + 2)
+            .map(|q| {
+                let s = q as isize - pad as isize;
+                if (0..h as isize).contains(&s) {
+                    Some(s as usize)
+                } else if q < hp && border == Border::Reflect {
+                    Some(reflect_index(s, h))
+                } else {
+                    None
                 }
-            });
-
-        // The 36 independent products M[ξ] = U[ξ] · V[ξ].
-        let none = Epilogue {
-            bias: None,
-            act: Activation::None,
-            residual: None,
+            })
+            .collect();
+        let g = Geometry {
+            x,
+            h,
+            w,
+            tw,
+            row_map,
+            pad,
+            border,
         };
-        let v_ref = &v;
-        m.par_chunks_mut(self.c_out * tiles)
-            .enumerate()
-            .for_each(|(xi, mc)| {
-                let src = TransformedInput {
-                    v: v_ref,
-                    xi,
-                    tiles,
-                };
-                gemm_serial(&self.u[xi], &src, tiles, mc, &none);
-            });
+        let tpb = nr * WINO_PANELS_PER_BLOCK;
+        let mut v = crate::pool::take(P * self.c_in * tpb);
+        let m_panels = self.u[0].m_panels;
+        let chunk_panels = WINO_CO_PER_TASK.div_ceil(mr).max(1);
+        let chunk_rows = chunk_panels * mr;
+        let isa = self.kernel.isa;
+        let plane_len = oh * ow;
 
-        // Output transform per output channel, a row of tiles at a time with the
-        // tiles in the lanes, fused with bias, activation and residual.
-        let m_ref = &m;
-        out.par_chunks_mut(oh * ow)
-            .enumerate()
-            .for_each(|(co, plane)| {
-                let b = bias.map_or(0.0, |b| b[co]);
-                let mut t1 = vec![0.0f32; T * M * tw];
-                let mut y = vec![0.0f32; M * M * tw];
-                let xi_stride = self.c_out * tiles;
-                for ty in 0..th {
-                    let base = co * tiles + ty * tw;
-                    // t1[(c·4 + i)·tw] = Σ_r Aᵀ[i][r] M[ξ = 6r + c]
-                    for c in 0..T {
-                        at_lanes(
-                            lanes(m_ref, base + c * xi_stride, T * xi_stride, tw),
-                            lanes_mut(&mut t1, c * M * tw, tw, tw),
-                        );
-                    }
-                    // y[(i·4 + j)·tw] = Σ_c Aᵀ[j][c] t1[c][i]
-                    for i in 0..M {
-                        at_lanes(
-                            lanes(&t1, i * tw, M * tw, tw),
-                            lanes_mut(&mut y, i * M * tw, tw, tw),
-                        );
-                    }
-                    for i in 0..M {
-                        let oy = ty * M + i;
-                        if oy >= oh {
-                            break;
+        let mut t0 = 0;
+        while t0 < tiles {
+            let t1 = (t0 + tpb).min(tiles);
+            let panels = (t1 - t0).div_ceil(nr);
+
+            // 1. Input transform, parallel over channels.
+            let vp = SharedPtr(v.as_mut_ptr());
+            let vp = &vp;
+            let v_at = |xi: usize, panel: usize, ci: usize| self.v_offset(xi, ci, panel, tpb);
+            (0..self.c_in)
+                .into_par_iter()
+                .with_min_len(8)
+                .for_each_init(Vec::new, |scratch, ci| {
+                    let at = |xi: usize, panel: usize| v_at(xi, panel, ci);
+                    // SAFETY: each channel writes only its own rows of `v`; the
+                    // CPU has the ISA of the kernel family (checked when built).
+                    unsafe {
+                        match isa {
+                            #[cfg(target_arch = "x86_64")]
+                            Isa::Avx512 => input_avx512(&g, ci, t0, t1, nr, &at, vp.0, scratch),
+                            #[cfg(target_arch = "x86_64")]
+                            Isa::Avx2Fma => input_avx2(&g, ci, t0, t1, nr, &at, vp.0, scratch),
+                            _ => input_portable(&g, ci, t0, t1, nr, &at, vp.0, scratch),
                         }
-                        let orow = &mut plane[oy * ow..(oy + 1) * ow];
-                        let rrow = residual.map(|r| &r[(co * oh + oy) * ow..][..ow]);
-                        for j in 0..M {
-                            let yl = &y[(i * M + j) * tw..][..tw];
-                            for (tx, &val) in yl.iter().enumerate() {
-                                let ox = tx * M + j;
-                                if ox >= ow {
-                                    break;
+                    }
+                });
+
+            // 2. Products and output transform, parallel over output-channel chunks.
+            let v_ref = &v;
+            let g_ref = &g;
+            out.par_chunks_mut(chunk_rows * plane_len)
+                .enumerate()
+                .for_each(|(chunk, dst)| {
+                    let mp0 = chunk * chunk_panels;
+                    let mp1 = (mp0 + chunk_panels).min(m_panels);
+                    let co0 = chunk * chunk_rows;
+                    let rows = dst.len() / plane_len;
+                    let stride = chunk_rows * nr;
+                    M_BUF.with(|buf| {
+                        let mut buf = buf.borrow_mut();
+                        let m_len = panels * P * stride;
+                        buf.ensure(m_len + (T * M + M * M) * nr);
+                        let (mbuf, scratch) = buf.as_mut_slice().split_at_mut(m_len);
+                        for xi in 0..P {
+                            let a = &self.u[xi];
+                            for mp in mp0..mp1 {
+                                for (bi, &(k0, kc, aoff)) in a.kblocks.iter().enumerate() {
+                                    let ap = a.data.as_slice()[aoff + mp * kc * mr..].as_ptr();
+                                    for p in 0..panels {
+                                        let bp = v_ref[self.v_offset(xi, k0, p, tpb)..].as_ptr();
+                                        let c = &mut mbuf
+                                            [(p * P + xi) * stride + (mp - mp0) * mr * nr..]
+                                            [..mr * nr];
+                                        let cols = nr.min(t1 - t0 - p * nr);
+                                        // SAFETY: the A panel holds kc·mr floats, the B
+                                        // panel kc·nr, and C mr rows of nr floats (ldc nr);
+                                        // a narrow kernel touches only its first columns.
+                                        unsafe {
+                                            match self.kernel.narrow {
+                                                Some((lanes, narrow)) if cols + lanes <= nr => {
+                                                    let nv = cols.div_ceil(lanes);
+                                                    narrow(
+                                                        nv,
+                                                        kc,
+                                                        ap,
+                                                        bp,
+                                                        nr,
+                                                        c.as_mut_ptr(),
+                                                        nr,
+                                                        bi > 0,
+                                                    )
+                                                }
+                                                _ => (self.kernel.run)(
+                                                    kc,
+                                                    ap,
+                                                    bp,
+                                                    c.as_mut_ptr(),
+                                                    nr,
+                                                    bi > 0,
+                                                ),
+                                            }
+                                        };
+                                    }
                                 }
-                                let mut r = act.apply_one(val + b);
-                                if let Some(rr) = rrow {
-                                    r += rr[ox];
-                                }
-                                orow[ox] = r;
                             }
                         }
-                    }
-                }
-            });
+                        let mut segs = Vec::with_capacity(4);
+                        for p in 0..panels {
+                            let pt0 = t0 + p * nr;
+                            segments(pt0, (pt0 + nr).min(t1), g_ref.tw, &mut segs);
+                            for r in 0..rows {
+                                let co = co0 + r;
+                                let m = &mbuf[p * P * stride + r * nr..];
+                                let plane = &mut dst[r * plane_len..(r + 1) * plane_len];
+                                let b = bias.map_or(0.0, |b| b[co]);
+                                let res = residual.map(|rs| &rs[co * plane_len..][..plane_len]);
+                                // SAFETY: the CPU has the kernel family's ISA.
+                                unsafe {
+                                    match isa {
+                                        #[cfg(target_arch = "x86_64")]
+                                        Isa::Avx512 => output_avx512(
+                                            m, stride, nr, &segs, oh, ow, b, act, res, plane,
+                                            scratch,
+                                        ),
+                                        #[cfg(target_arch = "x86_64")]
+                                        Isa::Avx2Fma => output_avx2(
+                                            m, stride, nr, &segs, oh, ow, b, act, res, plane,
+                                            scratch,
+                                        ),
+                                        _ => output_portable(
+                                            m, stride, nr, &segs, oh, ow, b, act, res, plane,
+                                            scratch,
+                                        ),
+                                    }
+                                }
+                            }
+                        }
+                    });
+                });
+            t0 = t1;
+        }
+        debug_assert_eq!(out.len(), self.c_out * plane_len);
         crate::pool::give(v);
-        crate::pool::give(m);
     }
 }

@@ -196,13 +196,17 @@ fn auto_algorithm_choice() {
     );
     assert_eq!(
         pick(ConvSpec::square(64, 3, 7, 1, 0)),
-        ConvAlgorithm::Direct
+        ConvAlgorithm::Shifted
     );
     assert_eq!(
         pick(ConvSpec::square(64, 128, 3, 2, 1)),
         ConvAlgorithm::Gemm
     );
-    assert_eq!(pick(ConvSpec::square(3, 64, 7, 1, 0)), ConvAlgorithm::Gemm);
+    assert_eq!(
+        pick(ConvSpec::square(3, 64, 7, 1, 0)),
+        ConvAlgorithm::Shifted
+    );
+    assert_eq!(pick(ConvSpec::square(64, 64, 1, 1, 0)), ConvAlgorithm::Gemm);
     let s = ConvSpec::square(8, 8, 5, 1, 2);
     let w5 = &w[..s.weight_len()];
     let r = Conv2d::with_algorithm(

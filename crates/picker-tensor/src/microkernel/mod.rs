@@ -19,6 +19,41 @@ pub(crate) mod x86;
 pub(crate) type KernelFn =
     unsafe fn(kc: usize, a: *const f32, b: *const f32, c: *mut f32, ldc: usize, accumulate: bool);
 
+/// Signature of the micro-kernels that read B in place: row `k` of the B
+/// panel is the `NR` floats at `b.add(offs[k])` (so a stride-1 convolution
+/// can take its rows straight from the padded image, with no packing).
+///
+/// # Safety
+/// `a` must hold `kc * MR` floats, `offs` `kc` offsets with `NR` readable
+/// floats at `b.add(offs[k])` each, and `c` must be valid for `MR` rows of
+/// `NR` floats at stride `ldc`; the CPU must support the ISA.
+pub(crate) type RowsKernelFn = unsafe fn(
+    kc: usize,
+    a: *const f32,
+    b: *const f32,
+    offs: *const usize,
+    c: *mut f32,
+    ldc: usize,
+    accumulate: bool,
+);
+
+/// Signature of the narrow-panel kernels: `C[MR × lanes·nv] (+)= A · B` with
+/// B rows `ldb` floats apart, for the last, partly filled panel of a product
+/// (`lanes` is the family's vector width, `nv` at most `NR / lanes`).
+///
+/// # Safety
+/// As [`KernelFn`], with `lanes·nv` columns of B and C instead of `NR`.
+pub(crate) type NarrowKernelFn = unsafe fn(
+    nv: usize,
+    kc: usize,
+    a: *const f32,
+    b: *const f32,
+    ldb: usize,
+    c: *mut f32,
+    ldc: usize,
+    accumulate: bool,
+);
+
 /// A micro-kernel with its tile shape.
 #[derive(Clone, Copy)]
 pub(crate) struct MicroKernel {
@@ -26,6 +61,11 @@ pub(crate) struct MicroKernel {
     pub(crate) mr: usize,
     pub(crate) nr: usize,
     pub(crate) run: KernelFn,
+    /// The same tile with B rows read in place.
+    pub(crate) run_rows: RowsKernelFn,
+    /// Narrow tiles for a partly filled last panel: `(lanes, kernel)`, or
+    /// `None` where the family only has the full tile.
+    pub(crate) narrow: Option<(usize, NarrowKernelFn)>,
 }
 
 impl MicroKernel {
@@ -41,6 +81,8 @@ impl MicroKernel {
                 mr: x86::AVX512_MR,
                 nr: x86::AVX512_NR,
                 run: x86::avx512_sgemm_8x48,
+                run_rows: x86::avx512_sgemm_rows_8x48,
+                narrow: Some((16, x86::avx512_sgemm_narrow_8x16n)),
             }),
             #[cfg(target_arch = "x86_64")]
             Isa::Avx2Fma => Some(MicroKernel {
@@ -48,12 +90,16 @@ impl MicroKernel {
                 mr: x86::AVX2_MR,
                 nr: x86::AVX2_NR,
                 run: x86::avx2_sgemm_6x16,
+                run_rows: x86::avx2_sgemm_rows_6x16,
+                narrow: None,
             }),
             _ => Some(MicroKernel {
                 isa: Isa::Portable,
                 mr: portable::MR,
                 nr: portable::NR,
                 run: portable::portable_sgemm_4x16,
+                run_rows: portable::portable_sgemm_rows_4x16,
+                narrow: None,
             }),
         }
     }

@@ -1,0 +1,287 @@
+//! Stride-1 convolutions as a GEMM whose B operand is read in place.
+//!
+//! Over a padded copy of the input (`c_in` planes of `hp × wp`), the
+//! im2col row of tap `(ci, dy, dx)` is the image itself shifted by
+//! `ci·hp·wp + dy·wp + dx`, if the output is computed on the padded width:
+//! column `n` of the product is output pixel `(n / wp, n % wp)`, and the
+//! columns with `n % wp ≥ ow` are computed and dropped. So the micro-kernel
+//! reads every B row straight from the image ([`RowsKernelFn`]) and nothing is
+//! packed; the `(kw − 1) / wp` wasted columns are the price.
+//!
+//! Used by 3×3 transposed convolutions (one such product per output phase,
+//! written interleaved) and by stride-1 convolutions that Winograd does not
+//! take (7×7, few channels).
+//!
+//! [`RowsKernelFn`]: crate::microkernel::RowsKernelFn
+
+use rayon::prelude::*;
+
+use crate::activation::Activation;
+use crate::gemm::{Epilogue, PackedA};
+use crate::pad::reflect_index;
+use crate::params::{MAX_NR, MAX_PANELS_PER_TASK, TASKS_PER_THREAD};
+
+/// The B operand: row `k` is `src[offs[k] ..]`, column `n` is output pixel
+/// `(n / wp, n % wp)` of the padded-width grid.
+pub(crate) struct ShiftedB<'a> {
+    pub(crate) src: &'a [f32],
+    pub(crate) offs: &'a [usize],
+    pub(crate) wp: usize,
+}
+
+/// Where output `(co, y, x)` goes: `out[base + co·cs + y·rs + x·xs]`, for
+/// `y < oh`, `x < ow`. The residual, if any, is indexed the same way.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct OutMap {
+    pub(crate) base: usize,
+    pub(crate) cs: usize,
+    pub(crate) rs: usize,
+    pub(crate) xs: usize,
+    pub(crate) oh: usize,
+    pub(crate) ow: usize,
+}
+
+impl OutMap {
+    #[inline(always)]
+    fn at(&self, co: usize, y: usize, x: usize) -> usize {
+        self.base + co * self.cs + y * self.rs + x * self.xs
+    }
+}
+
+/// Largest `MR` of any micro-kernel family.
+const MAX_MR: usize = 8;
+
+struct SharedPtr(*mut f32);
+// SAFETY: every output element belongs to one column panel, so tasks (which
+// own disjoint panels) write disjoint elements.
+unsafe impl Sync for SharedPtr {}
+unsafe impl Send for SharedPtr {}
+
+/// `out = epilogue(a · b)` on the rayon pool, through `map`.
+///
+/// # Panics
+/// When some row of `b` is shorter than the padded grid needs (`src` must
+/// hold `max(offs) + ceil(oh·wp / NR)·NR` floats), or `out` is too short for `map`.
+pub(crate) fn shifted_gemm(
+    a: &PackedA,
+    b: &ShiftedB<'_>,
+    map: &OutMap,
+    out: &mut [f32],
+    epi: &Epilogue<'_>,
+) {
+    let (m, mr, nr) = (a.m, a.kernel.mr, a.kernel.nr);
+    assert!(mr <= MAX_MR && nr <= MAX_NR);
+    assert_eq!(
+        b.offs.len(),
+        a.k,
+        "shifted_gemm: one offset per column of A"
+    );
+    if m == 0 || map.oh == 0 || map.ow == 0 {
+        return;
+    }
+    assert!(
+        map.ow <= b.wp,
+        "shifted_gemm: valid width beyond the padded width"
+    );
+    let n_wide = map.oh * b.wp;
+    let n_panels = n_wide.div_ceil(nr);
+    let max_off = b.offs.iter().copied().max().unwrap_or(0);
+    assert!(
+        max_off + n_panels * nr <= b.src.len(),
+        "shifted_gemm: the padded input has too little slack"
+    );
+    let last = map.at(m - 1, map.oh - 1, map.ow - 1);
+    assert!(last < out.len(), "shifted_gemm: output too short");
+    if let Some(r) = epi.residual {
+        assert!(last < r.len(), "shifted_gemm: residual too short");
+    }
+    if let Some(bias) = epi.bias {
+        assert_eq!(bias.len(), m, "shifted_gemm: bias has the wrong length");
+    }
+    if a.k == 0 {
+        for co in 0..m {
+            for y in 0..map.oh {
+                for x in 0..map.ow {
+                    let i = map.at(co, y, x);
+                    out[i] = finish(0.0, co, i, epi);
+                }
+            }
+        }
+        return;
+    }
+    let threads = rayon::current_num_threads().max(1);
+    let per_task = n_panels
+        .div_ceil(threads * TASKS_PER_THREAD)
+        .clamp(1, MAX_PANELS_PER_TASK);
+    let n_tasks = n_panels.div_ceil(per_task);
+    let out_ptr = SharedPtr(out.as_mut_ptr());
+    let out_ptr = &out_ptr;
+    let task = |t: usize| {
+        let mut tmp = [0.0f32; MAX_MR * MAX_NR];
+        let p0 = t * per_task;
+        let p1 = (p0 + per_task).min(n_panels);
+        for p in p0..p1 {
+            let n0 = p * nr;
+            let (y, x) = (n0 / b.wp, n0 % b.wp);
+            let whole_cols = map.xs == 1 && x + nr <= map.ow;
+            for mp in 0..a.m_panels {
+                let row0 = mp * mr;
+                let rows = mr.min(m - row0);
+                let direct = whole_cols && rows == mr;
+                for (bi, &(k0, kc, aoff)) in a.kblocks.iter().enumerate() {
+                    let ap = a.data.as_slice()[aoff + mp * kc * mr..].as_ptr();
+                    let offs = b.offs[k0..k0 + kc].as_ptr();
+                    // SAFETY: the A panel holds kc·mr floats; every B row has nr
+                    // floats from n0 (slack checked above); C is either `tmp`
+                    // (mr rows of nr) or mr whole rows of nr inside `out`, owned
+                    // by this task.
+                    unsafe {
+                        let bp = b.src.as_ptr().add(n0);
+                        if direct {
+                            let c = out_ptr.0.add(map.at(row0, y, x));
+                            (a.kernel.run_rows)(kc, ap, bp, offs, c, map.cs, bi > 0);
+                        } else {
+                            (a.kernel.run_rows)(kc, ap, bp, offs, tmp.as_mut_ptr(), nr, bi > 0);
+                        }
+                    }
+                }
+                // SAFETY: the elements touched are this panel's, inside `out`
+                // (checked above through `last`), written by this task only.
+                unsafe {
+                    if direct {
+                        for r in 0..rows {
+                            let i0 = map.at(row0 + r, y, x);
+                            let dst = std::slice::from_raw_parts_mut(out_ptr.0.add(i0), nr);
+                            let res = epi.residual.map(|rs| &rs[i0..i0 + nr]);
+                            finish_run(dst, bias_of(epi, row0 + r), epi.act, res);
+                        }
+                    } else {
+                        // Runs of the panel that stay in one output row.
+                        let end = (n0 + nr).min(n_wide);
+                        let mut n = n0;
+                        while n < end {
+                            let (yy, xx) = (n / b.wp, n % b.wp);
+                            let run = (b.wp - xx).min(end - n);
+                            let valid = run.min(map.ow.saturating_sub(xx));
+                            if valid > 0 {
+                                let j0 = n - n0;
+                                for r in 0..rows {
+                                    let i0 = map.at(row0 + r, yy, xx);
+                                    let src = &tmp[r * nr + j0..][..valid];
+                                    let bias = bias_of(epi, row0 + r);
+                                    if map.xs == 1 {
+                                        let dst = std::slice::from_raw_parts_mut(
+                                            out_ptr.0.add(i0),
+                                            valid,
+                                        );
+                                        dst.copy_from_slice(src);
+                                        let res = epi.residual.map(|rs| &rs[i0..i0 + valid]);
+                                        finish_run(dst, bias, epi.act, res);
+                                    } else {
+                                        for (k, &v) in src.iter().enumerate() {
+                                            let i = i0 + k * map.xs;
+                                            let mut o = epi.act.apply_one(v + bias);
+                                            if let Some(rs) = epi.residual {
+                                                o += rs[i];
+                                            }
+                                            *out_ptr.0.add(i) = o;
+                                        }
+                                    }
+                                }
+                            }
+                            n += run;
+                        }
+                    }
+                }
+            }
+        }
+    };
+    if threads == 1 {
+        (0..n_tasks).for_each(task);
+    } else {
+        (0..n_tasks).into_par_iter().for_each(task);
+    }
+}
+
+/// `act(v + bias[co]) + residual[i]`.
+#[inline(always)]
+fn finish(v: f32, co: usize, i: usize, epi: &Epilogue<'_>) -> f32 {
+    let r = epi.act.apply_one(v + bias_of(epi, co));
+    match epi.residual {
+        Some(res) => r + res[i],
+        None => r,
+    }
+}
+
+#[inline(always)]
+fn bias_of(epi: &Epilogue<'_>, co: usize) -> f32 {
+    epi.bias.map_or(0.0, |b| b[co])
+}
+
+/// `dst = act(dst + bias) [+ res]`, element-wise.
+#[inline(always)]
+fn finish_run(dst: &mut [f32], bias: f32, act: Activation, res: Option<&[f32]>) {
+    match (act, res) {
+        (Activation::Relu, None) => dst.iter_mut().for_each(|v| *v = (*v + bias).max(0.0)),
+        (Activation::None, None) => dst.iter_mut().for_each(|v| *v += bias),
+        (_, None) => dst.iter_mut().for_each(|v| *v = act.apply_one(*v + bias)),
+        (_, Some(r)) => dst
+            .iter_mut()
+            .zip(r)
+            .for_each(|(v, &r)| *v = act.apply_one(*v + bias) + r),
+    }
+}
+
+/// How a padded copy is filled outside the image.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Fill {
+    /// Zeros.
+    Zero,
+    /// Reflection without repeating the edge (each pad smaller than the side).
+    Reflect,
+}
+
+/// A padded copy of one image (`c` planes of `h × w`) with `[top, bottom,
+/// left, right]` pads, plus `slack` zero floats at the end, from the pool.
+/// Returns the buffer and the padded `(hp, wp)`.
+pub(crate) fn padded_copy(
+    x: &[f32],
+    c: usize,
+    h: usize,
+    w: usize,
+    pads: [usize; 4],
+    fill: Fill,
+    slack: usize,
+) -> (Vec<f32>, usize, usize) {
+    let [t, bo, l, r] = pads;
+    let (hp, wp) = (h + t + bo, w + l + r);
+    let plane = hp * wp;
+    let mut buf = crate::pool::take(c * plane + slack);
+    let (body, tail) = buf.split_at_mut(c * plane);
+    tail.fill(0.0);
+    body.par_chunks_mut(plane.max(1))
+        .enumerate()
+        .for_each(|(ci, dst)| {
+            let src = &x[ci * h * w..(ci + 1) * h * w];
+            for (py, drow) in dst.chunks_exact_mut(wp).enumerate() {
+                let sy = py as isize - t as isize;
+                let sy = if (0..h as isize).contains(&sy) {
+                    sy as usize
+                } else if fill == Fill::Reflect {
+                    reflect_index(sy, h)
+                } else {
+                    drow.fill(0.0);
+                    continue;
+                };
+                let srow = &src[sy * w..(sy + 1) * w];
+                drow[l..l + w].copy_from_slice(srow);
+                for j in (0..l).chain(l + w..wp) {
+                    drow[j] = match fill {
+                        Fill::Zero => 0.0,
+                        Fill::Reflect => srow[reflect_index(j as isize - l as isize, w)],
+                    };
+                }
+            }
+        });
+    (buf, hp, wp)
+}
