@@ -3,8 +3,8 @@
 //! load and its activation fused into the kernel epilogue.
 
 use picker_tensor::{
-    fold_batchnorm, reflect_pad, Activation, BatchNorm, Conv2d, ConvSpec, ConvTranspose2d,
-    ConvTransposeSpec, Tensor, WeightLayout,
+    fold_batchnorm, Activation, BatchNorm, Conv2d, ConvSpec, ConvTranspose2d, ConvTransposeSpec,
+    Tensor, WeightLayout,
 };
 
 use crate::error::{Error, Result};
@@ -133,6 +133,10 @@ impl ConvBn {
     /// `act(bn(conv(x)))`.
     pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
         Ok(self.conv.forward(x)?)
+    }
+    /// `act(bn(conv(reflect_pad(x, pad))))`, the padding fused where the kernel can.
+    pub fn forward_reflect(&self, x: &Tensor, pad: usize) -> Result<Tensor> {
+        Ok(self.conv.forward_reflect(x, pad, None)?)
     }
     /// Parameters after folding.
     pub fn param_count(&self) -> u64 {
@@ -329,7 +333,7 @@ impl Encoder {
         tr: &mut Tracer<'_>,
         path: &str,
     ) -> Result<Tensor> {
-        let x = self.conv_in.forward(&reflect_pad(x, [3; 4])?)?;
+        let x = self.conv_in.forward_reflect(x, 3)?;
         tr.record(path, "conv_in", &x);
         let x = self.down[0].forward(&x)?;
         tr.record(path, "down.0", &x);
@@ -386,7 +390,7 @@ impl Decoder {
         tr.record(path, "up.0", &x);
         let x = self.up[1].forward(&x)?;
         tr.record(path, "up.1", &x);
-        let y = self.conv_out.forward(&reflect_pad(&x, [3; 4])?)?;
+        let y = self.conv_out.forward_reflect(&x, 3, None)?;
         tr.record(path, "conv_out", &y);
         Ok(y)
     }

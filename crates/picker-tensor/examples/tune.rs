@@ -1,9 +1,10 @@
 //! Times one layer shape of the thesis networks at 240×320, for quick tuning
 //! without criterion: `cargo run --release -p picker-tensor --example tune -- res`
-//! (`res`, `envres`, `decout`, `encin`, `up0`, `up1`; `RAYON_NUM_THREADS`, `PICKER_ISA` apply).
+//! (`res`, `resmany`, `envres`, `decout`, `encin`, `down0`, `down1`, `envin`, `up0`, `up1`; `RAYON_NUM_THREADS`, `PICKER_ISA` apply).
 
 use picker_tensor::{
-    Activation, Conv2d, ConvSpec, ConvTranspose2d, ConvTransposeSpec, Rng, Tensor,
+    Activation, Conv2d, ConvAlgorithm, ConvSpec, ConvTranspose2d, ConvTransposeSpec, Isa, Rng,
+    Tensor,
 };
 use std::time::Instant;
 
@@ -63,13 +64,26 @@ fn main() {
         "envres" => (32, 42, ConvSpec::square(256, 256, 3, 1, 0)),
         "decout" => (246, 326, ConvSpec::square(64, 3, 7, 1, 0)),
         "encin" => (246, 326, ConvSpec::square(3, 64, 7, 1, 0)),
+        "down0" => (240, 320, ConvSpec::square(64, 128, 3, 2, 1)),
+        "down1" => (120, 160, ConvSpec::square(128, 256, 3, 2, 1)),
+        "envin" => (246, 326, ConvSpec::square(3, 64, 7, 2, 0)),
         other => {
-            eprintln!("unknown layer {other:?}: use res, envres, decout, encin, up0 or up1");
+            eprintln!("unknown layer {other:?}: use res, resmany, envres, decout, encin, down0, down1, envin, up0 or up1");
             std::process::exit(2);
         }
     };
     let wt = rng.normal_vec(s.weight_len(), 0.05);
-    let conv = Conv2d::new(s, &wt, None, Activation::Relu).expect("layer");
+    // TUNE_ALGO=gemm|direct|winograd|shifted forces an algorithm.
+    let algo = match std::env::var("TUNE_ALGO").as_deref() {
+        Ok("gemm") => ConvAlgorithm::Gemm,
+        Ok("direct") => ConvAlgorithm::Direct,
+        Ok("winograd") => ConvAlgorithm::Winograd,
+        Ok("shifted") => ConvAlgorithm::Shifted,
+        _ => ConvAlgorithm::Auto,
+    };
+    let conv =
+        Conv2d::with_algorithm(Isa::best(), algo, s, &wt, None, Activation::Relu).expect("layer");
+    println!("{which}: {:?}", conv.algorithm());
     let x = rng.tensor([1, s.c_in, h, w]);
     time_it(&which, s.flops(h, w), || conv.forward(&x).expect("forward"));
 }

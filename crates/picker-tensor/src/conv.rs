@@ -10,8 +10,8 @@ use rayon::prelude::*;
 
 use crate::microkernel::MicroKernel;
 use crate::pad::reflect_pad;
-use crate::params::MAX_NR;
-use crate::shifted::{padded_copy, shifted_gemm, Fill, OutMap, ShiftedB};
+use crate::params::{MAX_NR, SHIFTED_KC};
+use crate::shifted::{padded_copy, phase_copy, shifted_gemm, Fill, OutMap, ShiftedB};
 use crate::tensor::Tensor;
 use crate::winograd::{Border, Winograd};
 
@@ -225,7 +225,8 @@ pub enum ConvAlgorithm {
     /// Winograd F(4×4, 3×3) (3×3 kernels, stride 1, any zero padding).
     Winograd,
     /// Packed-A GEMM that reads the B rows in place from a padded copy of
-    /// the input (stride 1, any kernel): no im2col packing.
+    /// the input (any kernel; stride `s > 1` through the `s × s` phase planes
+    /// of the input): no im2col packing.
     Shifted,
 }
 
@@ -244,7 +245,7 @@ impl ConvAlgorithm {
             ConvAlgorithm::Auto | ConvAlgorithm::Gemm => true,
             ConvAlgorithm::Direct => s.stride == 1 && s.pad == 0 && s.c_out <= direct::MAX_CO,
             ConvAlgorithm::Winograd => s.kh == 3 && s.kw == 3 && s.stride == 1,
-            ConvAlgorithm::Shifted => s.stride == 1,
+            ConvAlgorithm::Shifted => true,
         }
     }
 
@@ -261,9 +262,7 @@ impl ConvAlgorithm {
             {
                 ConvAlgorithm::Winograd
             }
-            ConvAlgorithm::Auto if s.stride == 1 && (s.kh > 1 || s.kw > 1 || s.pad > 0) => {
-                ConvAlgorithm::Shifted
-            }
+            ConvAlgorithm::Auto if s.kh > 1 || s.kw > 1 || s.pad > 0 => ConvAlgorithm::Shifted,
             ConvAlgorithm::Auto => ConvAlgorithm::Gemm,
             other => other,
         }
@@ -466,20 +465,30 @@ impl Conv2d {
                 isa,
                 wino: Winograd::new(kernel, spec.c_in, spec.c_out, weight),
             },
-            ConvAlgorithm::Shifted if spec.c_out <= FOLD_MAX_CO && spec.kw > 1 => {
+            ConvAlgorithm::Shifted
+                if spec.stride == 1 && spec.c_out <= FOLD_MAX_CO && spec.kw > 1 =>
+            {
                 let (kh, kw, c_in) = (spec.kh, spec.kw, spec.c_in);
                 ConvPath::Shifted {
-                    packed: PackedA::pack(kernel, spec.c_out * kw, c_in * kh, |r, c| {
-                        let (co, kx, ci, ky) = (r / kw, r % kw, c / kh, c % kh);
-                        weight[((co * c_in + ci) * kh + ky) * kw + kx]
-                    }),
+                    packed: PackedA::pack_with_depth(
+                        kernel,
+                        spec.c_out * kw,
+                        c_in * kh,
+                        SHIFTED_KC,
+                        |r, c| {
+                            let (co, kx, ci, ky) = (r / kw, r % kw, c / kh, c % kh);
+                            weight[((co * c_in + ci) * kh + ky) * kw + kx]
+                        },
+                    ),
                     fold_kx: true,
                 }
             }
             ConvAlgorithm::Shifted => {
                 let k = spec.c_in * spec.kh * spec.kw;
                 ConvPath::Shifted {
-                    packed: PackedA::pack(kernel, spec.c_out, k, |r, c| weight[r * k + c]),
+                    packed: PackedA::pack_with_depth(kernel, spec.c_out, k, SHIFTED_KC, |r, c| {
+                        weight[r * k + c]
+                    }),
                     fold_kx: false,
                 }
             }
@@ -641,14 +650,46 @@ impl Conv2d {
                     } else {
                         (s.pad, Fill::Zero)
                     };
-                    let slack = packed.kernel.nr + s.kw;
-                    let (src, hp, wp) =
-                        padded_copy(img, s.c_in, x.h(), x.w(), [pad; 4], fill, slack);
+                    let slack = packed.kernel.nr + s.kw + s.stride;
                     let epi = Epilogue {
                         bias: self.bias.as_deref(),
                         act: self.act,
                         residual,
                     };
+                    let map = OutMap {
+                        base: 0,
+                        cs: oh * ow,
+                        rs: ow,
+                        xs: 1,
+                        oh,
+                        ow,
+                    };
+                    if s.stride > 1 {
+                        let st = s.stride;
+                        let (src, hq, wq) =
+                            phase_copy(img, s.c_in, x.h(), x.w(), pad, fill, st, slack);
+                        // Tap (ky, kx) reads phase (ky % s, kx % s) at (oy + ky / s, ox + kx / s).
+                        let offs: Vec<usize> = (0..s.c_in)
+                            .flat_map(|ci| {
+                                (0..s.kh).flat_map(move |ky| {
+                                    (0..s.kw).map(move |kx| {
+                                        let ph = (ky % st) * st + kx % st;
+                                        (ph * s.c_in + ci) * hq * wq + (ky / st) * wq + kx / st
+                                    })
+                                })
+                            })
+                            .collect();
+                        let b = ShiftedB {
+                            src: &src,
+                            offs: &offs,
+                            wp: wq,
+                        };
+                        shifted_gemm(packed, &b, &map, c, &epi);
+                        crate::pool::give(src);
+                        continue;
+                    }
+                    let (src, hp, wp) =
+                        padded_copy(img, s.c_in, x.h(), x.w(), [pad; 4], fill, slack);
                     if *fold_kx {
                         self.folded(packed, &src, hp, wp, oh, ow, &epi, c);
                     } else {
@@ -663,14 +704,6 @@ impl Conv2d {
                             src: &src,
                             offs: &offs,
                             wp,
-                        };
-                        let map = OutMap {
-                            base: 0,
-                            cs: oh * ow,
-                            rs: ow,
-                            xs: 1,
-                            oh,
-                            ow,
                         };
                         shifted_gemm(packed, &b, &map, c, &epi);
                     }
@@ -854,10 +887,16 @@ impl ConvTranspose2d {
                     .collect();
                 let nt = kidx.len();
                 let packed = (nt > 0).then(|| {
-                    PackedA::pack(kernel, spec.c_out, spec.c_in * nt, |co, k| {
-                        let (ci, (ky, kx)) = (k / nt, kidx[k % nt]);
-                        weight[((ci * spec.c_out + co) * spec.kh + ky) * spec.kw + kx]
-                    })
+                    PackedA::pack_with_depth(
+                        kernel,
+                        spec.c_out,
+                        spec.c_in * nt,
+                        SHIFTED_KC,
+                        |co, k| {
+                            let (ci, (ky, kx)) = (k / nt, kidx[k % nt]);
+                            weight[((ci * spec.c_out + co) * spec.kh + ky) * spec.kw + kx]
+                        },
+                    )
                 });
                 phases.push(Phase {
                     ry,

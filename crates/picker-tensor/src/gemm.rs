@@ -38,13 +38,24 @@ impl PackedA {
         k: usize,
         at: impl Fn(usize, usize) -> f32,
     ) -> PackedA {
+        Self::pack_with_depth(kernel, m, k, KC, at)
+    }
+
+    /// As [`PackedA::pack`], in depth blocks of `depth` columns.
+    pub(crate) fn pack_with_depth(
+        kernel: MicroKernel,
+        m: usize,
+        k: usize,
+        depth: usize,
+        at: impl Fn(usize, usize) -> f32,
+    ) -> PackedA {
         let mr = kernel.mr;
         let m_panels = m.div_ceil(mr);
         let mut kblocks = Vec::new();
         let mut off = 0;
         let mut k0 = 0;
         while k0 < k {
-            let kc = KC.min(k - k0);
+            let kc = depth.min(k - k0);
             kblocks.push((k0, kc, off));
             off += m_panels * kc * mr;
             k0 += kc;

@@ -5,6 +5,10 @@
 /// micro-kernel streams the packed A panels from L2.
 pub const KC: usize = 256;
 
+/// Depth of one block of the shifted GEMM (B rows read in place): `SHIFTED_KC × NR`
+/// floats of B stay in L1 while every row panel of A passes over them.
+pub const SHIFTED_KC: usize = 128;
+
 /// Most NR-wide B panels one task packs for a K block (`KC × NR × this` floats, kept in L2).
 pub const MAX_PANELS_PER_TASK: usize = 8;
 

@@ -117,20 +117,24 @@ pub(crate) fn shifted_gemm(
     let out_ptr = SharedPtr(out.as_mut_ptr());
     let out_ptr = &out_ptr;
     let task = |t: usize| {
-        let mut tmp = [0.0f32; MAX_MR * MAX_NR];
+        // One tile of partial sums per row panel, for the tiles that cannot be
+        // accumulated in place.
+        let mut tmps = vec![0.0f32; a.m_panels * mr * nr];
         let p0 = t * per_task;
         let p1 = (p0 + per_task).min(n_panels);
         for p in p0..p1 {
             let n0 = p * nr;
             let (y, x) = (n0 / b.wp, n0 % b.wp);
             let whole_cols = map.xs == 1 && x + nr <= map.ow;
-            for mp in 0..a.m_panels {
-                let row0 = mp * mr;
-                let rows = mr.min(m - row0);
-                let direct = whole_cols && rows == mr;
-                for (bi, &(k0, kc, aoff)) in a.kblocks.iter().enumerate() {
+            // Depth block outside, row panels inside: the block's B rows
+            // (kc × nr floats) stay in L1 while every row panel uses them.
+            for (bi, &(k0, kc, aoff)) in a.kblocks.iter().enumerate() {
+                let offs = b.offs[k0..k0 + kc].as_ptr();
+                for mp in 0..a.m_panels {
+                    let row0 = mp * mr;
+                    let direct = whole_cols && mr.min(m - row0) == mr;
                     let ap = a.data.as_slice()[aoff + mp * kc * mr..].as_ptr();
-                    let offs = b.offs[k0..k0 + kc].as_ptr();
+                    let tmp = &mut tmps[mp * mr * nr..(mp + 1) * mr * nr];
                     // SAFETY: the A panel holds kc·mr floats; every B row has nr
                     // floats from n0 (slack checked above); C is either `tmp`
                     // (mr rows of nr) or mr whole rows of nr inside `out`, owned
@@ -145,6 +149,12 @@ pub(crate) fn shifted_gemm(
                         }
                     }
                 }
+            }
+            for mp in 0..a.m_panels {
+                let row0 = mp * mr;
+                let rows = mr.min(m - row0);
+                let direct = whole_cols && rows == mr;
+                let tmp = &tmps[mp * mr * nr..(mp + 1) * mr * nr];
                 // SAFETY: the elements touched are this panel's, inside `out`
                 // (checked above through `last`), written by this task only.
                 unsafe {
@@ -284,4 +294,78 @@ pub(crate) fn padded_copy(
             }
         });
     (buf, hp, wp)
+}
+
+/// The `s × s` phase planes of one padded image, for a stride-`s` convolution
+/// as a stride-1 product: plane `(a, b, ci)` holds `padded[ci][s·i + a][s·j + b]`
+/// (`hq × wq`, zero past the padded image), planes ordered `(a·s + b)·c + ci`,
+/// plus `slack` zero floats. Returns the buffer and `(hq, wq)`.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn phase_copy(
+    x: &[f32],
+    c: usize,
+    h: usize,
+    w: usize,
+    pad: usize,
+    fill: Fill,
+    s: usize,
+    slack: usize,
+) -> (Vec<f32>, usize, usize) {
+    let (hp, wp) = (h + 2 * pad, w + 2 * pad);
+    let (hq, wq) = (hp.div_ceil(s), wp.div_ceil(s));
+    let plane = hq * wq;
+    let src_of = |q: usize, n: usize, np: usize| -> Option<usize> {
+        let v = q as isize - pad as isize;
+        if (0..n as isize).contains(&v) {
+            Some(v as usize)
+        } else if q < np && fill == Fill::Reflect {
+            Some(reflect_index(v, n))
+        } else {
+            None
+        }
+    };
+    let cols: Vec<Vec<Option<usize>>> = (0..s)
+        .map(|b| (0..wq).map(|j| src_of(s * j + b, w, wp)).collect())
+        .collect();
+    // Per column phase b: the range of j whose source column is inside the row.
+    let interior: Vec<(usize, usize)> = (0..s)
+        .map(|b| {
+            let lo = pad.saturating_sub(b).div_ceil(s).min(wq);
+            let hi = ((w + pad).saturating_sub(b)).div_ceil(s).clamp(lo, wq);
+            (lo, hi)
+        })
+        .collect();
+    let mut buf = crate::pool::take(s * s * c * plane + slack);
+    let (body, tail) = buf.split_at_mut(s * s * c * plane);
+    tail.fill(0.0);
+    body.par_chunks_mut(plane.max(1))
+        .enumerate()
+        .for_each(|(idx, dst)| {
+            let (ab, ci) = (idx / c, idx % c);
+            let (a, b) = (ab / s, ab % s);
+            let src = &x[ci * h * w..(ci + 1) * h * w];
+            for (i, drow) in dst.chunks_exact_mut(wq).enumerate() {
+                match src_of(s * i + a, h, hp) {
+                    None => drow.fill(0.0),
+                    Some(sy) => {
+                        let srow = &src[sy * w..(sy + 1) * w];
+                        // Columns j with 0 ≤ s·j + b − pad < w read the row with
+                        // stride s; the few others go through the map.
+                        let (lo, hi) = interior[b];
+                        if lo < hi {
+                            let first = s * lo + b - pad;
+                            for (d, v) in
+                                drow[lo..hi].iter_mut().zip(srow[first..].iter().step_by(s))
+                            {
+                                *d = *v;
+                            }
+                        }
+                        for j in (0..lo.min(wq)).chain(hi.max(lo)..wq) {
+                            drow[j] = cols[b][j].map_or(0.0, |cx| srow[cx]);
+                        }
+                    }
+                }
+            }
+        });
+    (buf, hq, wq)
 }

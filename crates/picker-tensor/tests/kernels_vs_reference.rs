@@ -200,7 +200,7 @@ fn auto_algorithm_choice() {
     );
     assert_eq!(
         pick(ConvSpec::square(64, 128, 3, 2, 1)),
-        ConvAlgorithm::Gemm
+        ConvAlgorithm::Shifted
     );
     assert_eq!(
         pick(ConvSpec::square(3, 64, 7, 1, 0)),
