@@ -213,17 +213,25 @@ pub struct Conv2d {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 #[non_exhaustive]
 pub enum ConvAlgorithm {
-    /// Chosen from the shape: direct for ≤ 4 outputs (stride 1, no padding),
-    /// Winograd for 3×3 stride-1 layers with ≥ 16 input and output channels
-    /// (unless the environment variable `PICKER_CONV=gemm` is set when the layer
-    /// is built, for comparisons), else the packed GEMM.
+    /// Chosen from the shape: the shifted GEMM with folded columns for
+    /// stride-1 layers with ≤ 4 outputs; Winograd for 3×3 stride-1 layers with
+    /// ≥ 16 input and output channels (unless the environment variable
+    /// `PICKER_CONV=gemm` is set when the layer is built, for comparisons;
+    /// `PICKER_WINOGRAD_WEIGHTS=lazy` picks [`ConvAlgorithm::WinogradLowMemory`]);
+    /// the shifted GEMM for other kernels larger than 1×1 or with padding;
+    /// else (1×1) the packed GEMM.
     Auto,
     /// Packed GEMM over an implicit im2col (any shape).
     Gemm,
     /// Direct row-vectorised convolution (stride 1, no padding, ≤ 4 outputs).
     Direct,
-    /// Winograd F(4×4, 3×3) (3×3 kernels, stride 1, any zero padding).
+    /// Winograd F(4×4, 3×3) (3×3 kernels, stride 1, any zero padding), its
+    /// transformed weights packed once (4× the memory of the 3×3 weights).
     Winograd,
+    /// Winograd F(4×4, 3×3) keeping only the 3×3 weights: the transformed
+    /// weights are made at every forward pass into a reused buffer (slower,
+    /// for memory-bound use).
+    WinogradLowMemory,
     /// Packed-A GEMM that reads the B rows in place from a padded copy of
     /// the input (any kernel; stride `s > 1` through the `s × s` phase planes
     /// of the input): no im2col packing.
@@ -232,10 +240,11 @@ pub enum ConvAlgorithm {
 
 impl ConvAlgorithm {
     /// Every algorithm that can be asked for explicitly.
-    pub const EXPLICIT: [ConvAlgorithm; 4] = [
+    pub const EXPLICIT: [ConvAlgorithm; 5] = [
         ConvAlgorithm::Gemm,
         ConvAlgorithm::Direct,
         ConvAlgorithm::Winograd,
+        ConvAlgorithm::WinogradLowMemory,
         ConvAlgorithm::Shifted,
     ];
 
@@ -244,7 +253,9 @@ impl ConvAlgorithm {
         match self {
             ConvAlgorithm::Auto | ConvAlgorithm::Gemm => true,
             ConvAlgorithm::Direct => s.stride == 1 && s.pad == 0 && s.c_out <= direct::MAX_CO,
-            ConvAlgorithm::Winograd => s.kh == 3 && s.kw == 3 && s.stride == 1,
+            ConvAlgorithm::Winograd | ConvAlgorithm::WinogradLowMemory => {
+                s.kh == 3 && s.kw == 3 && s.stride == 1
+            }
             ConvAlgorithm::Shifted => true,
         }
     }
@@ -260,7 +271,11 @@ impl ConvAlgorithm {
                     && s.c_out >= 16
                     && std::env::var("PICKER_CONV").as_deref() != Ok("gemm") =>
             {
-                ConvAlgorithm::Winograd
+                if std::env::var("PICKER_WINOGRAD_WEIGHTS").as_deref() == Ok("lazy") {
+                    ConvAlgorithm::WinogradLowMemory
+                } else {
+                    ConvAlgorithm::Winograd
+                }
             }
             ConvAlgorithm::Auto if s.kh > 1 || s.kw > 1 || s.pad > 0 => ConvAlgorithm::Shifted,
             ConvAlgorithm::Auto => ConvAlgorithm::Gemm,
@@ -461,10 +476,18 @@ impl Conv2d {
                 isa,
                 weight: weight.to_vec(),
             },
-            ConvAlgorithm::Winograd => ConvPath::Winograd {
-                isa,
-                wino: Winograd::new(kernel, spec.c_in, spec.c_out, weight),
-            },
+            algo @ (ConvAlgorithm::Winograd | ConvAlgorithm::WinogradLowMemory) => {
+                ConvPath::Winograd {
+                    isa,
+                    wino: Winograd::new(
+                        kernel,
+                        spec.c_in,
+                        spec.c_out,
+                        weight,
+                        algo == ConvAlgorithm::Winograd,
+                    ),
+                }
+            }
             ConvAlgorithm::Shifted
                 if spec.stride == 1 && spec.c_out <= FOLD_MAX_CO && spec.kw > 1 =>
             {
@@ -533,7 +556,8 @@ impl Conv2d {
         match &self.path {
             ConvPath::Gemm { .. } => ConvAlgorithm::Gemm,
             ConvPath::Direct { .. } => ConvAlgorithm::Direct,
-            ConvPath::Winograd { .. } => ConvAlgorithm::Winograd,
+            ConvPath::Winograd { wino, .. } if wino.is_packed() => ConvAlgorithm::Winograd,
+            ConvPath::Winograd { .. } => ConvAlgorithm::WinogradLowMemory,
             ConvPath::Shifted { .. } => ConvAlgorithm::Shifted,
         }
     }

@@ -29,11 +29,10 @@ use rayon::prelude::*;
 
 use crate::activation::Activation;
 use crate::aligned::AlignedBuf;
-use crate::gemm::PackedA;
 use crate::isa::Isa;
 use crate::microkernel::MicroKernel;
 use crate::pad::reflect_index;
-use crate::params::{WINO_CO_PER_TASK, WINO_PANELS_PER_BLOCK};
+use crate::params::{KC, WINO_CO_PER_TASK, WINO_PANELS_PER_BLOCK};
 
 /// Points of the transformed tile along one axis.
 const T: usize = 6;
@@ -139,24 +138,19 @@ fn at_lanes(s: [&[f32]; 6], o: [&mut [f32]; 4]) {
     }
 }
 
-/// `G` (6×3), applied in f64 at load.
-const G: [[f64; 3]; 6] = [
-    [0.25, 0.0, 0.0],
-    [-1.0 / 6.0, -1.0 / 6.0, -1.0 / 6.0],
-    [-1.0 / 6.0, 1.0 / 6.0, -1.0 / 6.0],
-    [1.0 / 24.0, 1.0 / 12.0, 1.0 / 6.0],
-    [1.0 / 24.0, -1.0 / 12.0, 1.0 / 6.0],
-    [0.0, 0.0, 1.0],
-];
-
-/// A 3×3 stride-1 convolution's weights, transformed and packed.
+/// A 3×3 stride-1 convolution's weights (transformed and packed, or kept to
+/// be transformed at each pass; see [`UStore`]).
 #[derive(Clone)]
 pub(crate) struct Winograd {
     kernel: MicroKernel,
     c_in: usize,
     c_out: usize,
-    /// `U[ξ]`, `c_out × c_in`, packed as the micro-kernel's A panels.
-    u: Vec<PackedA>,
+    /// `MR`-row panels of `U[ξ]`.
+    m_panels: usize,
+    /// `(k0, kc, offset)` of each depth block inside one `U[ξ]`.
+    kblocks: Vec<(usize, usize, usize)>,
+    /// `U[ξ]`, `c_out × c_in`, in the micro-kernel's A-panel layout.
+    u: UStore,
 }
 
 /// Where one forward pass reads its input and writes its output.
@@ -429,38 +423,199 @@ transforms_for!(input_avx512, output_avx512, "avx512f,avx2,fma");
 transforms_for!(input_avx2, output_avx2, "avx2,fma");
 transforms_for!(input_portable, output_portable,);
 
+/// `G x` for one column `x` of a 3×3 kernel, with `G` (6×3) the rows
+/// `[¼ 0 0] [−⅙ −⅙ −⅙] [−⅙ ⅙ −⅙] [1/24 1/12 ⅙] [1/24 −1/12 ⅙] [0 0 1]`.
+#[inline(always)]
+fn g3(x0: f32, x1: f32, x2: f32) -> [f32; 6] {
+    let (a, b) = (x0 + x2, x1);
+    let c = x0 * (1.0 / 24.0) + x2 * (1.0 / 6.0);
+    [
+        x0 * 0.25,
+        -(a + b) * (1.0 / 6.0),
+        -(a - b) * (1.0 / 6.0),
+        c + b * (1.0 / 12.0),
+        c - b * (1.0 / 12.0),
+        x2,
+    ]
+}
+
+/// `G g Gᵀ` lane-wise: `g[k]` holds tap `k` (row-major 3×3) of many kernels,
+/// `u[ξ·stride ..]` gets their 36 transformed points. Works on blocks of 16
+/// lanes held in fixed-size arrays, so the arithmetic is vectorised.
+#[inline(always)]
+fn transform_lanes(g: [&[f32]; 9], u: &mut [f32], stride: usize) {
+    const L: usize = 16;
+    let len = g[0].len();
+    let mut l0 = 0;
+    while l0 < len {
+        let n = L.min(len - l0);
+        let mut x = [[0.0f32; L]; 9];
+        for (k, xk) in x.iter_mut().enumerate() {
+            xk[..n].copy_from_slice(&g[k][l0..l0 + n]);
+        }
+        let col = |a: usize, b: usize, c: usize| -> [[f32; L]; 6] {
+            let mut o = [[0.0f32; L]; 6];
+            for l in 0..L {
+                let r = g3(x[a][l], x[b][l], x[c][l]);
+                for i in 0..6 {
+                    o[i][l] = r[i];
+                }
+            }
+            o
+        };
+        let (c0, c1, c2) = (col(0, 3, 6), col(1, 4, 7), col(2, 5, 8));
+        for i in 0..T {
+            let mut r = [[0.0f32; L]; 6];
+            for l in 0..L {
+                let v = g3(c0[i][l], c1[i][l], c2[i][l]);
+                for j in 0..6 {
+                    r[j][l] = v[j];
+                }
+            }
+            for (j, rj) in r.iter().enumerate() {
+                let at = (i * T + j) * stride + l0;
+                u[at..at + n].copy_from_slice(&rj[..n]);
+            }
+        }
+        l0 += n;
+    }
+}
+
+macro_rules! weight_transform_for {
+    ($name:ident, $($feat:literal)?) => {
+        $(#[target_feature(enable = $feat)])?
+        unsafe fn $name(g: [&[f32]; 9], u: &mut [f32], stride: usize) {
+            transform_lanes(g, u, stride)
+        }
+    };
+}
+#[cfg(target_arch = "x86_64")]
+weight_transform_for!(weights_avx512, "avx512f,avx2,fma");
+#[cfg(target_arch = "x86_64")]
+weight_transform_for!(weights_avx2, "avx2,fma");
+weight_transform_for!(weights_portable,);
+
+/// How the transformed weights `U` are kept.
+#[derive(Clone)]
+enum UStore {
+    /// Packed once when the layer is built: 4× the memory of the 3×3 weights.
+    Packed(AlignedBuf),
+    /// Only the 3×3 weights are kept (as `[c_out, 9, c_in]`); every forward
+    /// pass transforms and packs `U` into a pooled buffer, so a network holds
+    /// its weights once (measured: about 15% slower on the 256-channel layers).
+    Lazy(Vec<f32>),
+}
+
 impl Winograd {
-    /// Transforms `weight` (`[c_out, c_in, 3, 3]`) and packs it for `kernel`.
-    pub(crate) fn new(kernel: MicroKernel, c_in: usize, c_out: usize, weight: &[f32]) -> Self {
-        let mut u = vec![vec![0.0f32; c_out * c_in]; P];
+    /// Builds the layer for `weight` (`[c_out, c_in, 3, 3]`) and `kernel`,
+    /// packing `U` once when `packed`, else at every forward pass.
+    pub(crate) fn new(
+        kernel: MicroKernel,
+        c_in: usize,
+        c_out: usize,
+        weight: &[f32],
+        packed: bool,
+    ) -> Self {
+        let mr = kernel.mr;
+        let m_panels = c_out.div_ceil(mr);
+        let mut kblocks = Vec::new();
+        let mut k0 = 0;
+        while k0 < c_in {
+            let kc = KC.min(c_in - k0);
+            kblocks.push((k0, kc, k0 * m_panels * mr));
+            k0 += kc;
+        }
+        // [c_out, c_in, 9] → [c_out, 9, c_in]: the taps of one output channel
+        // are contiguous over input channels (the lanes of the transform).
+        let mut taps = vec![0.0f32; weight.len()];
         for co in 0..c_out {
             for ci in 0..c_in {
-                let g = &weight[(co * c_in + ci) * 9..][..9];
-                // G g (6×3), then (G g) Gᵀ (6×6)
-                let mut gg = [[0.0f64; 3]; T];
-                for (i, row) in gg.iter_mut().enumerate() {
-                    for (j, v) in row.iter_mut().enumerate() {
-                        *v = (0..3).map(|k| G[i][k] * g[k * 3 + j] as f64).sum();
-                    }
-                }
-                for i in 0..T {
-                    for j in 0..T {
-                        let v: f64 = (0..3).map(|k| gg[i][k] * G[j][k]).sum();
-                        u[i * T + j][co * c_in + ci] = v as f32;
-                    }
+                for k in 0..9 {
+                    taps[(co * 9 + k) * c_in + ci] = weight[(co * c_in + ci) * 9 + k];
                 }
             }
         }
-        let u = u
-            .iter()
-            .map(|m| PackedA::pack(kernel, c_out, c_in, |r, c| m[r * c_in + c]))
-            .collect();
-        Self {
+        let mut w = Self {
             kernel,
             c_in,
             c_out,
-            u,
+            m_panels,
+            kblocks,
+            u: UStore::Lazy(taps),
+        };
+        if packed {
+            let mut buf = AlignedBuf::zeroed(P * w.per_xi());
+            if let UStore::Lazy(taps) = &w.u {
+                w.pack_u(taps, buf.as_mut_slice());
+            }
+            w.u = UStore::Packed(buf);
         }
+        w
+    }
+
+    /// True when `U` is packed once (not made at every pass).
+    pub(crate) fn is_packed(&self) -> bool {
+        matches!(self.u, UStore::Packed(_))
+    }
+
+    /// Floats of one packed `U[ξ]`.
+    fn per_xi(&self) -> usize {
+        self.m_panels * self.kernel.mr * self.c_in
+    }
+
+    /// Transforms `taps` (`[c_out, 9, c_in]`) and writes every `U[ξ]` into
+    /// `dst` (`36 · per_xi` floats, `ξ`-major, each in the micro-kernel's
+    /// A-panel layout), in parallel over row panels.
+    fn pack_u(&self, taps: &[f32], dst: &mut [f32]) {
+        let (mr, c_in, per_xi) = (self.kernel.mr, self.c_in, self.per_xi());
+        let isa = self.kernel.isa;
+        let ptr = SharedPtr(dst.as_mut_ptr());
+        let ptr = &ptr;
+        assert!(dst.len() >= P * per_xi);
+        (0..self.m_panels)
+            .into_par_iter()
+            .for_each_init(Vec::new, |scratch: &mut Vec<f32>, mp| {
+                // ub[ξ][ci] for one output channel, then panel[ξ][ci][r].
+                scratch.resize(P * c_in * (mr + 1), 0.0);
+                let (ub, panel) = scratch.split_at_mut(P * c_in);
+                for r in 0..mr {
+                    let co = mp * mr + r;
+                    if co < self.c_out {
+                        let g: [&[f32]; 9] =
+                            std::array::from_fn(|k| &taps[(co * 9 + k) * c_in..][..c_in]);
+                        // SAFETY: the CPU has the kernel family's ISA.
+                        unsafe {
+                            match isa {
+                                #[cfg(target_arch = "x86_64")]
+                                Isa::Avx512 => weights_avx512(g, ub, c_in),
+                                #[cfg(target_arch = "x86_64")]
+                                Isa::Avx2Fma => weights_avx2(g, ub, c_in),
+                                _ => weights_portable(g, ub, c_in),
+                            }
+                        }
+                    } else {
+                        ub.fill(0.0);
+                    }
+                    for xi in 0..P {
+                        let src = &ub[xi * c_in..(xi + 1) * c_in];
+                        let dst = &mut panel[xi * c_in * mr..(xi + 1) * c_in * mr];
+                        for (d, &v) in dst.chunks_exact_mut(mr).zip(src) {
+                            d[r] = v;
+                        }
+                    }
+                }
+                for xi in 0..P {
+                    for &(k0, kc, aoff) in &self.kblocks {
+                        let src = &panel[(xi * c_in + k0) * mr..(xi * c_in + k0 + kc) * mr];
+                        let at = xi * per_xi + aoff + mp * kc * mr;
+                        // SAFETY: row panel `mp` owns these kc·mr floats of U[ξ]
+                        // (below `P · per_xi`, checked above).
+                        unsafe {
+                            std::ptr::copy_nonoverlapping(src.as_ptr(), ptr.0.add(at), kc * mr)
+                        };
+                    }
+                }
+            });
     }
 
     /// Offset in the block buffer of the `nr` floats of `V[ξ]`, channel `ci`,
@@ -468,7 +623,7 @@ impl Winograd {
     /// `(k0, kc)`, then panel, then the `kc` rows of that panel.
     #[inline(always)]
     fn v_offset(&self, xi: usize, ci: usize, panel: usize, tpb: usize) -> usize {
-        let (k0, kc, _) = self.u[0]
+        let (k0, kc, _) = self
             .kblocks
             .iter()
             .copied()
@@ -521,7 +676,21 @@ impl Winograd {
         };
         let tpb = nr * WINO_PANELS_PER_BLOCK;
         let mut v = crate::pool::take(P * self.c_in * tpb);
-        let m_panels = self.u[0].m_panels;
+        let m_panels = self.m_panels;
+        let per_xi = self.per_xi();
+        let lazy_u = match &self.u {
+            UStore::Lazy(taps) => {
+                let mut buf = crate::pool::take(P * per_xi);
+                self.pack_u(taps, &mut buf);
+                Some(buf)
+            }
+            UStore::Packed(_) => None,
+        };
+        let u_all: &[f32] = match (&self.u, &lazy_u) {
+            (UStore::Packed(buf), _) => buf.as_slice(),
+            (UStore::Lazy(_), Some(buf)) => buf,
+            (UStore::Lazy(_), None) => unreachable!("lazy U is packed above"),
+        };
         let chunk_panels = WINO_CO_PER_TASK.div_ceil(mr).max(1);
         let chunk_rows = chunk_panels * mr;
         let isa = self.kernel.isa;
@@ -571,10 +740,10 @@ impl Winograd {
                         buf.ensure(m_len + (T * M + M * M) * nr);
                         let (mbuf, scratch) = buf.as_mut_slice().split_at_mut(m_len);
                         for xi in 0..P {
-                            let a = &self.u[xi];
+                            let a = &u_all[xi * per_xi..(xi + 1) * per_xi];
                             for mp in mp0..mp1 {
-                                for (bi, &(k0, kc, aoff)) in a.kblocks.iter().enumerate() {
-                                    let ap = a.data.as_slice()[aoff + mp * kc * mr..].as_ptr();
+                                for (bi, &(k0, kc, aoff)) in self.kblocks.iter().enumerate() {
+                                    let ap = a[aoff + mp * kc * mr..].as_ptr();
                                     for p in 0..panels {
                                         let bp = v_ref[self.v_offset(xi, k0, p, tpb)..].as_ptr();
                                         let c = &mut mbuf
@@ -650,5 +819,8 @@ impl Winograd {
         }
         debug_assert_eq!(out.len(), self.c_out * plane_len);
         crate::pool::give(v);
+        if let Some(buf) = lazy_u {
+            crate::pool::give(buf);
+        }
     }
 }

@@ -65,7 +65,10 @@ impl ConvProblem {
             } else {
                 conv.forward(&x).unwrap()
             };
-            let tol = if algo == ConvAlgorithm::Winograd {
+            let tol = if matches!(
+                algo,
+                ConvAlgorithm::Winograd | ConvAlgorithm::WinogradLowMemory
+            ) {
                 Tolerance::WINOGRAD_F32
             } else {
                 Tolerance::KERNEL_F32
@@ -135,6 +138,12 @@ fn named_conv_problems() -> Vec<ConvProblem> {
         tanh(conv(1, 11, 150, 6, 3, 7, 1, 0)), // direct path: full and partial row blocks
         res(conv(2, 5, 70, 4, 4, 3, 1, 0)),   // direct path, 4 outputs, residual
         conv(1, 4, 66, 3, 2, 1, 1, 0),        // direct path, 1x1
+        relu(conv(1, 9, 13, 6, 3, 7, 1, 2)),  // folded shifted GEMM with zero padding
+        conv(1, 8, 70, 5, 2, 5, 1, 0),        // folded, two outputs, rows across panels
+        relu(conv(1, 19, 21, 3, 10, 7, 2, 3)), // shifted via phase planes, 7x7 stride 2
+        conv(1, 23, 17, 9, 11, 3, 3, 1),      // phase planes, stride 3
+        res(conv(1, 14, 28, 16, 16, 3, 1, 0)), // Winograd: 28 tiles, one narrow panel (2 zmm)
+        res(conv(1, 54, 34, 16, 24, 3, 1, 0)), // Winograd: 104 tiles, several blocks, narrow tail
     ]
 }
 
@@ -574,4 +583,77 @@ fn reused_buffers_never_leak_stale_values() {
             Tolerance::KERNEL_F32,
         );
     }
+}
+
+/// `forward_reflect` (reflection padding fused into the gather or the padded
+/// copy) against `reference::reflect_pad` then the reference convolution.
+#[test]
+fn conv2d_reflect_forward() {
+    // (n, h, w, c_in, c_out, k, stride, reflect pad, residual)
+    let cases = [
+        (1, 5, 7, 17, 19, 3, 1, 1, true),   // Winograd
+        (1, 2, 2, 16, 16, 3, 1, 1, true),   // Winograd, 2x2 image (smallest reflect 1)
+        (2, 9, 12, 24, 16, 3, 1, 1, false), // Winograd, batch 2
+        (1, 30, 41, 32, 32, 3, 1, 1, true), // Winograd, several tile rows, odd width
+        (1, 4, 9, 3, 9, 7, 1, 3, false),    // encoder input conv (shifted)
+        (1, 9, 11, 6, 3, 7, 1, 3, false),   // decoder output conv (folded)
+        (1, 11, 13, 3, 8, 7, 2, 3, false),  // EnvMap input conv (phase planes)
+        (1, 6, 5, 5, 7, 3, 1, 2, true),     // pad 2 with a 3x3 kernel
+    ];
+    for isa in isas() {
+        for (i, &(n, h, w, ci, co, k, st, rp, with_res)) in cases.iter().enumerate() {
+            let mut rng = Rng::new(7000 + i as u64);
+            let spec = ConvSpec::square(ci, co, k, st, 0);
+            let x = rng.tensor([n, ci, h, w]);
+            let wt = rng.normal_vec(spec.weight_len(), (1.0 / (ci * k * k) as f32).sqrt());
+            let b = rng.normal_vec(co, 0.5);
+            let padded = reference::reflect_pad(&x, [rp; 4]).unwrap();
+            let mut expected = reference::conv2d(&padded, &wt, Some(&b), spec).unwrap();
+            expected = reference::activate(&expected, Activation::Relu);
+            let r = rng.tensor(expected.shape());
+            if with_res {
+                expected = reference::add(&expected, &r).unwrap();
+            }
+            for algo in ConvAlgorithm::EXPLICIT
+                .into_iter()
+                .filter(|a| a.applies(&spec))
+            {
+                let conv = Conv2d::with_algorithm(isa, algo, spec, &wt, Some(&b), Activation::Relu)
+                    .unwrap();
+                let found = conv
+                    .forward_reflect(&x, rp, with_res.then_some(&r))
+                    .unwrap();
+                check(
+                    &format!("{isa} {algo:?} reflect case {i}"),
+                    &found,
+                    &expected,
+                    Tolerance::WINOGRAD_F32,
+                );
+            }
+        }
+    }
+    // Refused: a layer with its own zero padding, and a pad as large as the image.
+    let mut rng = Rng::new(1);
+    let spec = ConvSpec::square(4, 4, 3, 1, 1);
+    let conv = Conv2d::new(
+        spec,
+        &rng.normal_vec(spec.weight_len(), 0.1),
+        None,
+        Activation::None,
+    )
+    .unwrap();
+    assert!(conv
+        .forward_reflect(&rng.tensor([1, 4, 5, 5]), 1, None)
+        .is_err());
+    let spec = ConvSpec::square(16, 16, 3, 1, 0);
+    let conv = Conv2d::new(
+        spec,
+        &rng.normal_vec(spec.weight_len(), 0.1),
+        None,
+        Activation::None,
+    )
+    .unwrap();
+    assert!(conv
+        .forward_reflect(&rng.tensor([1, 16, 2, 5]), 2, None)
+        .is_err());
 }
