@@ -93,6 +93,9 @@ pub fn run(a: Args) -> Result<()> {
         }
     }
     let net = Net::load(&weights).context("loading network")?;
+    let preset = weights.preset().to_string();
+    // The network holds its own (folded, packed) copy: unmap the file.
+    drop(weights);
     let load_ms = t0.elapsed().as_secs_f64() * 1e3;
     let kind = net.kind();
     let config = net.config();
@@ -120,7 +123,6 @@ pub fn run(a: Args) -> Result<()> {
     let gflops = flops / (median_ms * 1e-3) / 1e9;
     let peak_rss_mb = peak_rss_mb();
     let isa = Isa::best().name();
-    let preset = weights.preset().to_string();
 
     if a.json {
         let obj = serde_json::json!({

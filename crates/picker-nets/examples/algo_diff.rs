@@ -1,5 +1,7 @@
-//! Largest output difference between the Winograd and the plain-GEMM
-//! convolutions on random thesis-size networks:
+//! Largest output difference between the default algorithms (Winograd for the
+//! residual blocks, the shifted GEMM for the other convolutions), the
+//! low-memory Winograd, and the plain packed GEMM for every layer, on random
+//! thesis-size networks:
 //! `cargo run --release -p picker-nets --example algo_diff -- [HxW]`.
 
 use picker_nets::{
@@ -35,10 +37,19 @@ fn main() {
         std::env::set_var("PICKER_CONV", "gemm");
         let gemm = load(&bytes).forward(&x).expect("forward");
         std::env::remove_var("PICKER_CONV");
-        let wino = load(&bytes).forward(&x).expect("forward");
-        for ((name, a), (_, b)) in gemm.tensors.iter().zip(&wino.tensors) {
+        let auto = load(&bytes).forward(&x).expect("forward");
+        std::env::set_var("PICKER_WINOGRAD_WEIGHTS", "lazy");
+        let lazy = load(&bytes).forward(&x).expect("forward");
+        std::env::remove_var("PICKER_WINOGRAD_WEIGHTS");
+        for (((name, a), (_, b)), (_, c)) in
+            gemm.tensors.iter().zip(&auto.tensors).zip(&lazy.tensors)
+        {
             let d = a.max_abs_diff(b).expect("same shapes");
-            println!("{} {name}: max |winograd - gemm| = {d:.2e}", kind.as_str());
+            let dl = a.max_abs_diff(c).expect("same shapes");
+            println!(
+                "{} {name}: max |default - gemm| = {d:.2e}, max |low-memory winograd - gemm| = {dl:.2e}",
+                kind.as_str()
+            );
         }
     }
 }

@@ -40,6 +40,26 @@ impl Storage {
             Storage::Static(s) => s,
         }
     }
+
+    /// Tells the OS that bytes `[start, end)` of a memory-mapped file were
+    /// consumed (copied out), so their pages leave the process's resident set
+    /// while the network's own copy is built: loading then peaks at about
+    /// one copy of the weights, not two. A later read simply faults the pages
+    /// in again from the page cache; the contents never change.
+    fn release(&self, start: usize, end: usize) {
+        #[cfg(unix)]
+        if let Storage::Mmap(m) = self {
+            if end > start {
+                // SAFETY: the mapping is read-only and private, so MADV_DONTNEED
+                // only drops clean pages, which read back unchanged.
+                let _ = unsafe {
+                    m.unchecked_advise_range(memmap2::UncheckedAdvice::DontNeed, start, end - start)
+                };
+            }
+        }
+        #[cfg(not(unix))]
+        let _ = (start, end);
+    }
 }
 
 #[derive(Clone, Debug)]
@@ -539,6 +559,7 @@ impl Weights {
                 })
             }
         };
+        self.storage.release(e.start, e.end);
         if let Some(index) = values.iter().position(|v| !v.is_finite()) {
             return Err(Error::NonFinite {
                 path: self.path.clone(),

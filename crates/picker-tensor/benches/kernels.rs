@@ -5,7 +5,9 @@
 //! bench another micro-kernel family; `RAYON_NUM_THREADS` to set threads).
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
-use picker_tensor::{Activation, Conv2d, ConvSpec, ConvTranspose2d, ConvTransposeSpec, Rng};
+use picker_tensor::{
+    Activation, Conv2d, ConvAlgorithm, ConvSpec, ConvTranspose2d, ConvTransposeSpec, Isa, Rng,
+};
 
 /// (id, input h, input w, spec) of the convolutions at 240×320.
 fn conv_layers() -> Vec<(&'static str, usize, usize, ConvSpec)> {
@@ -48,13 +50,32 @@ fn bench(c: &mut Criterion) {
     g.sample_size(10);
     for (name, h, w, s) in conv_layers() {
         let wt = rng.normal_vec(s.weight_len(), 0.05);
-        let conv = Conv2d::new(s, &wt, Some(&vec![0.1; s.c_out]), Activation::Relu).unwrap();
+        let bias = vec![0.1; s.c_out];
+        // The default algorithm, and for the residual-block shapes the
+        // low-memory Winograd and the plain packed GEMM beside it.
+        let mut algos = vec![ConvAlgorithm::Auto];
+        if name.ends_with("res") {
+            algos.extend([ConvAlgorithm::WinogradLowMemory, ConvAlgorithm::Gemm]);
+        }
         let x = rng.tensor([1, s.c_in, h, w]);
-        g.throughput(Throughput::Elements(s.flops(h, w)));
-        let id = format!("{name}/{}x{}x{}_k{}s{}", s.c_in, h, w, s.kh, s.stride);
-        g.bench_function(BenchmarkId::from_parameter(id), |b| {
-            b.iter(|| conv.forward(&x).unwrap())
-        });
+        for algo in algos {
+            let conv =
+                Conv2d::with_algorithm(Isa::best(), algo, s, &wt, Some(&bias), Activation::Relu)
+                    .unwrap();
+            g.throughput(Throughput::Elements(s.flops(h, w)));
+            let id = format!(
+                "{name}/{}x{}x{}_k{}s{}/{:?}",
+                s.c_in,
+                h,
+                w,
+                s.kh,
+                s.stride,
+                conv.algorithm()
+            );
+            g.bench_function(BenchmarkId::from_parameter(id), |b| {
+                b.iter(|| conv.forward(&x).unwrap())
+            });
+        }
     }
     g.finish();
     let mut g = c.benchmark_group("conv_transpose2d/f32");

@@ -215,11 +215,11 @@ pub struct Conv2d {
 pub enum ConvAlgorithm {
     /// Chosen from the shape: the shifted GEMM with folded columns for
     /// stride-1 layers with ≤ 4 outputs; Winograd for 3×3 stride-1 layers with
-    /// ≥ 16 input and output channels (unless the environment variable
-    /// `PICKER_CONV=gemm` is set when the layer is built, for comparisons;
-    /// `PICKER_WINOGRAD_WEIGHTS=lazy` picks [`ConvAlgorithm::WinogradLowMemory`]);
-    /// the shifted GEMM for other kernels larger than 1×1 or with padding;
-    /// else (1×1) the packed GEMM.
+    /// ≥ 16 input and output channels (`PICKER_WINOGRAD_WEIGHTS=lazy` picks
+    /// [`ConvAlgorithm::WinogradLowMemory`]); the shifted GEMM for other
+    /// kernels larger than 1×1 or with padding; else (1×1) the packed GEMM.
+    /// With the environment variable `PICKER_CONV=gemm` set when a layer is
+    /// built, every layer takes the packed GEMM (for comparisons).
     Auto,
     /// Packed GEMM over an implicit im2col (any shape).
     Gemm,
@@ -261,15 +261,14 @@ impl ConvAlgorithm {
     }
 
     fn resolve(self, s: &ConvSpec) -> ConvAlgorithm {
+        let force_gemm = std::env::var("PICKER_CONV").as_deref() == Ok("gemm");
         match self {
+            ConvAlgorithm::Auto if force_gemm => ConvAlgorithm::Gemm,
             ConvAlgorithm::Auto if s.stride == 1 && s.c_out <= FOLD_MAX_CO && s.kw > 1 => {
                 ConvAlgorithm::Shifted
             }
             ConvAlgorithm::Auto
-                if ConvAlgorithm::Winograd.applies(s)
-                    && s.c_in >= 16
-                    && s.c_out >= 16
-                    && std::env::var("PICKER_CONV").as_deref() != Ok("gemm") =>
+                if ConvAlgorithm::Winograd.applies(s) && s.c_in >= 16 && s.c_out >= 16 =>
             {
                 if std::env::var("PICKER_WINOGRAD_WEIGHTS").as_deref() == Ok("lazy") {
                     ConvAlgorithm::WinogradLowMemory

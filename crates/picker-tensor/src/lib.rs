@@ -7,8 +7,9 @@
 //!
 //! | op | fast path | reference |
 //! |---|---|---|
-//! | conv2d | packed GEMM, implicit im2col (1×1 as plain GEMM), fused bias/act/residual | [`reference::conv2d`] |
-//! | conv-transpose2d | packed GEMM into columns + parallel col2im | [`reference::conv_transpose2d`] |
+//! | conv2d 3×3 stride 1 | Winograd F(4×4, 3×3) over cache-sized tile blocks, reflection padding in the gather, fused bias/act/residual | [`reference::conv2d`] |
+//! | conv2d, other shapes | shifted GEMM: B rows read in place from a padded copy (strides through phase planes; few outputs fold `kx` into the rows); 1×1 as plain packed GEMM | [`reference::conv2d`] |
+//! | conv-transpose2d | sub-pixel: one shifted GEMM per output phase, written interleaved | [`reference::conv_transpose2d`] |
 //! | BatchNorm (eval) | folded into the conv at load: [`fold_batchnorm`] | [`reference::batch_norm`] |
 //! | reflection pad | row copies, parallel per plane | [`reference::reflect_pad`] |
 //! | ReLU, Tanh, add | fused into conv epilogues; [`activate`], [`add_assign`] | [`reference::activate`], [`reference::add`] |
