@@ -60,27 +60,31 @@ impl Mask {
     }
     /// The mask eroded by one pixel (8-neighbourhood; the image border does not erode).
     pub fn eroded(&self) -> Mask {
+        use rayon::prelude::*;
         let (w, h) = (self.width, self.height);
         let mut out = self.data.clone();
-        for y in 0..h {
-            for x in 0..w {
-                if !self.data[y * w + x] {
-                    continue;
-                }
-                'n: for dy in -1i64..=1 {
-                    for dx in -1i64..=1 {
-                        let (xx, yy) = (x as i64 + dx, y as i64 + dy);
-                        if xx < 0 || yy < 0 || xx >= w as i64 || yy >= h as i64 {
-                            continue;
-                        }
-                        if !self.data[yy as usize * w + xx as usize] {
-                            out[y * w + x] = false;
-                            break 'n;
+        // Rows in parallel (each output pixel depends on the input only).
+        out.par_chunks_mut(w.max(1))
+            .enumerate()
+            .for_each(|(y, row)| {
+                for (x, o) in row.iter_mut().enumerate() {
+                    if !self.data[y * w + x] {
+                        continue;
+                    }
+                    'n: for dy in -1i64..=1 {
+                        for dx in -1i64..=1 {
+                            let (xx, yy) = (x as i64 + dx, y as i64 + dy);
+                            if xx < 0 || yy < 0 || xx >= w as i64 || yy >= h as i64 {
+                                continue;
+                            }
+                            if !self.data[yy as usize * w + xx as usize] {
+                                *o = false;
+                                break 'n;
+                            }
                         }
                     }
                 }
-            }
-        }
+            });
         Mask {
             width: w,
             height: h,

@@ -33,6 +33,7 @@ use picker_inpaint::{seam_score, InpaintOptions, Inpainter};
 use picker_nets::conventions as conv;
 use picker_render::io::Image;
 use picker_render::{ElementImages, EnvMap, Quality, Shader};
+use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::mask::{Mask, MaskOptions, PickMask};
@@ -381,23 +382,40 @@ pub fn extract(
             rw[i] = 1.0;
         }
     }
+    // Only the masked pixels of the de-lit photo are ever read (reprojection,
+    // consistency and medians all go through `full`): the others stay 0.
     let delit = if rw.iter().any(|&v| v > 0.0) {
-        let r = resample::masked_bilinear(&ratio, &rw, fw, fh);
-        let mut d = Image::zeros(3, fh, fw);
-        for i in 0..fw * fh {
-            d.set_rgb(i, p.photo_linear.rgb(i) * r.rgb(i));
-        }
+        let mut d = resample::masked_bilinear_where(&ratio, &rw, fw, fh, &full.data);
+        let n = fw * fh;
+        let (d0, rest) = d.data.split_at_mut(n);
+        let (d1, d2) = rest.split_at_mut(n);
+        let step = fw.max(1);
+        d0.par_chunks_mut(step)
+            .zip(d1.par_chunks_mut(step))
+            .zip(d2.par_chunks_mut(step))
+            .enumerate()
+            .for_each(|(y, ((r0, r1), r2))| {
+                for x in 0..r0.len() {
+                    let i = y * fw + x;
+                    if full.data[i] {
+                        let v = p.photo_linear.rgb(i) * Vec3::new(r0[x], r1[x], r2[x]);
+                        (r0[x], r1[x], r2[x]) = (v.x, v.y, v.z);
+                    }
+                }
+            });
         d
     } else {
-        resample::masked_bilinear(
+        resample::masked_bilinear_where(
             &el.diffuse,
             &mw.iter().map(|&b| b as u8 as f32).collect::<Vec<_>>(),
             fw,
             fh,
+            &full.data,
         )
     };
     let interior = full.eroded();
     let confidence: Vec<f32> = (0..fw * fh)
+        .into_par_iter()
         .map(|i| {
             if !full.data[i] {
                 return 0.0;
@@ -430,16 +448,22 @@ pub fn extract(
     if textured {
         // Coordinates.
         let mwf: Vec<f32> = mw.iter().map(|&b| b as u8 as f32).collect();
-        let net_coords = el.uv.as_ref().map(|uv| {
-            let up = resample::upsample_uv(uv, &mwf, fw, fh);
-            Coords {
-                width: fw,
-                height: fh,
-                u: up.plane(0).to_vec(),
-                v: up.plane(1).to_vec(),
-                wrap: true,
-            }
-        });
+        // Upsampled only inside the mask (the only pixels any use reads), and
+        // not at all when the plane was asked for.
+        let net_coords = el
+            .uv
+            .as_ref()
+            .filter(|_| opts.uv != UvChoice::Plane)
+            .map(|uv| {
+                let up = resample::upsample_uv_where(uv, &mwf, fw, fh, &full.data);
+                Coords {
+                    width: fw,
+                    height: fh,
+                    u: up.plane(0).to_vec(),
+                    v: up.plane(1).to_vec(),
+                    wrap: true,
+                }
+            });
         let normal = plane::plane_normal(&el.normals, mw);
         let spread = normal.map(|n| plane::normal_spread_deg(&el.normals, mw, n));
         let plane_coords = |diag_focal: &mut Option<f32>| -> Option<Coords> {
