@@ -135,7 +135,18 @@ impl Prepared {
         }
         check_size("photo", &inputs.photo, 3, fw, fh)?;
         check_size("segmentation", &inputs.segmentation, 3, w, h)?;
-        let photo_linear = inputs.photo.map(picker_render::io::srgb_decode);
+        // `Image::map` in parallel (per value: the same bits).
+        let photo_linear = Image {
+            data: inputs
+                .photo
+                .data
+                .par_iter()
+                .map(|&v| picker_render::io::srgb_decode(v))
+                .collect(),
+            channels: inputs.photo.channels,
+            height: inputs.photo.height,
+            width: inputs.photo.width,
+        };
         let photo_work = resample::area(&photo_linear, w, h);
         let luma = guided::luma(&inputs.photo);
         let valid = (0..w * h).map(|i| inputs.elements.is_valid(i)).collect();

@@ -98,17 +98,20 @@ pub fn area_plane(src: &[f32], w: usize, h: usize, dw: usize, dh: usize) -> Vec<
     };
     let (sx, sy) = (spans(w, dw), spans(h, dh));
     let mut out = vec![0.0; dw * dh];
-    for (y, ry) in sy.iter().enumerate() {
-        for (x, rx) in sx.iter().enumerate() {
-            let mut s = 0.0;
-            for &(yy, wy) in ry {
-                for &(xx, wx) in rx {
-                    s += src[yy * w + xx] * wx * wy;
+    // Rows in parallel (each value is one fixed-order sum: same bits).
+    out.par_chunks_mut(dw.max(1))
+        .zip(sy.par_iter())
+        .for_each(|(row, ry)| {
+            for (o, rx) in row.iter_mut().zip(&sx) {
+                let mut s = 0.0;
+                for &(yy, wy) in ry {
+                    for &(xx, wx) in rx {
+                        s += src[yy * w + xx] * wx * wy;
+                    }
                 }
+                *o = s;
             }
-            out[y * dw + x] = s;
-        }
-    }
+        });
     out
 }
 
@@ -403,6 +406,47 @@ mod tests {
                             assert!(uv_fast.data[j].is_nan());
                         }
                     }
+                }
+            }
+        }
+    }
+
+    /// The parallel area resize equals the plain sequential double loop.
+    #[test]
+    fn area_matches_sequential_reference() {
+        let mut rng = Rng::new(7);
+        for &(w, h, dw, dh) in &[(1, 1, 1, 1), (7, 3, 2, 2), (40, 30, 7, 5), (5, 4, 9, 11)] {
+            let src = rng.uniform_vec(w * h, -1.0, 1.0);
+            let got = area_plane(&src, w, h, dw, dh);
+            let spans = |n: usize, dn: usize| -> Vec<Vec<(usize, f32)>> {
+                (0..dn)
+                    .map(|i| {
+                        let a = i as f64 * n as f64 / dn as f64;
+                        let b = (i + 1) as f64 * n as f64 / dn as f64;
+                        let mut v = Vec::new();
+                        let mut k = a.floor() as usize;
+                        while (k as f64) < b && k < n {
+                            let lo = a.max(k as f64);
+                            let hi = b.min((k + 1) as f64);
+                            if hi > lo {
+                                v.push((k, ((hi - lo) / (b - a)) as f32));
+                            }
+                            k += 1;
+                        }
+                        v
+                    })
+                    .collect()
+            };
+            let (sx, sy) = (spans(w, dw), spans(h, dh));
+            for (y, ry) in sy.iter().enumerate() {
+                for (x, rx) in sx.iter().enumerate() {
+                    let mut s = 0.0f32;
+                    for &(yy, wy) in ry {
+                        for &(xx, wx) in rx {
+                            s += src[yy * w + xx] * wx * wy;
+                        }
+                    }
+                    assert_eq!(got[y * dw + x].to_bits(), s.to_bits());
                 }
             }
         }
