@@ -65,7 +65,10 @@ impl Coords {
 
     /// The `q`-quantile (0 = smallest) of the texture-square area per picked pixel.
     pub fn area_quantile(&self, mask: &[bool], q: f32) -> Option<f32> {
+        // In parallel; `collect` keeps the pixel order, so the selection is
+        // the same as a sequential pass's.
         let mut a: Vec<f32> = (0..mask.len())
+            .into_par_iter()
             .filter_map(|i| self.pixel_area(mask, i))
             .filter(|&a| a > 0.0)
             .collect();

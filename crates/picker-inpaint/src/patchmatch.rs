@@ -292,6 +292,36 @@ impl Ctx<'_> {
                 v.clamp(0, n as isize - 1) as usize
             }
         };
+        // Rows in parallel, the interior of a row as one copy (pure copies:
+        // the same values as `pad_reference`).
+        let cols: Vec<usize> = (0..pw).map(|px| map(px as isize - r as isize, w)).collect();
+        out.par_chunks_mut(pw * c)
+            .enumerate()
+            .for_each(|(py, row)| {
+                let sy = map(py as isize - r as isize, h);
+                let src = &img[sy * w * c..(sy + 1) * w * c];
+                row[r * c..(r + w) * c].copy_from_slice(src);
+                for px in (0..r).chain(r + w..pw) {
+                    let s = cols[px] * c;
+                    row[px * c..(px + 1) * c].copy_from_slice(&src[s..s + c]);
+                }
+            });
+        out
+    }
+
+    /// The plain implementation of [`Ctx::pad`].
+    #[cfg(test)]
+    fn pad_reference(&self, img: &[f32]) -> Vec<f32> {
+        let (h, w, c, r) = (self.h, self.w, self.c, self.r);
+        let (ph, pw) = (h + 2 * r, w + 2 * r);
+        let mut out = vec![0.0f32; ph * pw * c];
+        let map = |v: isize, n: usize| -> usize {
+            if self.toroidal {
+                v.rem_euclid(n as isize) as usize
+            } else {
+                v.clamp(0, n as isize - 1) as usize
+            }
+        };
         for py in 0..ph {
             let sy = map(py as isize - r as isize, h);
             for px in 0..pw {
@@ -505,28 +535,29 @@ fn unknown_counts(known: &[bool], h: usize, w: usize, r: usize, toroidal: bool) 
     };
     // Horizontal window sums, then vertical ones (out-of-image texels count
     // as known: they are never voted and non-toroidal sources lie inside).
+    // Integer sums, rows in parallel: exact whatever the order.
     let mut horiz = vec![0u32; h * w];
-    for y in 0..h {
-        for x in 0..w {
+    horiz.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+        for (x, o) in row.iter_mut().enumerate() {
             let mut s = 0;
             for dx in -(r as isize)..=r as isize {
                 if let Some(xx) = map(x as isize + dx, w) {
                     s += (!known[y * w + xx]) as u32;
                 }
             }
-            horiz[y * w + x] = s;
+            *o = s;
         }
-    }
+    });
     let mut out = vec![0u32; h * w];
-    for y in 0..h {
+    out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
         for dy in -(r as isize)..=r as isize {
             if let Some(yy) = map(y as isize + dy, h) {
-                for x in 0..w {
-                    out[y * w + x] += horiz[yy * w + x];
+                for (o, &v) in row.iter_mut().zip(&horiz[yy * w..(yy + 1) * w]) {
+                    *o += v;
                 }
             }
         }
-    }
+    });
     out
 }
 
@@ -1097,6 +1128,23 @@ mod tests {
                         );
                     }
                 }
+            }
+        }
+    }
+
+    #[test]
+    fn parallel_pad_matches_reference() {
+        let mut rng = Rng::new(43);
+        for (h, w, c, p) in shapes() {
+            for toroidal in [true, false] {
+                let case = Case::new(&mut rng, h, w, c, p, toroidal);
+                let ctx = case.ctx();
+                let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                assert_eq!(
+                    bits(&ctx.pad(&case.img)),
+                    bits(&ctx.pad_reference(&case.img)),
+                    "{h}x{w}x{c} p{p} toroidal {toroidal}"
+                );
             }
         }
     }
