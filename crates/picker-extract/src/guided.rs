@@ -65,7 +65,7 @@ pub fn box_mean_reference(src: &[f32], w: usize, h: usize, r: usize) -> Vec<f32>
 
 /// The window means of the linear coefficients `(mean(a), mean(b))` of the
 /// guided filter of `p` by `guide`.
-fn coefficients(
+pub(crate) fn coefficients(
     guide: &[f32],
     p: &[f32],
     w: usize,

@@ -135,13 +135,15 @@ impl Prepared {
         }
         check_size("photo", &inputs.photo, 3, fw, fh)?;
         check_size("segmentation", &inputs.segmentation, 3, w, h)?;
-        // `Image::map` in parallel (per value: the same bits).
+        // `Image::map(srgb_decode)` in parallel, 8-bit values from a table
+        // (per value: the same bits).
+        let lut = SrgbDecode8::new();
         let photo_linear = Image {
             data: inputs
                 .photo
                 .data
                 .par_iter()
-                .map(|&v| picker_render::io::srgb_decode(v))
+                .map(|&v| lut.decode(v))
                 .collect(),
             channels: inputs.photo.channels,
             height: inputs.photo.height,
@@ -263,6 +265,41 @@ impl Prepared {
             out.push((pick, pm));
         }
         out
+    }
+}
+
+/// [`picker_render::io::srgb_decode`] with the 256 values of 8-bit photos
+/// (`k / 255`, as the `image` crate converts them) looked up in a table of
+/// that function's own results: the same bits, without a `powf` per value.
+pub struct SrgbDecode8 {
+    table: [f32; 256],
+}
+
+impl Default for SrgbDecode8 {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl SrgbDecode8 {
+    /// The table.
+    pub fn new() -> Self {
+        Self {
+            table: std::array::from_fn(|k| picker_render::io::srgb_decode(k as f32 / 255.0)),
+        }
+    }
+
+    /// `srgb_decode(v)`.
+    #[inline]
+    pub fn decode(&self, v: f32) -> f32 {
+        if (0.0..=1.0).contains(&v) {
+            let k = (v * 255.0).round() as usize;
+            // Bit equality: −0.0 is not 0/255 (it decodes to −0.0).
+            if (k as f32 / 255.0).to_bits() == v.to_bits() {
+                return self.table[k];
+            }
+        }
+        picker_render::io::srgb_decode(v)
     }
 }
 
@@ -672,4 +709,26 @@ pub fn preview_sphere(m: &Material, env: &EnvMap, size: usize, repeats: f32) -> 
         }
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn srgb_table_matches_the_function() {
+        let lut = SrgbDecode8::new();
+        let mut rng = picker_tensor::Rng::new(4);
+        let mut values: Vec<f32> = (0..=255).map(|k| k as f32 / 255.0).collect();
+        values.extend((0..=65535).step_by(7).map(|k| k as f32 / 65535.0));
+        values.extend(rng.uniform_vec(10_000, -0.5, 1.5));
+        values.extend([f32::NAN, f32::INFINITY, -0.0, 1.0 + f32::EPSILON, -1e-30]);
+        for v in values {
+            assert_eq!(
+                lut.decode(v).to_bits(),
+                picker_render::io::srgb_decode(v).to_bits(),
+                "{v}"
+            );
+        }
+    }
 }

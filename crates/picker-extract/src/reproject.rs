@@ -340,6 +340,7 @@ pub fn consistency(
     let w = coords.width;
     let half = |parity: usize| -> Vec<f32> {
         (0..mask.len())
+            .into_par_iter()
             .map(|i| {
                 let (bx, by) = ((i % w) / 16, (i / w) / 16);
                 let mut hsh = (bx as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)

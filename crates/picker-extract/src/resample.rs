@@ -10,7 +10,7 @@ use rayon::prelude::*;
 /// Source coordinate of destination index `i` when `src` pixels become `dst`
 /// pixels (half-pixel centres), clamped to the source.
 #[inline]
-fn src_coord(i: usize, src: usize, dst: usize) -> (usize, usize, f32) {
+pub(crate) fn src_coord(i: usize, src: usize, dst: usize) -> (usize, usize, f32) {
     let p = ((i as f32 + 0.5) * src as f32 / dst as f32 - 0.5).max(0.0);
     let i0 = (p.floor() as usize).min(src - 1);
     let i1 = (i0 + 1).min(src - 1);
@@ -39,7 +39,7 @@ pub fn bilinear_plane(src: &[f32], w: usize, h: usize, dw: usize, dh: usize) -> 
 /// The bilinear blend of [`bilinear_plane`] (one definition, so that every
 /// fast path gives the same bits).
 #[inline(always)]
-fn lerp2(r0: &[f32], r1: &[f32], x0: usize, x1: usize, fx: f32, fy: f32) -> f32 {
+pub(crate) fn lerp2(r0: &[f32], r1: &[f32], x0: usize, x1: usize, fx: f32, fy: f32) -> f32 {
     let a = r0[x0] + (r0[x1] - r0[x0]) * fx;
     let b = r1[x0] + (r1[x1] - r1[x0]) * fx;
     a + (b - a) * fy
