@@ -65,7 +65,7 @@ pub fn box_mean_reference(src: &[f32], w: usize, h: usize, r: usize) -> Vec<f32>
 
 /// The window means of the linear coefficients `(mean(a), mean(b))` of the
 /// guided filter of `p` by `guide`.
-fn coefficients(
+pub(crate) fn coefficients(
     guide: &[f32],
     p: &[f32],
     w: usize,
@@ -154,6 +154,7 @@ pub fn luma(img: &Image) -> Vec<f32> {
     }
     let (r, g, b) = (img.plane(0), img.plane(1), img.plane(2));
     (0..img.plane_len())
+        .into_par_iter()
         .map(|i| 0.2126 * r[i] + 0.7152 * g[i] + 0.0722 * b[i])
         .collect()
 }
@@ -189,7 +190,11 @@ pub fn guided_upsample(
                 resample::bilinear_plane(&mb, w, h, fw, fh),
             )
         };
-        data.extend((0..fw * fh).map(|k| ua[k] * guide[k] + ub[k]));
+        let plane: Vec<f32> = (0..fw * fh)
+            .into_par_iter()
+            .map(|k| ua[k] * guide[k] + ub[k])
+            .collect();
+        data.extend(plane);
     }
     Image {
         channels: low.channels,

@@ -60,27 +60,31 @@ impl Mask {
     }
     /// The mask eroded by one pixel (8-neighbourhood; the image border does not erode).
     pub fn eroded(&self) -> Mask {
+        use rayon::prelude::*;
         let (w, h) = (self.width, self.height);
         let mut out = self.data.clone();
-        for y in 0..h {
-            for x in 0..w {
-                if !self.data[y * w + x] {
-                    continue;
-                }
-                'n: for dy in -1i64..=1 {
-                    for dx in -1i64..=1 {
-                        let (xx, yy) = (x as i64 + dx, y as i64 + dy);
-                        if xx < 0 || yy < 0 || xx >= w as i64 || yy >= h as i64 {
-                            continue;
-                        }
-                        if !self.data[yy as usize * w + xx as usize] {
-                            out[y * w + x] = false;
-                            break 'n;
+        // Rows in parallel (each output pixel depends on the input only).
+        out.par_chunks_mut(w.max(1))
+            .enumerate()
+            .for_each(|(y, row)| {
+                for (x, o) in row.iter_mut().enumerate() {
+                    if !self.data[y * w + x] {
+                        continue;
+                    }
+                    'n: for dy in -1i64..=1 {
+                        for dx in -1i64..=1 {
+                            let (xx, yy) = (x as i64 + dx, y as i64 + dy);
+                            if xx < 0 || yy < 0 || xx >= w as i64 || yy >= h as i64 {
+                                continue;
+                            }
+                            if !self.data[yy as usize * w + xx as usize] {
+                                *o = false;
+                                break 'n;
+                            }
                         }
                     }
                 }
-            }
-        }
+            });
         Mask {
             width: w,
             height: h,
@@ -304,6 +308,63 @@ pub fn pick_mask(
 /// thresholded at ½, then limited to pixels within one low-resolution pixel
 /// of the coarse mask. Equal sizes return the mask unchanged.
 pub fn refine(mask: &Mask, guide: &[f32], fw: usize, fh: usize) -> Mask {
+    use crate::resample::{lerp2, src_coord};
+    use rayon::prelude::*;
+    if (mask.width, mask.height) == (fw, fh) {
+        return mask.clone();
+    }
+    assert_eq!(guide.len(), fw * fh, "guide length");
+    // `refine_reference` fused per photo pixel: the guided coefficients and
+    // the dilated mask are interpolated where needed instead of as whole
+    // photo-resolution planes (the same bilinear formula, so the same bits),
+    // rows in parallel.
+    let (w, h) = (mask.width, mask.height);
+    let g_low = crate::resample::area_plane(guide, fw, fh, w, h);
+    let (ma, mb) = crate::guided::coefficients(&g_low, &mask.to_image().data, w, h, 1, 1e-3);
+    let dilated = dilated(mask).to_image().data;
+    let xs: Vec<_> = (0..fw).map(|x| src_coord(x, w, fw)).collect();
+    let mut data = vec![false; fw * fh];
+    data.par_chunks_mut(fw.max(1))
+        .enumerate()
+        .for_each(|(y, row)| {
+            let (y0, y1, fy) = src_coord(y, h, fh);
+            let (a0, a1) = (&ma[y0 * w..(y0 + 1) * w], &ma[y1 * w..(y1 + 1) * w]);
+            let (b0, b1) = (&mb[y0 * w..(y0 + 1) * w], &mb[y1 * w..(y1 + 1) * w]);
+            let (d0, d1) = (
+                &dilated[y0 * w..(y0 + 1) * w],
+                &dilated[y1 * w..(y1 + 1) * w],
+            );
+            let g = &guide[y * fw..(y + 1) * fw];
+            for (x, (o, &(x0, x1, fx))) in row.iter_mut().zip(&xs).enumerate() {
+                let soft = lerp2(a0, a1, x0, x1, fx, fy) * g[x] + lerp2(b0, b1, x0, x1, fx, fy);
+                let near = lerp2(d0, d1, x0, x1, fx, fy);
+                *o = soft > 0.5 && near > 0.0;
+            }
+        });
+    Mask {
+        width: fw,
+        height: fh,
+        data,
+    }
+}
+
+/// The mask dilated by one pixel (8-neighbourhood).
+fn dilated(mask: &Mask) -> Mask {
+    let mut d = mask.clone();
+    let inv = Mask {
+        width: mask.width,
+        height: mask.height,
+        data: mask.data.iter().map(|b| !b).collect(),
+    }
+    .eroded();
+    for (o, i) in d.data.iter_mut().zip(&inv.data) {
+        *o = !i;
+    }
+    d
+}
+
+/// The plain implementation of [`refine`] (whole photo-resolution planes).
+pub fn refine_reference(mask: &Mask, guide: &[f32], fw: usize, fh: usize) -> Mask {
     if (mask.width, mask.height) == (fw, fh) {
         return mask.clone();
     }
@@ -338,6 +399,31 @@ pub fn refine(mask: &Mask, guide: &[f32], fw: usize, fh: usize) -> Mask {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn fused_refine_matches_reference() {
+        let mut rng = picker_tensor::Rng::new(21);
+        for &(w, h, fw, fh) in &[
+            (1, 1, 3, 2),
+            (4, 3, 4, 3),
+            (4, 3, 9, 7),
+            (10, 1, 37, 5),
+            (16, 12, 160, 120),
+            (20, 15, 47, 33),
+        ] {
+            for density in [0.0, 0.3, 0.7, 1.0] {
+                let mask = Mask {
+                    width: w,
+                    height: h,
+                    data: (0..w * h).map(|_| rng.f64() < density).collect(),
+                };
+                let guide = rng.uniform_vec(fw * fh, 0.0, 1.0);
+                let a = refine(&mask, &guide, fw, fh);
+                let b = refine_reference(&mask, &guide, fw, fh);
+                assert_eq!(a.data, b.data, "{w}x{h} -> {fw}x{fh} density {density}");
+            }
+        }
+    }
 
     fn seg_from(ids: &[u8], w: usize, h: usize, palette: &[[f32; 3]]) -> Image {
         let mut img = Image::zeros(3, h, w);

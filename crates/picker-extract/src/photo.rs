@@ -742,13 +742,19 @@ pub fn resize(rgb: &Rgb32FImage, w: u32, h: u32) -> Rgb32FImage {
 /// The image as planar `[3, h, w]` values (R plane, G plane, B plane), ready
 /// to wrap as an NCHW tensor with batch 1.
 pub fn to_planar(rgb: &Rgb32FImage) -> Vec<f32> {
+    use rayon::prelude::*;
     let (w, h) = rgb.dimensions();
     let n = (w * h) as usize;
+    let raw: &[f32] = rgb.as_raw();
     let mut planes = vec![0.0f32; 3 * n];
-    for (i, p) in rgb.pixels().enumerate() {
-        for c in 0..3 {
-            planes[c * n + i] = p.0[c];
-        }
+    // Plane by plane, rows in parallel (pure copies).
+    let row = (w as usize).max(1);
+    for (c, plane) in planes.chunks_mut(n.max(1)).enumerate() {
+        plane.par_chunks_mut(row).enumerate().for_each(|(y, out)| {
+            for (x, o) in out.iter_mut().enumerate() {
+                *o = raw[3 * (y * row + x) + c];
+            }
+        });
     }
     planes
 }
@@ -769,6 +775,23 @@ mod tests {
             assert!(!jpeg_is_complete(&full[..cut]), "cut at {cut}");
         }
         assert!(!jpeg_is_complete(b"not a jpeg"));
+    }
+
+    #[test]
+    fn planar_copy_matches_pixels() {
+        for (w, h) in [(1u32, 1u32), (3, 1), (1, 4), (17, 9)] {
+            let img = Rgb32FImage::from_fn(w, h, |x, y| {
+                image::Rgb([x as f32, y as f32 * 10.0, (x * 100 + y) as f32 + 0.5])
+            });
+            let got = to_planar(&img);
+            let n = (w * h) as usize;
+            assert_eq!(got.len(), 3 * n);
+            for (i, p) in img.pixels().enumerate() {
+                for c in 0..3 {
+                    assert_eq!(got[c * n + i], p.0[c]);
+                }
+            }
+        }
     }
 
     #[test]

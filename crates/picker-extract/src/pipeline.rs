@@ -33,6 +33,7 @@ use picker_inpaint::{seam_score, InpaintOptions, Inpainter};
 use picker_nets::conventions as conv;
 use picker_render::io::Image;
 use picker_render::{ElementImages, EnvMap, Quality, Shader};
+use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::mask::{Mask, MaskOptions, PickMask};
@@ -134,7 +135,20 @@ impl Prepared {
         }
         check_size("photo", &inputs.photo, 3, fw, fh)?;
         check_size("segmentation", &inputs.segmentation, 3, w, h)?;
-        let photo_linear = inputs.photo.map(picker_render::io::srgb_decode);
+        // `Image::map(srgb_decode)` in parallel, 8-bit values from a table
+        // (per value: the same bits).
+        let lut = SrgbDecode8::new();
+        let photo_linear = Image {
+            data: inputs
+                .photo
+                .data
+                .par_iter()
+                .map(|&v| lut.decode(v))
+                .collect(),
+            channels: inputs.photo.channels,
+            height: inputs.photo.height,
+            width: inputs.photo.width,
+        };
         let photo_work = resample::area(&photo_linear, w, h);
         let luma = guided::luma(&inputs.photo);
         let valid = (0..w * h).map(|i| inputs.elements.is_valid(i)).collect();
@@ -251,6 +265,41 @@ impl Prepared {
             out.push((pick, pm));
         }
         out
+    }
+}
+
+/// [`picker_render::io::srgb_decode`] with the 256 values of 8-bit photos
+/// (`k / 255`, as the `image` crate converts them) looked up in a table of
+/// that function's own results: the same bits, without a `powf` per value.
+pub struct SrgbDecode8 {
+    table: [f32; 256],
+}
+
+impl Default for SrgbDecode8 {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl SrgbDecode8 {
+    /// The table.
+    pub fn new() -> Self {
+        Self {
+            table: std::array::from_fn(|k| picker_render::io::srgb_decode(k as f32 / 255.0)),
+        }
+    }
+
+    /// `srgb_decode(v)`.
+    #[inline]
+    pub fn decode(&self, v: f32) -> f32 {
+        if (0.0..=1.0).contains(&v) {
+            let k = (v * 255.0).round() as usize;
+            // Bit equality: −0.0 is not 0/255 (it decodes to −0.0).
+            if (k as f32 / 255.0).to_bits() == v.to_bits() {
+                return self.table[k];
+            }
+        }
+        picker_render::io::srgb_decode(v)
     }
 }
 
@@ -381,23 +430,40 @@ pub fn extract(
             rw[i] = 1.0;
         }
     }
+    // Only the masked pixels of the de-lit photo are ever read (reprojection,
+    // consistency and medians all go through `full`): the others stay 0.
     let delit = if rw.iter().any(|&v| v > 0.0) {
-        let r = resample::masked_bilinear(&ratio, &rw, fw, fh);
-        let mut d = Image::zeros(3, fh, fw);
-        for i in 0..fw * fh {
-            d.set_rgb(i, p.photo_linear.rgb(i) * r.rgb(i));
-        }
+        let mut d = resample::masked_bilinear_where(&ratio, &rw, fw, fh, &full.data);
+        let n = fw * fh;
+        let (d0, rest) = d.data.split_at_mut(n);
+        let (d1, d2) = rest.split_at_mut(n);
+        let step = fw.max(1);
+        d0.par_chunks_mut(step)
+            .zip(d1.par_chunks_mut(step))
+            .zip(d2.par_chunks_mut(step))
+            .enumerate()
+            .for_each(|(y, ((r0, r1), r2))| {
+                for x in 0..r0.len() {
+                    let i = y * fw + x;
+                    if full.data[i] {
+                        let v = p.photo_linear.rgb(i) * Vec3::new(r0[x], r1[x], r2[x]);
+                        (r0[x], r1[x], r2[x]) = (v.x, v.y, v.z);
+                    }
+                }
+            });
         d
     } else {
-        resample::masked_bilinear(
+        resample::masked_bilinear_where(
             &el.diffuse,
             &mw.iter().map(|&b| b as u8 as f32).collect::<Vec<_>>(),
             fw,
             fh,
+            &full.data,
         )
     };
     let interior = full.eroded();
     let confidence: Vec<f32> = (0..fw * fh)
+        .into_par_iter()
         .map(|i| {
             if !full.data[i] {
                 return 0.0;
@@ -430,16 +496,22 @@ pub fn extract(
     if textured {
         // Coordinates.
         let mwf: Vec<f32> = mw.iter().map(|&b| b as u8 as f32).collect();
-        let net_coords = el.uv.as_ref().map(|uv| {
-            let up = resample::upsample_uv(uv, &mwf, fw, fh);
-            Coords {
-                width: fw,
-                height: fh,
-                u: up.plane(0).to_vec(),
-                v: up.plane(1).to_vec(),
-                wrap: true,
-            }
-        });
+        // Upsampled only inside the mask (the only pixels any use reads), and
+        // not at all when the plane was asked for.
+        let net_coords = el
+            .uv
+            .as_ref()
+            .filter(|_| opts.uv != UvChoice::Plane)
+            .map(|uv| {
+                let up = resample::upsample_uv_where(uv, &mwf, fw, fh, &full.data);
+                Coords {
+                    width: fw,
+                    height: fh,
+                    u: up.plane(0).to_vec(),
+                    v: up.plane(1).to_vec(),
+                    wrap: true,
+                }
+            });
         let normal = plane::plane_normal(&el.normals, mw);
         let spread = normal.map(|n| plane::normal_spread_deg(&el.normals, mw, n));
         let plane_coords = |diag_focal: &mut Option<f32>| -> Option<Coords> {
@@ -637,4 +709,26 @@ pub fn preview_sphere(m: &Material, env: &EnvMap, size: usize, repeats: f32) -> 
         }
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn srgb_table_matches_the_function() {
+        let lut = SrgbDecode8::new();
+        let mut rng = picker_tensor::Rng::new(4);
+        let mut values: Vec<f32> = (0..=255).map(|k| k as f32 / 255.0).collect();
+        values.extend((0..=65535).step_by(7).map(|k| k as f32 / 65535.0));
+        values.extend(rng.uniform_vec(10_000, -0.5, 1.5));
+        values.extend([f32::NAN, f32::INFINITY, -0.0, 1.0 + f32::EPSILON, -1e-30]);
+        for v in values {
+            assert_eq!(
+                lut.decode(v).to_bits(),
+                picker_render::io::srgb_decode(v).to_bits(),
+                "{v}"
+            );
+        }
+    }
 }

@@ -17,6 +17,7 @@
 
 use glam::Vec3;
 use picker_render::io::Image;
+use rayon::prelude::*;
 
 use crate::reproject::Coords;
 
@@ -117,6 +118,88 @@ pub fn plane_coords(w: usize, h: usize, mask: &[bool], n: Vec3, focal: f32) -> C
     let (cx, cy) = (w as f32 / 2.0, h as f32 / 2.0);
     let mut s = vec![f32::NAN; w * h];
     let mut t = vec![f32::NAN; w * h];
+    // Rows in parallel: every pixel is computed alone (same bits for any thread count).
+    let step = w.max(1);
+    s.par_chunks_mut(step)
+        .zip(t.par_chunks_mut(step))
+        .enumerate()
+        .for_each(|(row, (rs, rt))| {
+            for col in 0..rs.len() {
+                let i = row * w + col;
+                if !mask[i] {
+                    continue;
+                }
+                let (x, y) = (col as f32 + 0.5, row as f32 + 0.5);
+                let d = Vec3::new((x - cx) / focal, -(y - cy) / focal, -1.0);
+                let nd = n.dot(d);
+                if nd >= -1e-4 {
+                    continue;
+                }
+                let p = -d / nd;
+                rs[col] = p.dot(e1);
+                rt[col] = -p.dot(e2);
+            }
+        });
+    // Both percentiles from one copy of the finite values (an order
+    // statistic does not depend on how the earlier selection permuted them).
+    let pct2 = |v: &[f32], q0: f32, q1: f32| -> Option<(f32, f32)> {
+        let mut f: Vec<f32> = v.par_iter().copied().filter(|x| x.is_finite()).collect();
+        if f.is_empty() {
+            return None;
+        }
+        let mut at = |q: f32| {
+            let k = ((f.len() - 1) as f32 * q) as usize;
+            *f.select_nth_unstable_by(k, |a, b| a.total_cmp(b)).1
+        };
+        Some((at(q0), at(q1)))
+    };
+    let mut coords = Coords {
+        width: w,
+        height: h,
+        u: vec![f32::NAN; w * h],
+        v: vec![f32::NAN; w * h],
+        wrap: false,
+    };
+    let (Some((s0, s1)), Some((t0, t1))) = (pct2(&s, 0.02, 0.98), pct2(&t, 0.02, 0.98)) else {
+        return coords;
+    };
+    let side = ((s1 - s0).max(1e-9) * (t1 - t0).max(1e-9)).sqrt();
+    let (sc, tc) = ((s0 + s1) / 2.0 - side / 2.0, (t0 + t1) / 2.0 - side / 2.0);
+    coords
+        .u
+        .par_chunks_mut(step)
+        .zip(coords.v.par_chunks_mut(step))
+        .enumerate()
+        .for_each(|(row, (ru, rv))| {
+            for col in 0..ru.len() {
+                let i = row * w + col;
+                if s[i].is_finite() {
+                    let (u, v) = ((s[i] - sc) / side, (t[i] - tc) / side);
+                    if (0.0..1.0).contains(&u) && (0.0..1.0).contains(&v) {
+                        ru[col] = u;
+                        rv[col] = v;
+                    }
+                }
+            }
+        });
+    coords
+}
+
+/// The plain, sequential implementation of [`plane_coords`] (the reference
+/// its parallel version is tested against).
+pub fn plane_coords_reference(w: usize, h: usize, mask: &[bool], n: Vec3, focal: f32) -> Coords {
+    let e1 = {
+        let x = Vec3::X - Vec3::X.dot(n) * n;
+        if x.length() > 1e-3 {
+            x.normalize()
+        } else {
+            (Vec3::Y - Vec3::Y.dot(n) * n).normalize()
+        }
+    };
+    let e2 = n.cross(e1);
+    let (cx, cy) = (w as f32 / 2.0, h as f32 / 2.0);
+    let mut s = vec![f32::NAN; w * h];
+    let mut t = vec![f32::NAN; w * h];
     for i in 0..w * h {
         if !mask[i] {
             continue;
@@ -169,6 +252,29 @@ pub fn plane_coords(w: usize, h: usize, mask: &[bool], n: Vec3, focal: f32) -> C
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn parallel_plane_coords_match_reference() {
+        let mut rng = picker_tensor::Rng::new(9);
+        for &(w, h) in &[(1, 1), (1, 7), (9, 1), (2, 2), (31, 17), (130, 97)] {
+            for k in 0..6 {
+                let density = [0.0, 0.02, 0.5, 0.9, 1.0, 0.3][k];
+                let mask: Vec<bool> = (0..w * h).map(|_| rng.f64() < density).collect();
+                let n = Vec3::new(
+                    rng.uniform(-1.0, 1.0),
+                    rng.uniform(-1.0, 1.0),
+                    rng.uniform(-0.2, 1.0),
+                );
+                let n = if k == 5 { Vec3::X } else { n.normalize() };
+                let focal = rng.uniform(5.0, 200.0);
+                let a = plane_coords(w, h, &mask, n, focal);
+                let b = plane_coords_reference(w, h, &mask, n, focal);
+                let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&a.u), bits(&b.u), "{w}x{h} k{k}");
+                assert_eq!(bits(&a.v), bits(&b.v), "{w}x{h} k{k}");
+            }
+        }
+    }
 
     #[test]
     fn focal_is_recovered_from_exact_view_vectors() {

@@ -7,6 +7,7 @@
 //! is drawn as `?`) scaled ×2, so no font file or dependency is needed.
 
 use picker_render::io::Image;
+use rayon::prelude::*;
 
 /// Background of a sheet (display value, neutral dark grey).
 pub const SHEET_BACKGROUND: f32 = 0.2;
@@ -326,21 +327,26 @@ pub(crate) fn resize(img: &Image, height: usize, width: usize, wrap: bool) -> Im
     let wx = axis_weights(img.width, width, wrap);
     let wy = axis_weights(img.height, height, wrap);
     let (sw, sh) = (img.width, img.height);
-    let mut out = Vec::with_capacity(c * width * height);
+    let mut out = vec![0.0f32; c * width * height];
     let mut tmp = vec![0.0f32; sh * width];
-    for ch in 0..c {
+    // Rows in parallel in both passes; every value is one fixed-order sum, so
+    // the bytes do not depend on the thread count.
+    for (ch, plane) in out.chunks_mut(width * height).enumerate() {
         let p = img.plane(ch);
-        for r in 0..sh {
+        tmp.par_chunks_mut(width).enumerate().for_each(|(r, row)| {
             let src = &p[r * sw..(r + 1) * sw];
-            for (o, taps) in wx.iter().enumerate() {
-                tmp[r * width + o] = taps.iter().map(|&(i, wt)| src[i] * wt).sum();
+            for (o, taps) in row.iter_mut().zip(&wx) {
+                *o = taps.iter().map(|&(i, wt)| src[i] * wt).sum();
             }
-        }
-        for taps in &wy {
-            for col in 0..width {
-                out.push(taps.iter().map(|&(i, wt)| tmp[i * width + col] * wt).sum());
-            }
-        }
+        });
+        plane
+            .par_chunks_mut(width)
+            .zip(wy.par_iter())
+            .for_each(|(row, taps)| {
+                for (col, o) in row.iter_mut().enumerate() {
+                    *o = taps.iter().map(|&(i, wt)| tmp[i * width + col] * wt).sum();
+                }
+            });
     }
     Image {
         channels: c,
@@ -386,4 +392,67 @@ fn axis_weights(src: usize, dst: usize, wrap: bool) -> Vec<Vec<(usize, f32)>> {
             }
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The sequential two-pass resize the parallel one must equal bit for bit.
+    fn resize_reference(img: &Image, height: usize, width: usize, wrap: bool) -> Image {
+        let c = img.channels;
+        if img.width == 0 || img.height == 0 || width == 0 || height == 0 {
+            return Image::zeros(c, height, width);
+        }
+        let wx = axis_weights(img.width, width, wrap);
+        let wy = axis_weights(img.height, height, wrap);
+        let (sw, sh) = (img.width, img.height);
+        let mut out = Vec::with_capacity(c * width * height);
+        let mut tmp = vec![0.0f32; sh * width];
+        for ch in 0..c {
+            let p = img.plane(ch);
+            for r in 0..sh {
+                let src = &p[r * sw..(r + 1) * sw];
+                for (o, taps) in wx.iter().enumerate() {
+                    tmp[r * width + o] = taps.iter().map(|&(i, wt)| src[i] * wt).sum();
+                }
+            }
+            for taps in &wy {
+                for col in 0..width {
+                    out.push(taps.iter().map(|&(i, wt)| tmp[i * width + col] * wt).sum());
+                }
+            }
+        }
+        Image {
+            channels: c,
+            height,
+            width,
+            data: out,
+        }
+    }
+
+    #[test]
+    fn parallel_resize_matches_reference() {
+        let mut rng = picker_tensor::Rng::new(3);
+        for &(c, h, w, dh, dw) in &[
+            (1, 1, 1, 1, 1),
+            (3, 1, 9, 4, 2),
+            (3, 40, 30, 7, 5),
+            (1, 5, 7, 33, 21),
+            (4, 300, 401, 192, 256),
+            (3, 2, 2, 0, 3),
+        ] {
+            let img = Image::new(c, h, w, rng.uniform_vec(c * h * w, 0.0, 1.0)).unwrap();
+            for wrap in [false, true] {
+                let a = resize(&img, dh, dw, wrap);
+                let b = resize_reference(&img, dh, dw, wrap);
+                assert_eq!(
+                    (a.channels, a.height, a.width),
+                    (b.channels, b.height, b.width)
+                );
+                let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&a.data), bits(&b.data), "{c}x{h}x{w} -> {dh}x{dw}");
+            }
+        }
+    }
 }

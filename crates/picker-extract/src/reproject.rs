@@ -14,6 +14,7 @@
 
 use glam::Vec3;
 use picker_render::io::Image;
+use rayon::prelude::*;
 
 /// Accumulated weight from which a texel counts as observed.
 pub const KNOWN_WEIGHT: f32 = 0.05;
@@ -64,7 +65,10 @@ impl Coords {
 
     /// The `q`-quantile (0 = smallest) of the texture-square area per picked pixel.
     pub fn area_quantile(&self, mask: &[bool], q: f32) -> Option<f32> {
+        // In parallel; `collect` keeps the pixel order, so the selection is
+        // the same as a sequential pass's.
         let mut a: Vec<f32> = (0..mask.len())
+            .into_par_iter()
             .filter_map(|i| self.pixel_area(mask, i))
             .filter(|&a| a > 0.0)
             .collect();
@@ -129,6 +133,15 @@ struct Sample {
     radius: f32,
 }
 
+/// The rows of texture band `k` (`SPLAT_BAND_ROWS` rows each).
+const SPLAT_BAND_ROWS: usize = 16;
+
+/// Accumulates the tent-weighted samples (optionally Cauchy-reweighted
+/// against `reference` with `scale`) into per-texel sums and weights.
+///
+/// Parallel over bands of texture rows: each band adds the samples that
+/// touch it in sample order, so every texel receives its contributions in
+/// the same order as `splat_reference` (same bits, whatever the threads).
 fn splat(
     samples: &[Sample],
     size: usize,
@@ -138,42 +151,84 @@ fn splat(
 ) -> (Vec<Vec3>, Vec<f32>) {
     let mut sum = vec![Vec3::ZERO; size * size];
     let mut wsum = vec![0.0f32; size * size];
+    if size == 0 {
+        return (sum, wsum);
+    }
     let n = size as i64;
-    for s in samples {
-        let px = s.u * size as f32 - 0.5;
+    let bands = size.div_ceil(SPLAT_BAND_ROWS);
+    // Row span of a sample (before wrapping).
+    let rows_of = |s: &Sample| -> (i64, i64) {
         let py = s.v * size as f32 - 0.5;
-        let r = s.radius;
-        let (x0, x1) = ((px - r).ceil() as i64, (px + r).floor() as i64);
-        let (y0, y1) = ((py - r).ceil() as i64, (py + r).floor() as i64);
+        (
+            (py - s.radius).ceil() as i64,
+            (py + s.radius).floor() as i64,
+        )
+    };
+    // Sample indices per band, in sample order.
+    let mut members: Vec<Vec<u32>> = vec![Vec::new(); bands];
+    let mut seen = vec![usize::MAX; bands];
+    for (k, s) in samples.iter().enumerate() {
+        let (y0, y1) = rows_of(s);
         for ty in y0..=y1 {
-            let wy = 1.0 - (ty as f32 - py).abs() / r;
-            if wy <= 0.0 {
-                continue;
-            }
             let yy = if wrap { ty.rem_euclid(n) } else { ty };
             if yy < 0 || yy >= n {
                 continue;
             }
-            for tx in x0..=x1 {
-                let wx = 1.0 - (tx as f32 - px).abs() / r;
-                if wx <= 0.0 {
-                    continue;
-                }
-                let xx = if wrap { tx.rem_euclid(n) } else { tx };
-                if xx < 0 || xx >= n {
-                    continue;
-                }
-                let t = yy as usize * size + xx as usize;
-                let mut w = s.weight * wx * wy;
-                if let Some(mean) = reference {
-                    let d = (s.colour - mean[t]).length() / scale;
-                    w /= 1.0 + d * d;
-                }
-                sum[t] += s.colour * w;
-                wsum[t] += w;
+            let b = yy as usize / SPLAT_BAND_ROWS;
+            if seen[b] != k {
+                seen[b] = k;
+                members[b].push(k as u32);
             }
         }
     }
+    let band_len = SPLAT_BAND_ROWS * size;
+    sum.par_chunks_mut(band_len)
+        .zip(wsum.par_chunks_mut(band_len))
+        .zip(members.par_iter())
+        .enumerate()
+        .for_each(|(b, ((bsum, bw), idx))| {
+            let (lo, hi) = (
+                (b * SPLAT_BAND_ROWS) as i64,
+                ((b + 1) * SPLAT_BAND_ROWS).min(size) as i64,
+            );
+            for &k in idx {
+                let s = &samples[k as usize];
+                let px = s.u * size as f32 - 0.5;
+                let py = s.v * size as f32 - 0.5;
+                let r = s.radius;
+                let (x0, x1) = ((px - r).ceil() as i64, (px + r).floor() as i64);
+                let (y0, y1) = ((py - r).ceil() as i64, (py + r).floor() as i64);
+                for ty in y0..=y1 {
+                    let wy = 1.0 - (ty as f32 - py).abs() / r;
+                    if wy <= 0.0 {
+                        continue;
+                    }
+                    let yy = if wrap { ty.rem_euclid(n) } else { ty };
+                    if yy < lo || yy >= hi {
+                        continue;
+                    }
+                    for tx in x0..=x1 {
+                        let wx = 1.0 - (tx as f32 - px).abs() / r;
+                        if wx <= 0.0 {
+                            continue;
+                        }
+                        let xx = if wrap { tx.rem_euclid(n) } else { tx };
+                        if xx < 0 || xx >= n {
+                            continue;
+                        }
+                        let t = yy as usize * size + xx as usize;
+                        let mut w = s.weight * wx * wy;
+                        if let Some(mean) = reference {
+                            let d = (s.colour - mean[t]).length() / scale;
+                            w /= 1.0 + d * d;
+                        }
+                        let lt = t - (lo as usize) * size;
+                        bsum[lt] += s.colour * w;
+                        bw[lt] += w;
+                    }
+                }
+            }
+        });
     (sum, wsum)
 }
 
@@ -189,30 +244,36 @@ pub fn reproject(
     let n = coords.width * coords.height;
     assert_eq!(mask.len(), n, "mask size");
     assert_eq!(colour.plane_len(), n, "colour size");
-    let mut samples = Vec::new();
-    for i in 0..n {
-        if !mask[i] || confidence[i] <= 0.0 {
-            continue;
-        }
-        let (u, v) = (coords.u[i], coords.v[i]);
-        let c = colour.rgb(i);
-        if !u.is_finite() || !v.is_finite() || !c.is_finite() {
-            continue;
-        }
-        // Footprint: the side of the pixel's area in texels (½ a texel at least).
-        let side = coords
-            .pixel_area(mask, i)
-            .map(|a| a.sqrt() * size as f32)
-            .unwrap_or(1.0);
-        let radius = side.clamp(1.0, MAX_SPLAT_RADIUS);
-        samples.push(Sample {
-            u,
-            v,
-            colour: c,
-            weight: confidence[i] / (radius * radius),
-            radius,
-        });
-    }
+    // Rows in parallel, concatenated in pixel order.
+    let w = coords.width.max(1);
+    let samples: Vec<Sample> = (0..coords.height)
+        .into_par_iter()
+        .flat_map_iter(|y| {
+            (y * w..(y + 1) * w).filter_map(|i| {
+                if !mask[i] || confidence[i] <= 0.0 {
+                    return None;
+                }
+                let (u, v) = (coords.u[i], coords.v[i]);
+                let c = colour.rgb(i);
+                if !u.is_finite() || !v.is_finite() || !c.is_finite() {
+                    return None;
+                }
+                // Footprint: the side of the pixel's area in texels (½ a texel at least).
+                let side = coords
+                    .pixel_area(mask, i)
+                    .map(|a| a.sqrt() * size as f32)
+                    .unwrap_or(1.0);
+                let radius = side.clamp(1.0, MAX_SPLAT_RADIUS);
+                Some(Sample {
+                    u,
+                    v,
+                    colour: c,
+                    weight: confidence[i] / (radius * radius),
+                    radius,
+                })
+            })
+        })
+        .collect();
     let (sum, wsum) = splat(&samples, size, coords.wrap, None, 1.0);
     let mean: Vec<Vec3> = sum
         .iter()
@@ -222,7 +283,7 @@ pub fn reproject(
     // Robust pass: Cauchy weights on the distance to the first-pass texel mean,
     // scale = 2 × the median deviation (at least 0.02).
     let mut dev: Vec<f32> = samples
-        .iter()
+        .par_iter()
         .map(|s| {
             let px = ((s.u * size as f32) as i64).rem_euclid(size as i64) as usize;
             let py = ((s.v * size as f32) as i64).rem_euclid(size as i64) as usize;
@@ -279,6 +340,7 @@ pub fn consistency(
     let w = coords.width;
     let half = |parity: usize| -> Vec<f32> {
         (0..mask.len())
+            .into_par_iter()
             .map(|i| {
                 let (bx, by) = ((i % w) / 16, (i / w) / 16);
                 let mut hsh = (bx as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
@@ -331,6 +393,56 @@ pub fn consistency(
         0.0
     };
     Some((r2, overlap))
+}
+
+/// The plain, sequential splat (the reference of [`splat`]).
+#[cfg(test)]
+fn splat_reference(
+    samples: &[Sample],
+    size: usize,
+    wrap: bool,
+    reference: Option<&[Vec3]>,
+    scale: f32,
+) -> (Vec<Vec3>, Vec<f32>) {
+    let mut sum = vec![Vec3::ZERO; size * size];
+    let mut wsum = vec![0.0f32; size * size];
+    let n = size as i64;
+    for s in samples {
+        let px = s.u * size as f32 - 0.5;
+        let py = s.v * size as f32 - 0.5;
+        let r = s.radius;
+        let (x0, x1) = ((px - r).ceil() as i64, (px + r).floor() as i64);
+        let (y0, y1) = ((py - r).ceil() as i64, (py + r).floor() as i64);
+        for ty in y0..=y1 {
+            let wy = 1.0 - (ty as f32 - py).abs() / r;
+            if wy <= 0.0 {
+                continue;
+            }
+            let yy = if wrap { ty.rem_euclid(n) } else { ty };
+            if yy < 0 || yy >= n {
+                continue;
+            }
+            for tx in x0..=x1 {
+                let wx = 1.0 - (tx as f32 - px).abs() / r;
+                if wx <= 0.0 {
+                    continue;
+                }
+                let xx = if wrap { tx.rem_euclid(n) } else { tx };
+                if xx < 0 || xx >= n {
+                    continue;
+                }
+                let t = yy as usize * size + xx as usize;
+                let mut w = s.weight * wx * wy;
+                if let Some(mean) = reference {
+                    let d = (s.colour - mean[t]).length() / scale;
+                    w /= 1.0 + d * d;
+                }
+                sum[t] += s.colour * w;
+                wsum[t] += w;
+            }
+        }
+    }
+    (sum, wsum)
 }
 
 #[cfg(test)]
@@ -416,6 +528,39 @@ mod tests {
         }
         let (r2, _) = consistency(&coords, &vec![true; 128 * 128], &img, 32).unwrap();
         assert!(r2 < 0.3, "{r2}");
+    }
+
+    #[test]
+    fn banded_splat_matches_reference() {
+        let mut rng = picker_tensor::Rng::new(12);
+        for &size in &[1usize, 3, 16, 17, 40] {
+            for wrap in [true, false] {
+                let samples: Vec<Sample> = (0..500)
+                    .map(|_| Sample {
+                        u: rng.uniform(-0.2, 1.2),
+                        v: rng.uniform(-0.2, 1.2),
+                        colour: Vec3::new(rng.uniform(0.0, 1.0), rng.uniform(0.0, 1.0), 0.3),
+                        weight: rng.uniform(0.01, 1.0),
+                        radius: rng.uniform(1.0, MAX_SPLAT_RADIUS * 3.0),
+                    })
+                    .collect();
+                let mean: Vec<Vec3> = (0..size * size)
+                    .map(|_| Vec3::splat(rng.uniform(0.0, 1.0)))
+                    .collect();
+                for reference in [None, Some(mean.as_slice())] {
+                    let (a, aw) = splat(&samples, size, wrap, reference, 0.2);
+                    let (b, bw) = splat_reference(&samples, size, wrap, reference, 0.2);
+                    let bits = |v: &[Vec3]| {
+                        v.iter()
+                            .flat_map(|c| c.to_array().map(f32::to_bits))
+                            .collect::<Vec<_>>()
+                    };
+                    assert_eq!(bits(&a), bits(&b), "size {size} wrap {wrap}");
+                    let wb = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                    assert_eq!(wb(&aw), wb(&bw));
+                }
+            }
+        }
     }
 
     #[test]

@@ -5,11 +5,12 @@
 //! `(p + 0.5)·m/n − 0.5` in one of `m` pixels (PyTorch's `align_corners=False`).
 
 use picker_render::io::Image;
+use rayon::prelude::*;
 
 /// Source coordinate of destination index `i` when `src` pixels become `dst`
 /// pixels (half-pixel centres), clamped to the source.
 #[inline]
-fn src_coord(i: usize, src: usize, dst: usize) -> (usize, usize, f32) {
+pub(crate) fn src_coord(i: usize, src: usize, dst: usize) -> (usize, usize, f32) {
     let p = ((i as f32 + 0.5) * src as f32 / dst as f32 - 0.5).max(0.0);
     let i0 = (p.floor() as usize).min(src - 1);
     let i1 = (i0 + 1).min(src - 1);
@@ -21,17 +22,27 @@ pub fn bilinear_plane(src: &[f32], w: usize, h: usize, dw: usize, dh: usize) -> 
     assert_eq!(src.len(), w * h, "plane length");
     let xs: Vec<_> = (0..dw).map(|x| src_coord(x, w, dw)).collect();
     let mut out = vec![0.0; dw * dh];
-    for y in 0..dh {
-        let (y0, y1, fy) = src_coord(y, h, dh);
-        let (r0, r1) = (&src[y0 * w..(y0 + 1) * w], &src[y1 * w..(y1 + 1) * w]);
-        let row = &mut out[y * dw..(y + 1) * dw];
-        for (o, &(x0, x1, fx)) in row.iter_mut().zip(&xs) {
-            let a = r0[x0] + (r0[x1] - r0[x0]) * fx;
-            let b = r1[x0] + (r1[x1] - r1[x0]) * fx;
-            *o = a + (b - a) * fy;
-        }
-    }
+    // Rows in parallel: every output value is computed alone, so the bytes do
+    // not depend on the thread count.
+    out.par_chunks_mut(dw.max(1))
+        .enumerate()
+        .for_each(|(y, row)| {
+            let (y0, y1, fy) = src_coord(y, h, dh);
+            let (r0, r1) = (&src[y0 * w..(y0 + 1) * w], &src[y1 * w..(y1 + 1) * w]);
+            for (o, &(x0, x1, fx)) in row.iter_mut().zip(&xs) {
+                *o = lerp2(r0, r1, x0, x1, fx, fy);
+            }
+        });
     out
+}
+
+/// The bilinear blend of [`bilinear_plane`] (one definition, so that every
+/// fast path gives the same bits).
+#[inline(always)]
+pub(crate) fn lerp2(r0: &[f32], r1: &[f32], x0: usize, x1: usize, fx: f32, fy: f32) -> f32 {
+    let a = r0[x0] + (r0[x1] - r0[x0]) * fx;
+    let b = r1[x0] + (r1[x1] - r1[x0]) * fx;
+    a + (b - a) * fy
 }
 
 /// Resizes every plane of `img` to `dw × dh` with `resize_plane` (a copy when the size already fits).
@@ -87,17 +98,20 @@ pub fn area_plane(src: &[f32], w: usize, h: usize, dw: usize, dh: usize) -> Vec<
     };
     let (sx, sy) = (spans(w, dw), spans(h, dh));
     let mut out = vec![0.0; dw * dh];
-    for (y, ry) in sy.iter().enumerate() {
-        for (x, rx) in sx.iter().enumerate() {
-            let mut s = 0.0;
-            for &(yy, wy) in ry {
-                for &(xx, wx) in rx {
-                    s += src[yy * w + xx] * wx * wy;
+    // Rows in parallel (each value is one fixed-order sum: same bits).
+    out.par_chunks_mut(dw.max(1))
+        .zip(sy.par_iter())
+        .for_each(|(row, ry)| {
+            for (o, rx) in row.iter_mut().zip(&sx) {
+                let mut s = 0.0;
+                for &(yy, wy) in ry {
+                    for &(xx, wx) in rx {
+                        s += src[yy * w + xx] * wx * wy;
+                    }
                 }
+                *o = s;
             }
-            out[y * dw + x] = s;
-        }
-    }
+        });
     out
 }
 
@@ -139,6 +153,79 @@ pub fn masked_bilinear(img: &Image, weight: &[f32], dw: usize, dh: usize) -> Ima
             }
         }
     }
+    out
+}
+
+/// [`masked_bilinear`] evaluated only at the destination pixels where `keep`
+/// is true (the others are 0): the same values there, bit for bit, at the
+/// cost of the kept pixels only, rows in parallel. For the photo-resolution
+/// quantities that are only ever read inside the material's mask.
+pub fn masked_bilinear_where(
+    img: &Image,
+    weight: &[f32],
+    dw: usize,
+    dh: usize,
+    keep: &[bool],
+) -> Image {
+    let (w, h) = (img.width, img.height);
+    assert_eq!(weight.len(), w * h, "weight length");
+    assert_eq!(keep.len(), dw * dh, "keep length");
+    if !weight.iter().any(|&m| m > 0.0) {
+        let mut out = bilinear(img, dw, dh);
+        for plane in out.data.chunks_mut((dw * dh).max(1)) {
+            for (v, _) in plane.iter_mut().zip(keep).filter(|(_, &k)| !k) {
+                *v = 0.0;
+            }
+        }
+        return out;
+    }
+    let c = img.channels;
+    let nearest = nearest_weighted(weight, w, h);
+    let prods: Vec<Vec<f32>> = (0..c)
+        .map(|ch| {
+            img.plane(ch)
+                .iter()
+                .zip(weight)
+                .map(|(v, m)| v * m)
+                .collect()
+        })
+        .collect();
+    let xs: Vec<_> = (0..dw).map(|x| src_coord(x, w, dw)).collect();
+    let m = dw * dh;
+    // Interleaved per row while computing, planar at the end.
+    let mut rows = vec![0.0f32; m * c];
+    rows.par_chunks_mut((dw * c).max(1))
+        .enumerate()
+        .for_each(|(y, row)| {
+            let (y0, y1, fy) = src_coord(y, h, dh);
+            let (a0, a1) = (y0 * w, y1 * w);
+            let (w0, w1) = (&weight[a0..a0 + w], &weight[a1..a1 + w]);
+            for (x, &(x0, x1, fx)) in xs.iter().enumerate() {
+                if !keep[y * dw + x] {
+                    continue;
+                }
+                let den = lerp2(w0, w1, x0, x1, fx, fy);
+                for ch in 0..c {
+                    row[x * c + ch] = if den > 1e-6 {
+                        let p = &prods[ch];
+                        lerp2(&p[a0..a0 + w], &p[a1..a1 + w], x0, x1, fx, fy) / den
+                    } else {
+                        let sx = ((x as f32 + 0.5) * w as f32 / dw as f32) as usize;
+                        let sy = ((y as f32 + 0.5) * h as f32 / dh as f32) as usize;
+                        img.plane(ch)[nearest[sy.min(h - 1) * w + sx.min(w - 1)]]
+                    };
+                }
+            }
+        });
+    let mut out = Image::zeros(c, dh, dw);
+    out.data
+        .par_chunks_mut(m.max(1))
+        .enumerate()
+        .for_each(|(ch, plane)| {
+            for (i, v) in plane.iter_mut().enumerate() {
+                *v = rows[i * c + ch];
+            }
+        });
     out
 }
 
@@ -226,9 +313,164 @@ pub fn upsample_uv(uv: &Image, weight: &[f32], dw: usize, dh: usize) -> Image {
     out
 }
 
+/// [`upsample_uv`] evaluated only where `keep` is true (the other pixels get
+/// `NaN`, "no coordinates"): the same values there, via
+/// [`masked_bilinear_where`], rows in parallel.
+pub fn upsample_uv_where(uv: &Image, weight: &[f32], dw: usize, dh: usize, keep: &[bool]) -> Image {
+    use std::f32::consts::TAU;
+    let n = uv.plane_len();
+    let mut enc = Image::zeros(5, uv.height, uv.width);
+    for i in 0..n {
+        let (u, v) = (uv.at(0, i), uv.at(1, i));
+        enc.data[i] = (TAU * u).cos();
+        enc.data[n + i] = (TAU * u).sin();
+        enc.data[2 * n + i] = (TAU * v).cos();
+        enc.data[3 * n + i] = (TAU * v).sin();
+        enc.data[4 * n + i] = uv.at(2, i);
+    }
+    let up = masked_bilinear_where(&enc, weight, dw, dh, keep);
+    let m = dw * dh;
+    let mut out = Image {
+        channels: 3,
+        height: dh,
+        width: dw,
+        data: vec![f32::NAN; 3 * m],
+    };
+    let (pu, rest) = out.data.split_at_mut(m);
+    let (pv, pt) = rest.split_at_mut(m);
+    let step = dw.max(1);
+    pu.par_chunks_mut(step)
+        .zip(pv.par_chunks_mut(step))
+        .zip(pt.par_chunks_mut(step))
+        .enumerate()
+        .for_each(|(y, ((ru, rv), rt))| {
+            for x in 0..ru.len() {
+                let i = y * dw + x;
+                if !keep[i] {
+                    continue;
+                }
+                let u = up.data[m + i].atan2(up.data[i]) / TAU;
+                let v = up.data[3 * m + i].atan2(up.data[2 * m + i]) / TAU;
+                ru[x] = picker_nets::conventions::wrap_unit(u);
+                rv[x] = picker_nets::conventions::wrap_unit(v);
+                rt[x] = up.data[4 * m + i];
+            }
+        });
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+    use picker_tensor::Rng;
+
+    /// Random images, weights (some all zero, some sparse) and keep masks on
+    /// edge shapes: the `_where` fast paths equal the full versions where kept.
+    #[test]
+    fn where_variants_match_the_full_versions() {
+        let mut rng = Rng::new(5);
+        let shapes = [
+            (1, 1, 1, 1),
+            (1, 1, 7, 5),
+            (3, 2, 1, 9),
+            (4, 3, 37, 29),
+            (10, 7, 10, 7),
+            (20, 15, 9, 4),
+            (32, 24, 400, 300),
+        ];
+        for &(w, h, dw, dh) in &shapes {
+            for density in [0.0, 0.05, 0.6, 1.0] {
+                let img = Image::new(3, h, w, rng.uniform_vec(3 * w * h, 0.0, 1.0)).unwrap();
+                let weight: Vec<f32> = (0..w * h)
+                    .map(|_| {
+                        if rng.f64() < density {
+                            rng.uniform(0.1, 1.0)
+                        } else {
+                            0.0
+                        }
+                    })
+                    .collect();
+                let keep: Vec<bool> = (0..dw * dh).map(|_| rng.f64() < 0.7).collect();
+                let full = masked_bilinear(&img, &weight, dw, dh);
+                let fast = masked_bilinear_where(&img, &weight, dw, dh, &keep);
+                let uv_full = upsample_uv(&img, &weight, dw, dh);
+                let uv_fast = upsample_uv_where(&img, &weight, dw, dh, &keep);
+                for c in 0..3 {
+                    for (i, &k) in keep.iter().enumerate() {
+                        let j = c * dw * dh + i;
+                        if k {
+                            assert_eq!(full.data[j].to_bits(), fast.data[j].to_bits());
+                            assert_eq!(uv_full.data[j].to_bits(), uv_fast.data[j].to_bits());
+                        } else {
+                            assert_eq!(fast.data[j], 0.0);
+                            assert!(uv_fast.data[j].is_nan());
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// The parallel area resize equals the plain sequential double loop.
+    #[test]
+    fn area_matches_sequential_reference() {
+        let mut rng = Rng::new(7);
+        for &(w, h, dw, dh) in &[(1, 1, 1, 1), (7, 3, 2, 2), (40, 30, 7, 5), (5, 4, 9, 11)] {
+            let src = rng.uniform_vec(w * h, -1.0, 1.0);
+            let got = area_plane(&src, w, h, dw, dh);
+            let spans = |n: usize, dn: usize| -> Vec<Vec<(usize, f32)>> {
+                (0..dn)
+                    .map(|i| {
+                        let a = i as f64 * n as f64 / dn as f64;
+                        let b = (i + 1) as f64 * n as f64 / dn as f64;
+                        let mut v = Vec::new();
+                        let mut k = a.floor() as usize;
+                        while (k as f64) < b && k < n {
+                            let lo = a.max(k as f64);
+                            let hi = b.min((k + 1) as f64);
+                            if hi > lo {
+                                v.push((k, ((hi - lo) / (b - a)) as f32));
+                            }
+                            k += 1;
+                        }
+                        v
+                    })
+                    .collect()
+            };
+            let (sx, sy) = (spans(w, dw), spans(h, dh));
+            for (y, ry) in sy.iter().enumerate() {
+                for (x, rx) in sx.iter().enumerate() {
+                    let mut s = 0.0f32;
+                    for &(yy, wy) in ry {
+                        for &(xx, wx) in rx {
+                            s += src[yy * w + xx] * wx * wy;
+                        }
+                    }
+                    assert_eq!(got[y * dw + x].to_bits(), s.to_bits());
+                }
+            }
+        }
+    }
+
+    /// The parallel bilinear resize equals a plain sequential loop.
+    #[test]
+    fn bilinear_matches_sequential_reference() {
+        let mut rng = Rng::new(6);
+        for &(w, h, dw, dh) in &[(1, 1, 3, 2), (5, 3, 17, 1), (9, 9, 4, 4), (13, 7, 50, 31)] {
+            let src = rng.uniform_vec(w * h, -1.0, 1.0);
+            let got = bilinear_plane(&src, w, h, dw, dh);
+            for y in 0..dh {
+                let (y0, y1, fy) = src_coord(y, h, dh);
+                for x in 0..dw {
+                    let (x0, x1, fx) = src_coord(x, w, dw);
+                    let (r0, r1) = (&src[y0 * w..], &src[y1 * w..]);
+                    let a = r0[x0] + (r0[x1] - r0[x0]) * fx;
+                    let b = r1[x0] + (r1[x1] - r1[x0]) * fx;
+                    assert_eq!(got[y * dw + x].to_bits(), (a + (b - a) * fy).to_bits());
+                }
+            }
+        }
+    }
 
     #[test]
     fn bilinear_identity_and_constant() {

@@ -292,6 +292,36 @@ impl Ctx<'_> {
                 v.clamp(0, n as isize - 1) as usize
             }
         };
+        // Rows in parallel, the interior of a row as one copy (pure copies:
+        // the same values as `pad_reference`).
+        let cols: Vec<usize> = (0..pw).map(|px| map(px as isize - r as isize, w)).collect();
+        out.par_chunks_mut(pw * c)
+            .enumerate()
+            .for_each(|(py, row)| {
+                let sy = map(py as isize - r as isize, h);
+                let src = &img[sy * w * c..(sy + 1) * w * c];
+                row[r * c..(r + w) * c].copy_from_slice(src);
+                for px in (0..r).chain(r + w..pw) {
+                    let s = cols[px] * c;
+                    row[px * c..(px + 1) * c].copy_from_slice(&src[s..s + c]);
+                }
+            });
+        out
+    }
+
+    /// The plain implementation of [`Ctx::pad`].
+    #[cfg(test)]
+    fn pad_reference(&self, img: &[f32]) -> Vec<f32> {
+        let (h, w, c, r) = (self.h, self.w, self.c, self.r);
+        let (ph, pw) = (h + 2 * r, w + 2 * r);
+        let mut out = vec![0.0f32; ph * pw * c];
+        let map = |v: isize, n: usize| -> usize {
+            if self.toroidal {
+                v.rem_euclid(n as isize) as usize
+            } else {
+                v.clamp(0, n as isize - 1) as usize
+            }
+        };
         for py in 0..ph {
             let sy = map(py as isize - r as isize, h);
             for px in 0..pw {
@@ -305,8 +335,32 @@ impl Ctx<'_> {
 
     /// SSD between the patches centred at positions `t` and `s` of the padded
     /// estimate; stops early (returning a value ≥ `bound`) once past `bound`.
+    ///
+    /// Dispatches to a row-length specialised copy of [`Ctx::dist_reference`]
+    /// for the usual patch × channel sizes (same operations in the same
+    /// order, so the same bits; `tests::fast_distance_matches_reference`).
     #[inline]
     fn dist(&self, pad: &[f32], t: usize, s: usize, bound: f32) -> f32 {
+        let w = self.w;
+        let pw = w + 2 * self.r;
+        let (ty, tx) = (t / w, t % w);
+        let (sy, sx) = (s / w, s % w);
+        let a = (ty * pw + tx) * self.c;
+        let b = (sy * pw + sx) * self.c;
+        let stride = pw * self.c;
+        match (self.p, self.c) {
+            (7, 3) => dist_fixed::<7, 21>(pad, a, b, stride, bound),
+            (7, 4) => dist_fixed::<7, 28>(pad, a, b, stride, bound),
+            (7, 1) => dist_fixed::<7, 7>(pad, a, b, stride, bound),
+            (7, 2) => dist_fixed::<7, 14>(pad, a, b, stride, bound),
+            (5, 3) => dist_fixed::<5, 15>(pad, a, b, stride, bound),
+            (3, 3) => dist_fixed::<3, 9>(pad, a, b, stride, bound),
+            _ => self.dist_reference(pad, t, s, bound),
+        }
+    }
+
+    /// The plain implementation of [`Ctx::dist`], for any patch and channel count.
+    fn dist_reference(&self, pad: &[f32], t: usize, s: usize, bound: f32) -> f32 {
         let pw = self.w + 2 * self.r;
         let row = self.p * self.c;
         let (ty, tx) = (t / self.w, t % self.w);
@@ -328,15 +382,73 @@ impl Ctx<'_> {
     fn offset(&self, y: usize, x: usize, dy: isize, dx: isize) -> Option<usize> {
         let (ny, nx) = (y as isize + dy, x as isize + dx);
         if self.toroidal {
-            let ny = ny.rem_euclid(self.h as isize) as usize;
-            let nx = nx.rem_euclid(self.w as isize) as usize;
-            Some(ny * self.w + nx)
+            Some(wrap(ny, self.h) * self.w + wrap(nx, self.w))
         } else if ny < 0 || nx < 0 || ny >= self.h as isize || nx >= self.w as isize {
             None
         } else {
             Some(ny as usize * self.w + nx as usize)
         }
     }
+}
+
+/// `v` modulo `n` in `0..n` (`rem_euclid` without a division for the
+/// values PatchMatch meets: within one period of the image).
+#[inline]
+fn wrap(v: isize, n: usize) -> usize {
+    let n = n as isize;
+    if (0..n).contains(&v) {
+        v as usize
+    } else if (-n..0).contains(&v) {
+        (v + n) as usize
+    } else if (n..2 * n).contains(&v) {
+        (v - n) as usize
+    } else {
+        v.rem_euclid(n) as usize
+    }
+}
+
+/// [`Ctx::dist`] for `P` rows of `ROW = P·c` values, `stride` apart, starting
+/// at `a` and `b`: the operations of [`ssd`] in the same order, with the
+/// lengths known at compile time (no bounds checks inside a row).
+#[inline]
+fn dist_fixed<const P: usize, const ROW: usize>(
+    pad: &[f32],
+    a: usize,
+    b: usize,
+    stride: usize,
+    bound: f32,
+) -> f32 {
+    let mut acc = 0.0f32;
+    for dy in 0..P {
+        let (oa, ob) = (a + dy * stride, b + dy * stride);
+        let ra: &[f32; ROW] = pad[oa..oa + ROW].try_into().expect("patch row");
+        let rb: &[f32; ROW] = pad[ob..ob + ROW].try_into().expect("patch row");
+        acc += ssd_fixed(ra, rb);
+        if acc >= bound {
+            return acc;
+        }
+    }
+    acc
+}
+
+/// [`ssd`] for a length known at compile time (same order of operations).
+#[inline(always)]
+fn ssd_fixed<const N: usize>(a: &[f32; N], b: &[f32; N]) -> f32 {
+    let mut lanes = [0.0f32; 8];
+    let full = N / 8 * 8;
+    let mut j = 0;
+    while j < full {
+        for k in 0..8 {
+            let d = a[j + k] - b[j + k];
+            lanes[k] += d * d;
+        }
+        j += 8;
+    }
+    let mut s = 0.0f32;
+    for i in full..N {
+        s += (a[i] - b[i]) * (a[i] - b[i]);
+    }
+    s + lanes.iter().sum::<f32>()
 }
 
 /// Sum of squared differences, in 8 independent lanes (vectorises, and the
@@ -357,6 +469,11 @@ fn ssd(a: &[f32], b: &[f32]) -> f32 {
         s += (x - y) * (x - y);
     }
     s + lanes.iter().sum::<f32>()
+}
+
+/// The identity field over `n` positions.
+fn nnf_identity(n: usize) -> Vec<u32> {
+    (0..n as u32).collect()
 }
 
 /// The largest chessboard distance from an unknown texel to the nearest known
@@ -418,28 +535,29 @@ fn unknown_counts(known: &[bool], h: usize, w: usize, r: usize, toroidal: bool) 
     };
     // Horizontal window sums, then vertical ones (out-of-image texels count
     // as known: they are never voted and non-toroidal sources lie inside).
+    // Integer sums, rows in parallel: exact whatever the order.
     let mut horiz = vec![0u32; h * w];
-    for y in 0..h {
-        for x in 0..w {
+    horiz.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+        for (x, o) in row.iter_mut().enumerate() {
             let mut s = 0;
             for dx in -(r as isize)..=r as isize {
                 if let Some(xx) = map(x as isize + dx, w) {
                     s += (!known[y * w + xx]) as u32;
                 }
             }
-            horiz[y * w + x] = s;
+            *o = s;
         }
-    }
+    });
     let mut out = vec![0u32; h * w];
-    for y in 0..h {
+    out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
         for dy in -(r as isize)..=r as isize {
             if let Some(yy) = map(y as isize + dy, h) {
-                for x in 0..w {
-                    out[y * w + x] += horiz[yy * w + x];
+                for (o, &v) in row.iter_mut().zip(&horiz[yy * w..(yy + 1) * w]) {
+                    *o += v;
                 }
             }
         }
-    }
+    });
     out
 }
 
@@ -483,6 +601,15 @@ impl PatchMatchInpainter {
         while have < want && limit < p * p {
             limit += 1;
             have += hist[limit];
+        }
+        if limit >= p * p && prev.is_none() && level == 0 {
+            // Too sparse for exemplars: fewer than `min_source_fraction` of
+            // the patches hold a single observed texel, so every source would
+            // be harmonic estimate matched against harmonic estimate. The
+            // harmonic fill is the answer (PatchMatch gave the same hole PSNR
+            // and colour statistics: the `density_sweep` test), at a fraction
+            // of the cost.
+            return nnf_identity(n);
         }
         let valid: Vec<bool> = (0..n)
             .map(|i| eligible(i) && counts[i] as usize <= limit)
@@ -639,8 +766,7 @@ impl PatchMatchInpainter {
                             let sy = by + rng.range(0, 2 * radius as usize) as isize - radius;
                             let sx = bx + rng.range(0, 2 * radius as usize) as isize - radius;
                             let s = if ctx.toroidal {
-                                sy.rem_euclid(h as isize) as usize * w
-                                    + sx.rem_euclid(w as isize) as usize
+                                wrap(sy, h) * w + wrap(sx, w)
                             } else {
                                 let sy = sy.clamp(ctx.src_rows.0 as isize, ctx.src_rows.1 as isize);
                                 let sx = sx.clamp(ctx.src_cols.0 as isize, ctx.src_cols.1 as isize);
@@ -675,7 +801,135 @@ fn compute_distances(ctx: &Ctx, pad: &[f32], nnf: &[u32], dist: &mut [f32]) {
 /// Patch voting: every unknown texel becomes the weighted mean of the texels
 /// that the overlapping target patches' nearest neighbours put there.
 /// Returns the new estimate and the largest change.
+///
+/// Same sums in the same order as `vote_reference`, with the wrapped (or
+/// clipped) coordinates looked up in tables instead of computed per texel.
 fn vote(ctx: &Ctx, img: &[f32], known: &[bool], nnf: &[u32], dist: &[f32]) -> (Vec<f32>, f32) {
+    let (h, w, c, r) = (ctx.h, ctx.w, ctx.c, ctx.r as isize);
+    // σ² = 75th percentile of the mean squared patch differences.
+    let norm = 1.0 / (ctx.p * ctx.p * c) as f32;
+    let mut ds: Vec<f32> = (0..h * w)
+        .filter(|&i| ctx.target[i])
+        .map(|i| dist[i] * norm)
+        .collect();
+    let sigma2 = if ds.is_empty() {
+        0.0
+    } else {
+        let k = (ds.len() * 3 / 4).min(ds.len() - 1);
+        *ds.select_nth_unstable_by(k, |a, b| a.total_cmp(b)).1
+    };
+    drop(ds);
+    let mut weight = vec![0.0f32; h * w];
+    weight.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+        for (x, wt) in row.iter_mut().enumerate() {
+            let i = y * w + x;
+            *wt = if !ctx.target[i] {
+                0.0
+            } else if sigma2 > 0.0 {
+                (-(dist[i] * norm / (2.0 * sigma2)).min(50.0)).exp()
+            } else {
+                1.0
+            };
+        }
+    });
+    // Coordinate tables: entry `v + r` is the image row (column) of the
+    // position `v` ∈ [−r, h + r), `NONE` outside a non-toroidal image.
+    const NONE: usize = usize::MAX;
+    let table = |n: usize| -> Vec<usize> {
+        (-r..n as isize + r)
+            .map(|v| {
+                if ctx.toroidal {
+                    wrap(v, n)
+                } else if (0..n as isize).contains(&v) {
+                    v as usize
+                } else {
+                    NONE
+                }
+            })
+            .collect()
+    };
+    let (rows, cols) = (table(h), table(w));
+    let mut out = img.to_vec();
+    let change = out
+        .par_chunks_mut(w * c)
+        .enumerate()
+        .map(|(y, row)| {
+            let mut change = 0.0f32;
+            let (mut acc, mut kacc) = ([0.0f32; 4], [0.0f32; 4]);
+            for x in 0..w {
+                let q = y * w + x;
+                if known[q] {
+                    continue;
+                }
+                acc.fill(0.0);
+                kacc.fill(0.0);
+                let (mut wsum, mut ksum) = (0.0f32, 0.0f32);
+                for dy in -r..=r {
+                    // Target row y − dy: table index y − dy + r.
+                    let ty = rows[(y as isize - dy + r) as usize];
+                    if ty == NONE {
+                        continue;
+                    }
+                    for dx in -r..=r {
+                        // Target patch centred at q − (dy, dx) sees q at offset (dy, dx).
+                        let tx = cols[(x as isize - dx + r) as usize];
+                        if tx == NONE {
+                            continue;
+                        }
+                        let t = ty * w + tx;
+                        let wt = weight[t];
+                        if wt <= 0.0 {
+                            continue;
+                        }
+                        let s = nnf[t] as usize;
+                        let sy = rows[((s / w) as isize + dy + r) as usize];
+                        let sx = cols[((s % w) as isize + dx + r) as usize];
+                        if sy == NONE || sx == NONE {
+                            continue;
+                        }
+                        let src = sy * w + sx;
+                        let a = if known[src] {
+                            ksum += wt;
+                            &mut kacc
+                        } else {
+                            wsum += wt;
+                            &mut acc
+                        };
+                        for ch in 0..c {
+                            a[ch] += wt * img[src * c + ch];
+                        }
+                    }
+                }
+                // Observed source texels only, when there are any.
+                let (acc, wsum) = if ksum > 0.0 {
+                    (&kacc, ksum)
+                } else {
+                    (&acc, wsum)
+                };
+                if wsum > 0.0 {
+                    for ch in 0..c {
+                        let v = acc[ch] / wsum;
+                        change = change.max((v - row[x * c + ch]).abs());
+                        row[x * c + ch] = v;
+                    }
+                }
+            }
+            change
+        })
+        .reduce(|| 0.0, f32::max);
+    (out, change)
+}
+
+/// The plain implementation of [`vote`] (per-texel offsets with `rem_euclid`),
+/// kept to test the table-driven one against.
+#[cfg(test)]
+fn vote_reference(
+    ctx: &Ctx,
+    img: &[f32],
+    known: &[bool],
+    nnf: &[u32],
+    dist: &[f32],
+) -> (Vec<f32>, f32) {
     let (h, w, c, r) = (ctx.h, ctx.w, ctx.c, ctx.r as isize);
     // σ² = 75th percentile of the mean squared patch differences.
     let norm = 1.0 / (ctx.p * ctx.p * c) as f32;
@@ -759,4 +1013,174 @@ fn vote(ctx: &Ctx, img: &[f32], known: &[bool], nnf: &[u32], dist: &[f32]) -> (V
         })
         .reduce(|| 0.0, f32::max);
     (out, change)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use picker_tensor::Rng;
+
+    /// A random level: values, a mask with about `unknown` unknown texels, a
+    /// random NNF and the matching context pieces.
+    struct Case {
+        h: usize,
+        w: usize,
+        c: usize,
+        p: usize,
+        toroidal: bool,
+        img: Vec<f32>,
+        known: Vec<bool>,
+        target: Vec<bool>,
+        valid: Vec<bool>,
+        nnf: Vec<u32>,
+        dist: Vec<f32>,
+    }
+
+    impl Case {
+        fn new(rng: &mut Rng, h: usize, w: usize, c: usize, p: usize, toroidal: bool) -> Self {
+            let n = h * w;
+            let img = rng.uniform_vec(n * c, 0.0, 1.0);
+            let known: Vec<bool> = (0..n).map(|_| rng.f64() > 0.3).collect();
+            let target: Vec<bool> = (0..n).map(|_| rng.f64() > 0.2).collect();
+            let valid = vec![true; n];
+            let nnf: Vec<u32> = (0..n).map(|_| rng.range(0, n - 1) as u32).collect();
+            // Distances with repeats and zeros (σ² ties, weight 1 paths).
+            let dist: Vec<f32> = (0..n)
+                .map(|_| (rng.range(0, 6) as f32 * rng.uniform(0.0, 2.0)).floor())
+                .collect();
+            Self {
+                h,
+                w,
+                c,
+                p,
+                toroidal,
+                img,
+                known,
+                target,
+                valid,
+                nnf,
+                dist,
+            }
+        }
+
+        fn ctx(&self) -> Ctx<'_> {
+            let r = self.p / 2;
+            let (src_rows, src_cols) = if self.toroidal {
+                ((0, self.h - 1), (0, self.w - 1))
+            } else {
+                ((r, self.h - 1 - r), (r, self.w - 1 - r))
+            };
+            Ctx {
+                h: self.h,
+                w: self.w,
+                c: self.c,
+                p: self.p,
+                r,
+                toroidal: self.toroidal,
+                target: &self.target,
+                valid: &self.valid,
+                src_rows,
+                src_cols,
+            }
+        }
+    }
+
+    /// Shapes from one patch up, square and thin, every specialised (p, c) and others.
+    fn shapes() -> Vec<(usize, usize, usize, usize)> {
+        let mut v = vec![];
+        for (p, c) in [
+            (3, 1),
+            (3, 3),
+            (5, 3),
+            (5, 4),
+            (7, 1),
+            (7, 2),
+            (7, 3),
+            (7, 4),
+            (9, 3),
+        ] {
+            for (h, w) in [(p, p), (p, 3 * p + 1), (2 * p + 3, p), (23, 17)] {
+                v.push((h, w, c, p));
+            }
+        }
+        v
+    }
+
+    #[test]
+    fn fast_distance_matches_reference() {
+        let mut rng = Rng::new(41);
+        for (h, w, c, p) in shapes() {
+            for toroidal in [true, false] {
+                let case = Case::new(&mut rng, h, w, c, p, toroidal);
+                let ctx = case.ctx();
+                let pad = ctx.pad(&case.img);
+                for _ in 0..200 {
+                    let t = rng.range(0, h * w - 1);
+                    let s = rng.range(0, h * w - 1);
+                    let full = ctx.dist_reference(&pad, t, s, f32::INFINITY);
+                    for bound in [f32::INFINITY, full, full * 0.5, 0.0, full * 1.01] {
+                        let a = ctx.dist(&pad, t, s, bound);
+                        let b = ctx.dist_reference(&pad, t, s, bound);
+                        assert_eq!(
+                            a.to_bits(),
+                            b.to_bits(),
+                            "{h}x{w}x{c} p{p} t{t} s{s} bound {bound}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn parallel_pad_matches_reference() {
+        let mut rng = Rng::new(43);
+        for (h, w, c, p) in shapes() {
+            for toroidal in [true, false] {
+                let case = Case::new(&mut rng, h, w, c, p, toroidal);
+                let ctx = case.ctx();
+                let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                assert_eq!(
+                    bits(&ctx.pad(&case.img)),
+                    bits(&ctx.pad_reference(&case.img)),
+                    "{h}x{w}x{c} p{p} toroidal {toroidal}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn wrap_matches_rem_euclid() {
+        for n in [1usize, 2, 3, 7, 64] {
+            for v in -(4 * n as isize)..(4 * n as isize) {
+                assert_eq!(wrap(v, n), v.rem_euclid(n as isize) as usize, "{v} mod {n}");
+            }
+        }
+    }
+
+    #[test]
+    fn table_vote_matches_reference() {
+        let mut rng = Rng::new(42);
+        for (h, w, c, p) in shapes() {
+            for toroidal in [true, false] {
+                let mut case = Case::new(&mut rng, h, w, c, p, toroidal);
+                for round in 0..3 {
+                    if round == 1 {
+                        // Every distance equal: σ² = that value.
+                        case.dist.fill(0.5);
+                    } else if round == 2 {
+                        // All zero: σ² = 0, unit weights.
+                        case.dist.fill(0.0);
+                    }
+                    let ctx = case.ctx();
+                    let (a, ca) = vote(&ctx, &case.img, &case.known, &case.nnf, &case.dist);
+                    let (b, cb) =
+                        vote_reference(&ctx, &case.img, &case.known, &case.nnf, &case.dist);
+                    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                    assert_eq!(bits(&a), bits(&b), "{h}x{w}x{c} p{p} toroidal {toroidal}");
+                    assert_eq!(ca.to_bits(), cb.to_bits());
+                }
+            }
+        }
+    }
 }
