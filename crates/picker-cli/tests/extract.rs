@@ -605,4 +605,17 @@ fn embedded_weights_find_the_wall_of_the_readme_example() {
         iou >= 0.8,
         "wall mask IoU {iou:.3} with the embedded weights (was 0.933)"
     );
+    // The embedded weights' UVs collapse on this wall (footprint ~0.1% of the
+    // texture square): `auto` must not keep them, but rectify the wall's plane.
+    let m: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("material.json")).unwrap()).unwrap();
+    let uv = &m["diagnostics"]["uv"];
+    assert_eq!(uv["requested"], "auto", "{uv}");
+    assert_eq!(uv["mode"], "plane", "collapsed UVs were kept: {uv}");
+    assert!(uv["net_uv_footprint"].as_f64().unwrap() < 0.01, "{uv}");
+    assert!(
+        m["texture"]["coverage_fraction"].as_f64().unwrap() > 0.3,
+        "the rectified wall should cover much of the texture: {}",
+        m["texture"]
+    );
 }

@@ -13,8 +13,10 @@
 //! - **UV mode `auto`** reprojects with the predicted UVs when their
 //!   cross-validated consistency ([`reproject::consistency`]) reaches
 //!   [`AUTO_MIN_R2`] (or cannot be measured because the material shows less
-//!   than about one repeat), otherwise rectifies a plane when the picked
-//!   normals agree within [`AUTO_MAX_PLANE_SPREAD_DEG`], otherwise keeps the UVs.
+//!   than about one repeat) and reach at least [`AUTO_MIN_UV_FOOTPRINT`] of the
+//!   texture square (collapsed UVs, all on a point or a line, do not), otherwise
+//!   rectifies a plane when the picked normals agree within
+//!   [`AUTO_MAX_PLANE_SPREAD_DEG`], otherwise keeps the UVs.
 //! - **Material parameters**: ρs and g are per-channel medians over the mask at
 //!   the working resolution; n = 2^(13g); the diffuse colour is the mean of the
 //!   final texture (textured) or the median de-lit colour (single colour).
@@ -44,6 +46,13 @@ use crate::{
 
 /// Smallest cross-validated R² for which `auto` trusts the predicted UVs.
 pub const AUTO_MIN_R2: f64 = 0.5;
+/// Smallest share of a [`AUTO_FOOTPRINT_CELLS`]² grid over the texture square
+/// that the predicted UVs of the picked pixels must reach for `auto` to keep
+/// them when a plane is usable: below it the UVs have collapsed (onto a
+/// point or a line) and the texture would be almost all invented.
+pub const AUTO_MIN_UV_FOOTPRINT: f64 = 0.01;
+/// Side of the grid [`AUTO_MIN_UV_FOOTPRINT`] is measured on.
+pub const AUTO_FOOTPRINT_CELLS: usize = 64;
 /// Largest median normal deviation (degrees) for which `auto` rectifies a plane.
 pub const AUTO_MAX_PLANE_SPREAD_DEG: f32 = 20.0;
 /// Default cap of the texture side.
@@ -312,6 +321,9 @@ pub struct UvDecision {
     pub requested: UvChoice,
     /// Cross-validated R² of the predicted UVs, when measurable.
     pub net_r2: Option<f64>,
+    /// Share of the texture square's grid cells the predicted UVs reach
+    /// (see [`AUTO_MIN_UV_FOOTPRINT`]), in `auto` mode.
+    pub net_uv_footprint: Option<f64>,
     /// Median deviation of the picked normals from the fitted plane (degrees).
     pub plane_spread_deg: Option<f32>,
     /// Focal length used by the plane mode (photo pixels).
@@ -531,12 +543,16 @@ pub fn extract(
             .max_size
             .min((2.0 * (full.count() as f64).sqrt()) as usize)
             .max(16);
-        let probe_size = reproject::texture_size(
-            net_coords.as_ref().and_then(|c| c.sizing_area(&full.data)),
-            observed_cap,
-        );
+        let net_footprint = match (&net_coords, opts.uv) {
+            (Some(c), UvChoice::Auto) => c.footprint(&full.data, AUTO_FOOTPRINT_CELLS),
+            _ => None,
+        };
+        // Collapsed UVs are not used whatever their consistency: skip measuring it.
         let net_r2 = match (&net_coords, opts.uv) {
-            (Some(c), UvChoice::Auto) => {
+            (Some(c), UvChoice::Auto)
+                if net_footprint.is_none_or(|f| f >= AUTO_MIN_UV_FOOTPRINT) =>
+            {
+                let probe_size = reproject::texture_size(c.sizing_area(&full.data), observed_cap);
                 reproject::consistency(c, &full.data, &delit, probe_size).map(|r| r.0)
             }
             _ => None,
@@ -559,8 +575,10 @@ pub fn extract(
                     }
                 },
                 UvChoice::Auto => {
-                    // Unmeasurable (the halves share too few texels): trust the UVs.
-                    let net_ok = net_r2.is_none_or(|r| r >= AUTO_MIN_R2);
+                    // Unmeasurable (the halves share too few texels): trust the UVs,
+                    // unless they have collapsed into a tiny part of the square.
+                    let collapsed = net_footprint.is_some_and(|f| f < AUTO_MIN_UV_FOOTPRINT);
+                    let net_ok = net_r2.is_none_or(|r| r >= AUTO_MIN_R2) && !collapsed;
                     let planar = spread.is_some_and(|s| s <= AUTO_MAX_PLANE_SPREAD_DEG);
                     if net_ok || !planar {
                         match net_coords {
@@ -593,6 +611,7 @@ pub fn extract(
             mode,
             requested: opts.uv,
             net_r2,
+            net_uv_footprint: net_footprint,
             plane_spread_deg: spread,
             focal_px: focal,
         });

@@ -86,6 +86,29 @@ impl Coords {
     pub fn sizing_area(&self, mask: &[bool]) -> Option<f32> {
         self.area_quantile(mask, DENSITY_QUANTILE)
     }
+
+    /// The fraction of a `cells × cells` grid over the texture square that
+    /// the coordinates of the `mask`ed pixels fall into (wrapped into [0,1)
+    /// when the coordinates wrap, else only those inside). Near 0 when the
+    /// coordinates have collapsed onto a point or a line; `None` for an
+    /// empty mask or `cells == 0`.
+    pub fn footprint(&self, mask: &[bool], cells: usize) -> Option<f64> {
+        if cells == 0 || !mask.iter().any(|&m| m) {
+            return None;
+        }
+        let mut hit = vec![false; cells * cells];
+        let cell = |t: f32| -> Option<usize> {
+            let t = if self.wrap { t - t.floor() } else { t };
+            (t.is_finite() && (0.0..1.0).contains(&t))
+                .then(|| ((t * cells as f32) as usize).min(cells - 1))
+        };
+        for (i, _) in mask.iter().enumerate().filter(|(_, &m)| m) {
+            if let (Some(cu), Some(cv)) = (cell(self.u[i]), cell(self.v[i])) {
+                hit[cv * cells + cu] = true;
+            }
+        }
+        Some(hit.iter().filter(|&&h| h).count() as f64 / (cells * cells) as f64)
+    }
 }
 
 /// Quantile of the per-pixel texture area that sizes the texture (0.1: the
@@ -569,5 +592,45 @@ mod tests {
         assert_eq!(texture_size(Some(1e-9), 1024), 1024);
         assert_eq!(texture_size(Some(0.5), 1024), 16);
         assert_eq!(texture_size(Some(1e-4), 8), 16);
+    }
+
+    #[test]
+    fn footprint_tells_collapsed_from_spread_coordinates() {
+        let (w, h) = (40, 30);
+        let mask = vec![true; w * h];
+        let make = |f: &dyn Fn(usize, usize) -> (f32, f32)| {
+            let (mut u, mut v) = (vec![0.0; w * h], vec![0.0; w * h]);
+            for y in 0..h {
+                for x in 0..w {
+                    (u[y * w + x], v[y * w + x]) = f(x, y);
+                }
+            }
+            Coords {
+                width: w,
+                height: h,
+                u,
+                v,
+                wrap: true,
+            }
+        };
+        // One repeat over the picture: the 8×8 grid is covered.
+        let spread = make(&|x, y| (x as f32 / w as f32, y as f32 / h as f32));
+        assert_eq!(spread.footprint(&mask, 8), Some(1.0));
+        // Constant coordinates: one cell; a line: one row of cells.
+        let point = make(&|_, _| (0.3, 0.7));
+        assert_eq!(point.footprint(&mask, 8), Some(1.0 / 64.0));
+        let line = make(&|x, _| (x as f32 / w as f32, 0.5));
+        assert_eq!(line.footprint(&mask, 8), Some(8.0 / 64.0));
+        // Wrapping: u = 1.25 is cell 2 of 8; without wrapping it is outside.
+        let mut out = make(&|_, _| (1.25, 0.5));
+        assert_eq!(out.footprint(&mask, 8), Some(1.0 / 64.0));
+        out.wrap = false;
+        assert_eq!(out.footprint(&mask, 8), Some(0.0));
+        // Only masked pixels count; an empty mask or grid has no footprint.
+        let mut one = vec![false; w * h];
+        one[5] = true;
+        assert_eq!(spread.footprint(&one, 8), Some(1.0 / 64.0));
+        assert_eq!(spread.footprint(&vec![false; w * h], 8), None);
+        assert_eq!(spread.footprint(&mask, 0), None);
     }
 }
