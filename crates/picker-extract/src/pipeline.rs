@@ -47,8 +47,8 @@ use crate::{
 /// Smallest cross-validated R² for which `auto` trusts the predicted UVs.
 pub const AUTO_MIN_R2: f64 = 0.5;
 /// Smallest share of a [`AUTO_FOOTPRINT_CELLS`]² grid over the texture square
-/// that the predicted UVs of the picked pixels must reach for `auto` to keep
-/// them when a plane is usable: below it the UVs have collapsed (onto a
+/// that the predicted UVs of the picked pixels (at the working resolution)
+/// must reach for `auto` to keep them when a plane is usable: below it the UVs have collapsed (onto a
 /// point or a line) and the texture would be almost all invented.
 pub const AUTO_MIN_UV_FOOTPRINT: f64 = 0.01;
 /// Side of the grid [`AUTO_MIN_UV_FOOTPRINT`] is measured on.
@@ -510,10 +510,29 @@ pub fn extract(
         let mwf: Vec<f32> = mw.iter().map(|&b| b as u8 as f32).collect();
         // Upsampled only inside the mask (the only pixels any use reads), and
         // not at all when the plane was asked for.
+        let normal = plane::plane_normal(&el.normals, mw);
+        let spread = normal.map(|n| plane::normal_spread_deg(&el.normals, mw, n));
+        let planar = spread.is_some_and(|s| s <= AUTO_MAX_PLANE_SPREAD_DEG);
+        // The footprint of the predicted UVs, measured on the working-resolution
+        // mask; collapsed UVs on a usable plane are never upsampled.
+        let net_footprint = match (&el.uv, opts.uv) {
+            (Some(uv), UvChoice::Auto) => Coords {
+                width: w,
+                height: h,
+                u: uv.plane(0).to_vec(),
+                v: uv.plane(1).to_vec(),
+                wrap: true,
+            }
+            .footprint(mw, AUTO_FOOTPRINT_CELLS),
+            _ => None,
+        };
+        let collapsed = net_footprint.is_some_and(|f| f < AUTO_MIN_UV_FOOTPRINT);
         let net_coords = el
             .uv
             .as_ref()
-            .filter(|_| opts.uv != UvChoice::Plane)
+            .filter(|_| {
+                opts.uv != UvChoice::Plane && !(opts.uv == UvChoice::Auto && collapsed && planar)
+            })
             .map(|uv| {
                 let up = resample::upsample_uv_where(uv, &mwf, fw, fh, &full.data);
                 Coords {
@@ -524,8 +543,6 @@ pub fn extract(
                     wrap: true,
                 }
             });
-        let normal = plane::plane_normal(&el.normals, mw);
-        let spread = normal.map(|n| plane::normal_spread_deg(&el.normals, mw, n));
         let plane_coords = |diag_focal: &mut Option<f32>| -> Option<Coords> {
             let n = normal?;
             let f_work = match opts.fov_deg {
@@ -543,15 +560,9 @@ pub fn extract(
             .max_size
             .min((2.0 * (full.count() as f64).sqrt()) as usize)
             .max(16);
-        let net_footprint = match (&net_coords, opts.uv) {
-            (Some(c), UvChoice::Auto) => c.footprint(&full.data, AUTO_FOOTPRINT_CELLS),
-            _ => None,
-        };
         // Collapsed UVs are not used whatever their consistency: skip measuring it.
         let net_r2 = match (&net_coords, opts.uv) {
-            (Some(c), UvChoice::Auto)
-                if net_footprint.is_none_or(|f| f >= AUTO_MIN_UV_FOOTPRINT) =>
-            {
+            (Some(c), UvChoice::Auto) if !collapsed => {
                 let probe_size = reproject::texture_size(c.sizing_area(&full.data), observed_cap);
                 reproject::consistency(c, &full.data, &delit, probe_size).map(|r| r.0)
             }
@@ -577,9 +588,7 @@ pub fn extract(
                 UvChoice::Auto => {
                     // Unmeasurable (the halves share too few texels): trust the UVs,
                     // unless they have collapsed into a tiny part of the square.
-                    let collapsed = net_footprint.is_some_and(|f| f < AUTO_MIN_UV_FOOTPRINT);
                     let net_ok = net_r2.is_none_or(|r| r >= AUTO_MIN_R2) && !collapsed;
-                    let planar = spread.is_some_and(|s| s <= AUTO_MAX_PLANE_SPREAD_DEG);
                     if net_ok || !planar {
                         match net_coords {
                             Some(c) => (UvMode::Net, c),
