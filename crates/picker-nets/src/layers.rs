@@ -41,6 +41,10 @@ impl<'a> Tracer<'a> {
     pub(crate) fn new(sink: Option<&'a mut Trace>) -> Self {
         Self { sink }
     }
+    /// True when activations are being recorded.
+    pub(crate) fn is_recording(&self) -> bool {
+        self.sink.is_some()
+    }
     /// Records a clone of `t` as `prefix.name` (or `name` when `prefix` is empty).
     pub(crate) fn record(&mut self, prefix: &str, name: &str, t: &Tensor) {
         if let Some(s) = self.sink.as_deref_mut() {

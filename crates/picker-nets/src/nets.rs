@@ -165,9 +165,25 @@ impl Irn {
         let (xp, pads) = pad_input(NetKind::Irn, x, 3)?;
         let e = self.enc.forward_traced(&xp, tr, "enc")?;
         let mut heads = Vec::with_capacity(self.heads.len());
-        for (name, tower) in &self.heads {
-            let y = tower.forward_traced(&e, tr, &format!("heads.{name}"))?;
-            heads.push((name.clone(), crop_back(y, pads, x.h(), x.w())?));
+        if tr.is_recording() {
+            for (name, tower) in &self.heads {
+                let y = tower.forward_traced(&e, tr, &format!("heads.{name}"))?;
+                heads.push((name.clone(), crop_back(y, pads, x.h(), x.w())?));
+            }
+        } else {
+            // The towers are independent: run them side by side (each layer's
+            // kernels still split over the pool), so no thread waits at the
+            // end of one small layer for the other. Results do not depend on
+            // the schedule: every kernel's arithmetic is fixed per element.
+            use rayon::prelude::*;
+            let ys: Vec<Result<Tensor>> = self
+                .heads
+                .par_iter()
+                .map(|(_, tower)| tower.forward_traced(&e, &mut Tracer::new(None), ""))
+                .collect();
+            for ((name, _), y) in self.heads.iter().zip(ys) {
+                heads.push((name.clone(), crop_back(y?, pads, x.h(), x.w())?));
+            }
         }
         Ok(IrnOutput { heads })
     }
