@@ -9,11 +9,11 @@ use crate::isa::Isa;
 use rayon::prelude::*;
 
 use crate::microkernel::MicroKernel;
-use crate::pad::reflect_pad;
+use crate::pad::{reflect_pad, Fill};
 use crate::params::{MAX_NR, SHIFTED_KC};
-use crate::shifted::{padded_copy, phase_copy, shifted_gemm, Fill, OutMap, ShiftedB};
+use crate::shifted::{padded_copy, phase_copy, shifted_gemm, OutMap, ShiftedB};
 use crate::tensor::Tensor;
-use crate::winograd::{Border, Winograd};
+use crate::winograd::Winograd;
 
 /// Shape of a 2-D convolution (PyTorch `Conv2d`, zero padding, no dilation, no groups).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -651,9 +651,9 @@ impl Conv2d {
                 }
                 ConvPath::Winograd { wino, .. } => {
                     let (pad, border) = if reflect > 0 {
-                        (reflect, Border::Reflect)
+                        (reflect, Fill::Reflect)
                     } else {
-                        (s.pad, Border::Zero)
+                        (s.pad, Fill::Zero)
                     };
                     wino.forward_image(
                         img,

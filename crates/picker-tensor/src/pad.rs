@@ -25,6 +25,39 @@ pub fn reflect_index(i: isize, n: usize) -> usize {
     }
 }
 
+/// How a padded copy (or a kernel that reads through padding) fills the
+/// positions outside the image.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Fill {
+    /// Zeros (PyTorch `Conv2d(padding=p)`).
+    Zero,
+    /// Reflection without repeating the edge (PyTorch `ReflectionPad2d`,
+    /// each pad smaller than the side).
+    Reflect,
+}
+
+/// The source index of position `q` of an axis of `n` values padded by `lo`
+/// before it, `padded_len` positions in all: `q − lo` inside the image,
+/// reflected (with [`Fill::Reflect`]) inside the padding, `None` (a zero)
+/// for zero padding or past `padded_len`.
+#[inline]
+pub(crate) fn padded_source(
+    q: usize,
+    lo: usize,
+    n: usize,
+    padded_len: usize,
+    fill: Fill,
+) -> Option<usize> {
+    let v = q as isize - lo as isize;
+    if (0..n as isize).contains(&v) {
+        Some(v as usize)
+    } else if q < padded_len && fill == Fill::Reflect {
+        Some(reflect_index(v, n))
+    } else {
+        None
+    }
+}
+
 /// PyTorch `ReflectionPad2d`: every pad must be smaller than the padded axis.
 pub fn reflect_pad(x: &Tensor, pads: Pads) -> Result<Tensor> {
     let [t, b, l, r] = pads;

@@ -18,7 +18,7 @@ use rayon::prelude::*;
 
 use crate::activation::Activation;
 use crate::gemm::{Epilogue, PackedA};
-use crate::pad::reflect_index;
+use crate::pad::{padded_source, Fill};
 use crate::params::{MAX_NR, MAX_PANELS_PER_TASK, TASKS_PER_THREAD};
 
 /// The B operand: row `k` is `src[offs[k] ..]`, column `n` is output pixel
@@ -242,15 +242,6 @@ fn finish_run(dst: &mut [f32], bias: f32, act: Activation, res: Option<&[f32]>) 
     }
 }
 
-/// How a padded copy is filled outside the image.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(crate) enum Fill {
-    /// Zeros.
-    Zero,
-    /// Reflection without repeating the edge (each pad smaller than the side).
-    Reflect,
-}
-
 /// A padded copy of one image (`c` planes of `h × w`) with `[top, bottom,
 /// left, right]` pads, plus `slack` zero floats at the end, from the pool.
 /// Returns the buffer and the padded `(hp, wp)`.
@@ -274,22 +265,14 @@ pub(crate) fn padded_copy(
         .for_each(|(ci, dst)| {
             let src = &x[ci * h * w..(ci + 1) * h * w];
             for (py, drow) in dst.chunks_exact_mut(wp).enumerate() {
-                let sy = py as isize - t as isize;
-                let sy = if (0..h as isize).contains(&sy) {
-                    sy as usize
-                } else if fill == Fill::Reflect {
-                    reflect_index(sy, h)
-                } else {
+                let Some(sy) = padded_source(py, t, h, hp, fill) else {
                     drow.fill(0.0);
                     continue;
                 };
                 let srow = &src[sy * w..(sy + 1) * w];
                 drow[l..l + w].copy_from_slice(srow);
                 for j in (0..l).chain(l + w..wp) {
-                    drow[j] = match fill {
-                        Fill::Zero => 0.0,
-                        Fill::Reflect => srow[reflect_index(j as isize - l as isize, w)],
-                    };
+                    drow[j] = padded_source(j, l, w, wp, fill).map_or(0.0, |c| srow[c]);
                 }
             }
         });
@@ -314,16 +297,7 @@ pub(crate) fn phase_copy(
     let (hp, wp) = (h + 2 * pad, w + 2 * pad);
     let (hq, wq) = (hp.div_ceil(s), wp.div_ceil(s));
     let plane = hq * wq;
-    let src_of = |q: usize, n: usize, np: usize| -> Option<usize> {
-        let v = q as isize - pad as isize;
-        if (0..n as isize).contains(&v) {
-            Some(v as usize)
-        } else if q < np && fill == Fill::Reflect {
-            Some(reflect_index(v, n))
-        } else {
-            None
-        }
-    };
+    let src_of = |q: usize, n: usize, np: usize| padded_source(q, pad, n, np, fill);
     let cols: Vec<Vec<Option<usize>>> = (0..s)
         .map(|b| (0..wq).map(|j| src_of(s * j + b, w, wp)).collect())
         .collect();

@@ -31,7 +31,7 @@ use crate::activation::Activation;
 use crate::aligned::AlignedBuf;
 use crate::isa::Isa;
 use crate::microkernel::MicroKernel;
-use crate::pad::reflect_index;
+use crate::pad::{padded_source, Fill};
 use crate::params::{KC, WINO_CO_PER_TASK, WINO_PANELS_PER_BLOCK};
 
 /// Points of the transformed tile along one axis.
@@ -40,16 +40,6 @@ const T: usize = 6;
 const M: usize = 4;
 /// Points of the transformed tile.
 const P: usize = T * T;
-
-/// How the input is extended past its edges before the convolution.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(crate) enum Border {
-    /// Zeros (PyTorch `Conv2d(padding=p)`).
-    Zero,
-    /// Reflection without repeating the edge (PyTorch `ReflectionPad2d(p)`,
-    /// which needs `p` smaller than both sides).
-    Reflect,
-}
 
 /// `Bᵀ x` for the points 0, ±1, ±2, ∞.
 #[inline(always)]
@@ -164,7 +154,7 @@ struct Geometry<'a> {
     row_map: Vec<Option<usize>>,
     /// Padding on each side, and how it is filled.
     pad: usize,
-    border: Border,
+    fill: Fill,
 }
 
 impl Geometry<'_> {
@@ -179,23 +169,11 @@ impl Geometry<'_> {
         let (w, p) = (self.w, self.pad);
         let src = &plane[sy * w..(sy + 1) * w];
         let pw = dst.len();
-        for (q, d) in dst.iter_mut().enumerate().take(p.min(pw)) {
-            *d = match self.border {
-                Border::Zero => 0.0,
-                Border::Reflect => src[reflect_index(q as isize - p as isize, w)],
-            };
-        }
-        if p < pw {
-            let n = w.min(pw - p);
-            dst[p..p + n].copy_from_slice(&src[..n]);
-        }
-        let wp = w + 2 * p;
-        for q in (p + w)..pw {
-            dst[q] = if q < wp && self.border == Border::Reflect {
-                src[reflect_index(q as isize - p as isize, w)]
-            } else {
-                0.0
-            };
+        // The image row in one copy; only the few padding columns go through the map.
+        let n = w.min(pw.saturating_sub(p));
+        dst[p.min(pw)..p.min(pw) + n].copy_from_slice(&src[..n]);
+        for q in (0..p.min(pw)).chain(p + n..pw) {
+            dst[q] = padded_source(q, p, w, w + 2 * p, self.fill).map_or(0.0, |c| src[c]);
         }
     }
 }
@@ -634,7 +612,7 @@ impl Winograd {
     }
 
     /// One image: `x` is `[c_in, h, w]`, extended by `pad` on every side as
-    /// `border` says; `out` is `[c_out, h + 2·pad − 2, w + 2·pad − 2]`.
+    /// `fill` says; `out` is `[c_out, h + 2·pad − 2, w + 2·pad − 2]`.
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn forward_image(
         &self,
@@ -642,7 +620,7 @@ impl Winograd {
         h: usize,
         w: usize,
         pad: usize,
-        border: Border,
+        fill: Fill,
         bias: Option<&[f32]>,
         act: Activation,
         residual: Option<&[f32]>,
@@ -654,16 +632,7 @@ impl Winograd {
         let (mr, nr) = (self.kernel.mr, self.kernel.nr);
         let hp = h + 2 * pad;
         let row_map = (0..M * th + 2)
-            .map(|q| {
-                let s = q as isize - pad as isize;
-                if (0..h as isize).contains(&s) {
-                    Some(s as usize)
-                } else if q < hp && border == Border::Reflect {
-                    Some(reflect_index(s, h))
-                } else {
-                    None
-                }
-            })
+            .map(|q| padded_source(q, pad, h, hp, fill))
             .collect();
         let g = Geometry {
             x,
@@ -672,7 +641,7 @@ impl Winograd {
             tw,
             row_map,
             pad,
-            border,
+            fill,
         };
         let tpb = nr * WINO_PANELS_PER_BLOCK;
         let mut v = crate::pool::take(P * self.c_in * tpb);
