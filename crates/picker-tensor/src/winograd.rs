@@ -190,6 +190,22 @@ fn segments(t0: usize, t1: usize, tw: usize, out: &mut Vec<(usize, usize, usize,
     }
 }
 
+/// Where one input channel's rows of the transformed tiles go in a block
+/// buffer: `V[ξ]`, panel `p` starts at `at(ξ, p)` (see [`Winograd::v_rows`]).
+#[derive(Clone, Copy)]
+struct VRows {
+    xi_stride: usize,
+    base: usize,
+    panel_stride: usize,
+}
+
+impl VRows {
+    #[inline(always)]
+    fn at(&self, xi: usize, panel: usize) -> usize {
+        xi * self.xi_stride + self.base + panel * self.panel_stride
+    }
+}
+
 struct SharedPtr(*mut f32);
 // SAFETY: tasks write disjoint parts of the buffer; see the call sites.
 unsafe impl Sync for SharedPtr {}
@@ -201,7 +217,7 @@ thread_local! {
 }
 
 /// Input transform of one channel over one block of tiles `[t0, t1)`, written
-/// into `v` (the block's packed B panels; see [`Winograd::v_offset`]).
+/// into `v` (the block's packed B panels) where `rows` says.
 ///
 /// Per panel and padded row `r` of each tile row: the row is split into its
 /// four column phases (`q_c[k] = row[4k + c]`, so tile `k` reads `q_0..q_3` at
@@ -215,7 +231,7 @@ fn input_channel_body(
     t0: usize,
     t1: usize,
     nr: usize,
-    v_at: &dyn Fn(usize, usize) -> usize,
+    rows: VRows,
     v: *mut f32,
     scratch: &mut Vec<f32>,
 ) {
@@ -267,10 +283,10 @@ fn input_channel_body(
         // V[ξ = 6i + j] = Σ_r Bᵀ[i][r] t1[j][r]
         for j in 0..T {
             let src = lanes(t1buf, j * T * nr, nr, nr);
-            // SAFETY: `v_at(ξ, panel)` rows of channel `ci` are written by this
-            // task only, and lie inside the block buffer (see `v_offset`).
+            // SAFETY: `rows.at(ξ, panel)` rows of channel `ci` are written by
+            // this task only, and lie inside the block buffer (see `VRows`).
             let o: [&mut [f32]; 6] = std::array::from_fn(|i| unsafe {
-                std::slice::from_raw_parts_mut(v.add(v_at(i * T + j, panel)), nr)
+                std::slice::from_raw_parts_mut(v.add(rows.at(i * T + j, panel)), nr)
             });
             bt_lanes(src, o);
         }
@@ -368,11 +384,11 @@ macro_rules! transforms_for {
             t0: usize,
             t1: usize,
             nr: usize,
-            v_at: &dyn Fn(usize, usize) -> usize,
+            rows: VRows,
             v: *mut f32,
             scratch: &mut Vec<f32>,
         ) {
-            input_channel_body(g, ci, t0, t1, nr, v_at, v, scratch)
+            input_channel_body(g, ci, t0, t1, nr, rows, v, scratch)
         }
 
         $(#[target_feature(enable = $feat)])?
@@ -596,11 +612,10 @@ impl Winograd {
             });
     }
 
-    /// Offset in the block buffer of the `nr` floats of `V[ξ]`, channel `ci`,
-    /// panel `panel`, for blocks of `tpb` tiles: `ξ`-major, then depth block
-    /// `(k0, kc)`, then panel, then the `kc` rows of that panel.
-    #[inline(always)]
-    fn v_offset(&self, xi: usize, ci: usize, panel: usize, tpb: usize) -> usize {
+    /// Where channel `ci`'s rows of every `V[ξ]` lie in a block buffer of
+    /// `tpb` tiles: `ξ`-major, then depth block `(k0, kc)`, then panel, then
+    /// the `kc` rows of that panel.
+    fn v_rows(&self, ci: usize, tpb: usize) -> VRows {
         let (k0, kc, _) = self
             .kblocks
             .iter()
@@ -608,7 +623,11 @@ impl Winograd {
             .find(|&(k0, kc, _)| ci < k0 + kc)
             .expect("ci < c_in");
         let nr = self.kernel.nr;
-        xi * self.c_in * tpb + k0 * tpb + panel * kc * nr + (ci - k0) * nr
+        VRows {
+            xi_stride: self.c_in * tpb,
+            base: k0 * tpb + (ci - k0) * nr,
+            panel_stride: kc * nr,
+        }
     }
 
     /// One image: `x` is `[c_in, h, w]`, extended by `pad` on every side as
@@ -644,6 +663,13 @@ impl Winograd {
             fill,
         };
         let tpb = nr * WINO_PANELS_PER_BLOCK;
+        // The first rows of each depth block, for the products.
+        let block_rows: Vec<VRows> = self
+            .kblocks
+            .iter()
+            .map(|&(k0, ..)| self.v_rows(k0, tpb))
+            .collect();
+        let block_rows = &block_rows;
         let mut v = crate::pool::take(P * self.c_in * tpb);
         let m_panels = self.m_panels;
         let per_xi = self.per_xi();
@@ -673,21 +699,20 @@ impl Winograd {
             // 1. Input transform, parallel over channels.
             let vp = SharedPtr(v.as_mut_ptr());
             let vp = &vp;
-            let v_at = |xi: usize, panel: usize, ci: usize| self.v_offset(xi, ci, panel, tpb);
             (0..self.c_in)
                 .into_par_iter()
                 .with_min_len(8)
                 .for_each_init(Vec::new, |scratch, ci| {
-                    let at = |xi: usize, panel: usize| v_at(xi, panel, ci);
+                    let rows = self.v_rows(ci, tpb);
                     // SAFETY: each channel writes only its own rows of `v`; the
                     // CPU has the ISA of the kernel family (checked when built).
                     unsafe {
                         match isa {
                             #[cfg(target_arch = "x86_64")]
-                            Isa::Avx512 => input_avx512(&g, ci, t0, t1, nr, &at, vp.0, scratch),
+                            Isa::Avx512 => input_avx512(&g, ci, t0, t1, nr, rows, vp.0, scratch),
                             #[cfg(target_arch = "x86_64")]
-                            Isa::Avx2Fma => input_avx2(&g, ci, t0, t1, nr, &at, vp.0, scratch),
-                            _ => input_portable(&g, ci, t0, t1, nr, &at, vp.0, scratch),
+                            Isa::Avx2Fma => input_avx2(&g, ci, t0, t1, nr, rows, vp.0, scratch),
+                            _ => input_portable(&g, ci, t0, t1, nr, rows, vp.0, scratch),
                         }
                     }
                 });
@@ -711,10 +736,10 @@ impl Winograd {
                         for xi in 0..P {
                             let a = &u_all[xi * per_xi..(xi + 1) * per_xi];
                             for mp in mp0..mp1 {
-                                for (bi, &(k0, kc, aoff)) in self.kblocks.iter().enumerate() {
+                                for (bi, &(_, kc, aoff)) in self.kblocks.iter().enumerate() {
                                     let ap = a[aoff + mp * kc * mr..].as_ptr();
                                     for p in 0..panels {
-                                        let bp = v_ref[self.v_offset(xi, k0, p, tpb)..].as_ptr();
+                                        let bp = v_ref[block_rows[bi].at(xi, p)..].as_ptr();
                                         let c = &mut mbuf
                                             [(p * P + xi) * stride + (mp - mp0) * mr * nr..]
                                             [..mr * nr];
