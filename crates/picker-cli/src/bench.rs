@@ -45,6 +45,10 @@ pub struct Args {
     /// Print exactly one JSON object instead of text.
     #[arg(long)]
     pub json: bool,
+    /// After the timed runs, run --runs more passes stage by stage (towers one
+    /// after another) and report each stage's median time.
+    #[arg(long)]
+    pub profile: bool,
 }
 
 /// Runs `picker bench`.
@@ -123,6 +127,11 @@ pub fn run(a: Args) -> Result<()> {
     let gflops = flops / (median_ms * 1e-3) / 1e9;
     let peak_rss_mb = peak_rss_mb();
     let isa = Isa::best().name();
+    let stages = if a.profile {
+        profile(&net, &input, a.runs)?
+    } else {
+        Vec::new()
+    };
 
     if a.json {
         let obj = serde_json::json!({
@@ -146,6 +155,10 @@ pub fn run(a: Args) -> Result<()> {
             "peak_rss_scope": if rss_reset { "process, from weight loading on" } else { "process" },
             "isa": isa,
             "params": config.param_count(),
+            "stages": stages
+                .iter()
+                .map(|(name, ms)| serde_json::json!({"stage": name, "median_ms": ms}))
+                .collect::<Vec<_>>(),
         });
         println!("{obj}");
     } else {
@@ -160,8 +173,49 @@ pub fn run(a: Args) -> Result<()> {
             flops / 1e9,
             peak_rss_mb.map_or("n/a".to_string(), |m| format!("{m:.0} MB")),
         );
+        if !stages.is_empty() {
+            let total: f64 = stages.iter().map(|(_, ms)| ms).sum();
+            println!(
+                "stages, one after another (median of {} passes; sum {total:.1} ms):",
+                a.runs
+            );
+            let width = stages.iter().map(|(n, _)| n.len()).max().unwrap_or(0);
+            for (name, ms) in &stages {
+                println!("  {name:<width$} {ms:>9.2} ms {:>5.1}%", 100.0 * ms / total);
+            }
+        }
     }
     Ok(())
+}
+
+/// Runs `runs` stage-timed passes; returns each stage's median in ms, in
+/// execution order.
+fn profile(net: &Net, input: &Tensor, runs: u32) -> Result<Vec<(String, f64)>> {
+    let mut per_stage: Vec<(String, Vec<f64>)> = Vec::new();
+    for _ in 0..runs {
+        let mut timings = picker_nets::Timings::new();
+        net.forward_timed(input, &mut timings)
+            .context("profiled forward pass")?;
+        if per_stage.is_empty() {
+            per_stage = timings
+                .iter()
+                .map(|(n, _)| (n.clone(), Vec::new()))
+                .collect();
+        }
+        if timings.len() != per_stage.len() {
+            bail!("the profiled passes recorded different stages");
+        }
+        for ((_, v), (_, d)) in per_stage.iter_mut().zip(&timings) {
+            v.push(d.as_secs_f64() * 1e3);
+        }
+    }
+    Ok(per_stage
+        .into_iter()
+        .map(|(n, mut v)| {
+            v.sort_by(f64::total_cmp);
+            (n, median(&v))
+        })
+        .collect())
 }
 
 /// Median of sorted values (mean of the middle two for an even count).

@@ -484,6 +484,39 @@ fn bench_json_has_the_keys() {
     let v: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
     assert_eq!(v["net"], "envmap");
     assert_eq!(v["preset"], "tiny");
+    assert_eq!(
+        v["stages"].as_array().map(Vec::len),
+        Some(0),
+        "no --profile"
+    );
+
+    // --profile: one median per stage, in execution order.
+    let o = picker([
+        "bench",
+        "--net",
+        "envmap",
+        "--preset",
+        "tiny",
+        "--size",
+        "17x23",
+        "--runs",
+        "2",
+        "--warmup",
+        "0",
+        "--profile",
+        "--json",
+    ]);
+    assert_ok(&o);
+    let v: serde_json::Value = serde_json::from_str(stdout(&o).trim()).unwrap();
+    let stages: Vec<&str> = v["stages"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s["stage"].as_str().unwrap())
+        .collect();
+    assert_eq!(stages.first(), Some(&"enc.conv_in"), "{stages:?}");
+    assert_eq!(stages.last(), Some(&"tail.2"), "{stages:?}");
+    assert!(v["stages"][0]["median_ms"].as_f64().unwrap() >= 0.0);
 }
 
 // ---- errors: one line on stderr naming the file, exit status 1 ----

@@ -32,30 +32,75 @@ impl Default for LayerOptions {
 /// pairs, e.g. `("heads.normals.blocks.0", ...)`.
 pub type Trace = Vec<(String, Tensor)>;
 
-/// An optional trace sink; recording costs nothing when it is `None`.
+/// Per-stage wall times of one profiled forward pass: `(module path, time)`
+/// in execution order, each the time since the previous stage ended (the
+/// first: since the pass began). The stages are the points a [`Trace`]
+/// records, so the times add up to the whole pass (less the input padding
+/// and output cropping).
+pub type Timings = Vec<(String, std::time::Duration)>;
+
+enum Sink<'a> {
+    Off,
+    Activations(&'a mut Trace),
+    Timings {
+        out: &'a mut Timings,
+        last: std::time::Instant,
+    },
+}
+
+/// An optional trace sink (activations or stage times); recording costs
+/// nothing when it is off.
 pub(crate) struct Tracer<'a> {
-    sink: Option<&'a mut Trace>,
+    sink: Sink<'a>,
 }
 
 impl<'a> Tracer<'a> {
     pub(crate) fn new(sink: Option<&'a mut Trace>) -> Self {
-        Self { sink }
+        Self {
+            sink: match sink {
+                Some(t) => Sink::Activations(t),
+                None => Sink::Off,
+            },
+        }
     }
-    /// True when activations are being recorded.
+    /// A tracer that records the time of each stage into `out`, starting now.
+    pub(crate) fn timing(out: &'a mut Timings) -> Self {
+        Self {
+            sink: Sink::Timings {
+                out,
+                last: std::time::Instant::now(),
+            },
+        }
+    }
+    /// True when activations or times are being recorded (the network then
+    /// runs its stages one after another, in a fixed order).
     pub(crate) fn is_recording(&self) -> bool {
-        self.sink.is_some()
+        !matches!(self.sink, Sink::Off)
     }
-    /// Records a clone of `t` as `prefix.name` (or `name` when `prefix` is empty).
+    /// Records a clone of `t` (or the time since the last record) as
+    /// `prefix.name` (or `name` when `prefix` is empty).
     pub(crate) fn record(&mut self, prefix: &str, name: &str, t: &Tensor) {
-        if let Some(s) = self.sink.as_deref_mut() {
-            let key = if prefix.is_empty() {
+        let key = || {
+            if prefix.is_empty() {
                 name.to_string()
             } else if name.is_empty() {
                 prefix.to_string()
             } else {
                 format!("{prefix}.{name}")
-            };
-            s.push((key, t.clone()));
+            }
+        };
+        match &mut self.sink {
+            Sink::Off => {}
+            Sink::Activations(s) => s.push((key(), t.clone())),
+            Sink::Timings { out, last } => {
+                let now = std::time::Instant::now();
+                // A record with an empty name repeats its module's last
+                // stage (e.g. `enc` after `enc.down.1`): no time of its own.
+                if !name.is_empty() {
+                    out.push((key(), now - *last));
+                }
+                *last = now;
+            }
         }
     }
 }

@@ -78,7 +78,7 @@ pub use config::{
 pub use conventions::RenderElements;
 pub use error::{Error, Result, ACCEPTED_DTYPES};
 pub use keys::{random_weights, state_dict_spec, ParamRole, ParamSpec};
-pub use layers::{LayerOptions, Trace};
+pub use layers::{LayerOptions, Timings, Trace};
 pub use nets::{
     EnvMap, EnvMapOutput, Inpaint, InpaintOutput, Irn, IrnOutput, Msn, MsnOutput, Net, NetOutput,
     Tower,

@@ -14,7 +14,9 @@ use picker_tensor::{mirror_pad, resize_bilinear, Activation, ConvSpec, Tensor};
 
 use crate::config::{EnvMapConfig, InpaintConfig, IrnConfig, MsnConfig, NetConfig, NetKind};
 use crate::error::{Error, Result};
-use crate::layers::{join, ConvBn, Decoder, Encoder, LayerOptions, ResBlocks, Trace, Tracer};
+use crate::layers::{
+    join, ConvBn, Decoder, Encoder, LayerOptions, ResBlocks, Timings, Trace, Tracer,
+};
 use crate::weights::Weights;
 
 fn options(cfg: &NetConfig) -> LayerOptions {
@@ -160,6 +162,11 @@ impl Irn {
     pub fn forward_traced(&self, x: &Tensor, trace: &mut Trace) -> Result<IrnOutput> {
         self.run(x, &mut Tracer::new(Some(trace)))
     }
+    /// As `forward`, also timing each stage into `timings` (the stages a
+    /// trace records; they run one after another, see [`Timings`]).
+    pub fn forward_timed(&self, x: &Tensor, timings: &mut Timings) -> Result<IrnOutput> {
+        self.run(x, &mut Tracer::timing(timings))
+    }
 
     fn run(&self, x: &Tensor, tr: &mut Tracer<'_>) -> Result<IrnOutput> {
         let (xp, pads) = pad_input(NetKind::Irn, x, 3)?;
@@ -242,6 +249,11 @@ impl Msn {
     /// `blocks.<i>`, `dec.up.0`, `dec.up.1`, `dec.conv_out` (padded size).
     pub fn forward_traced(&self, x: &Tensor, trace: &mut Trace) -> Result<MsnOutput> {
         self.run(x, &mut Tracer::new(Some(trace)))
+    }
+    /// As `forward`, also timing each stage into `timings` (the stages a
+    /// trace records; they run one after another, see [`Timings`]).
+    pub fn forward_timed(&self, x: &Tensor, timings: &mut Timings) -> Result<MsnOutput> {
+        self.run(x, &mut Tracer::timing(timings))
     }
     fn run(&self, x: &Tensor, tr: &mut Tracer<'_>) -> Result<MsnOutput> {
         let (xp, pads) = pad_input(NetKind::Msn, x, 3)?;
@@ -330,6 +342,11 @@ impl EnvMap {
     pub fn forward_traced(&self, x: &Tensor, trace: &mut Trace) -> Result<EnvMapOutput> {
         self.run(x, &mut Tracer::new(Some(trace)))
     }
+    /// As `forward`, also timing each stage into `timings` (the stages a
+    /// trace records; they run one after another, see [`Timings`]).
+    pub fn forward_timed(&self, x: &Tensor, timings: &mut Timings) -> Result<EnvMapOutput> {
+        self.run(x, &mut Tracer::timing(timings))
+    }
     fn run(&self, x: &Tensor, tr: &mut Tracer<'_>) -> Result<EnvMapOutput> {
         let (xp, _) = pad_input(NetKind::EnvMap, x, 3)?;
         let e = self.enc.forward_traced(&xp, tr, "enc")?;
@@ -412,6 +429,11 @@ impl Inpaint {
     /// `blocks.<i>`, `dec.up.0`, `dec.up.1`, `dec.conv_out` (padded size).
     pub fn forward_traced(&self, x: &Tensor, trace: &mut Trace) -> Result<InpaintOutput> {
         self.run(x, &mut Tracer::new(Some(trace)))
+    }
+    /// As `forward`, also timing each stage into `timings` (the stages a
+    /// trace records; they run one after another, see [`Timings`]).
+    pub fn forward_timed(&self, x: &Tensor, timings: &mut Timings) -> Result<InpaintOutput> {
+        self.run(x, &mut Tracer::timing(timings))
     }
     fn run(&self, x: &Tensor, tr: &mut Tracer<'_>) -> Result<InpaintOutput> {
         let (xp, pads) = pad_input(NetKind::Inpaint, x, self.config.channels + 1)?;
@@ -548,6 +570,15 @@ impl Net {
             Net::Msn(n) => n.forward_traced(x, trace)?.into(),
             Net::EnvMap(n) => n.forward_traced(x, trace)?.into(),
             Net::Inpaint(n) => n.forward_traced(x, trace)?.into(),
+        })
+    }
+    /// As [`Net::forward`], also timing each stage (see [`Timings`]).
+    pub fn forward_timed(&self, x: &Tensor, timings: &mut Timings) -> Result<NetOutput> {
+        Ok(match self {
+            Net::Irn(n) => n.forward_timed(x, timings)?.into(),
+            Net::Msn(n) => n.forward_timed(x, timings)?.into(),
+            Net::EnvMap(n) => n.forward_timed(x, timings)?.into(),
+            Net::Inpaint(n) => n.forward_timed(x, timings)?.into(),
         })
     }
 }

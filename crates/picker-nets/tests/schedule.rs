@@ -4,7 +4,7 @@
 
 use picker_nets::{
     metadata_for, random_weights, serialize_safetensors, Irn, NetConfig, NetKind, StorageDtype,
-    Trace, Weights,
+    Timings, Trace, Weights,
 };
 use picker_tensor::Rng;
 use std::path::Path;
@@ -48,4 +48,30 @@ fn parallel_towers_match_the_sequential_run_bit_for_bit() {
             );
         }
     }
+}
+
+#[test]
+fn timed_run_gives_the_same_outputs_and_one_time_per_traced_stage() {
+    let irn = tiny_irn();
+    let x = Rng::new(12).tensor([1, 3, 29, 40]);
+    let mut trace = Trace::default();
+    let traced = irn.forward_traced(&x, &mut trace).expect("traced");
+    let mut timings = Timings::default();
+    let timed = irn.forward_timed(&x, &mut timings).expect("timed");
+    for ((na, a), (_, b)) in timed.heads.iter().zip(&traced.heads) {
+        assert_eq!(a.data(), b.data(), "{na}");
+    }
+    // Every traced activation has a stage time, except `enc` (the encoder's
+    // output repeats its last stage, `enc.down.1`).
+    let traced_names: Vec<&str> = trace
+        .iter()
+        .map(|(n, _)| n.as_str())
+        .filter(|n| *n != "enc")
+        .collect();
+    let timed_names: Vec<&str> = timings.iter().map(|(n, _)| n.as_str()).collect();
+    assert_eq!(timed_names, traced_names);
+    assert!(
+        timed_names.contains(&"heads.normals.dec.conv_out"),
+        "{timed_names:?}"
+    );
 }

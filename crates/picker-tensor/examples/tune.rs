@@ -1,6 +1,6 @@
 //! Times one layer shape of the thesis networks at 240×320, for quick tuning
 //! without criterion: `cargo run --release -p picker-tensor --example tune -- res`
-//! (`res`, `resmany`, `envres`, `decout`, `encin`, `down0`, `down1`, `envin`, `up0`, `up1`; `RAYON_NUM_THREADS`, `PICKER_ISA` apply).
+//! (`res`, `resmany`, `envres`, `decout`, `encin`, `down0`, `down1`, `envin`, `envdown0`, `envdown1`, `up0`, `up1`; `RAYON_NUM_THREADS`, `PICKER_ISA` apply).
 
 use picker_tensor::{
     Activation, Conv2d, ConvAlgorithm, ConvSpec, ConvTranspose2d, ConvTransposeSpec, Isa, Rng,
@@ -67,8 +67,10 @@ fn main() {
         "down0" => (240, 320, ConvSpec::square(64, 128, 3, 2, 1)),
         "down1" => (120, 160, ConvSpec::square(128, 256, 3, 2, 1)),
         "envin" => (246, 326, ConvSpec::square(3, 64, 7, 2, 0)),
+        "envdown0" => (120, 160, ConvSpec::square(64, 128, 3, 2, 1)),
+        "envdown1" => (60, 80, ConvSpec::square(128, 256, 3, 2, 1)),
         other => {
-            eprintln!("unknown layer {other:?}: use res, resmany, envres, decout, encin, down0, down1, envin, up0 or up1");
+            eprintln!("unknown layer {other:?}: use res, resmany, envres, decout, encin, down0, down1, envin, envdown0, envdown1, up0 or up1");
             std::process::exit(2);
         }
     };
