@@ -144,6 +144,14 @@ fn named_conv_problems() -> Vec<ConvProblem> {
         conv(1, 23, 17, 9, 11, 3, 3, 1),      // phase planes, stride 3
         res(conv(1, 14, 28, 16, 16, 3, 1, 0)), // Winograd: 28 tiles, one narrow panel (2 zmm)
         res(conv(1, 54, 34, 16, 24, 3, 1, 0)), // Winograd: 104 tiles, several blocks, narrow tail
+        // Winograd: tile rows of 33 tiles (three groups of 16 in the phase split,
+        // runs across panel ends), tanh with bias and residual, zero padding.
+        ConvProblem {
+            act: Activation::Tanh,
+            residual: true,
+            ..conv(1, 9, 131, 5, 7, 3, 1, 1)
+        },
+        relu(conv(1, 5, 66, 3, 4, 3, 1, 2)), // Winograd: zero pad 2, 16 tiles + 1
     ]
 }
 
@@ -599,6 +607,8 @@ fn conv2d_reflect_forward() {
         (1, 9, 11, 6, 3, 7, 1, 3, false),   // decoder output conv (folded)
         (1, 11, 13, 3, 8, 7, 2, 3, false),  // EnvMap input conv (phase planes)
         (1, 6, 5, 5, 7, 3, 1, 2, true),     // pad 2 with a 3x3 kernel
+        (1, 6, 133, 8, 5, 3, 1, 1, true),   // Winograd, tile rows of 34 tiles
+        (1, 9, 70, 4, 6, 3, 1, 2, false),   // Winograd, reflect 2 on a wide row
     ];
     for isa in isas() {
         for (i, &(n, h, w, ci, co, k, st, rp, with_res)) in cases.iter().enumerate() {

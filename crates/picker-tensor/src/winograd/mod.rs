@@ -412,7 +412,9 @@ macro_rules! transforms_for {
 }
 
 #[cfg(target_arch = "x86_64")]
-transforms_for!(input_avx512, output_avx512, "avx512f,avx2,fma");
+mod avx512;
+#[cfg(target_arch = "x86_64")]
+use avx512::{input as input_avx512, output as output_avx512};
 #[cfg(target_arch = "x86_64")]
 transforms_for!(input_avx2, output_avx2, "avx2,fma");
 transforms_for!(input_portable, output_portable,);
