@@ -11,7 +11,10 @@ use rayon::prelude::*;
 use crate::microkernel::MicroKernel;
 use crate::pad::{reflect_pad, Fill};
 use crate::params::{MAX_NR, SHIFTED_KC};
-use crate::shifted::{padded_copy, phase_copy, shifted_gemm, OutMap, ShiftedB};
+use crate::shifted::{
+    padded_copy, phase_copy, shifted_gemm, shifted_gemm_interleaved, OutMap, PhasePart,
+    RowPhaseMap, ShiftedB,
+};
 use crate::tensor::Tensor;
 use crate::winograd::Winograd;
 
@@ -979,48 +982,59 @@ impl ConvTranspose2d {
         for b in 0..x.n() {
             let dst = &mut out.data_mut()[b * per_out..(b + 1) * per_out];
             let (src, hp, wp) = padded_copy(x.image(b), sp.c_in, h, w, pads, Fill::Zero, slack);
-            for ph in &self.phases {
-                let mh = oh.saturating_sub(ph.ry).div_ceil(s);
-                let mw = ow.saturating_sub(ph.rx).div_ceil(s);
-                if mh == 0 || mw == 0 {
+            // Per row phase, its column phases side by side, written as
+            // whole interleaved rows.
+            for row in self.phases.chunks(s) {
+                let ry = row[0].ry;
+                let mh = oh.saturating_sub(ry).div_ceil(s);
+                if mh == 0 {
                     continue;
                 }
-                let map = OutMap {
-                    base: ph.ry * ow + ph.rx,
+                let offs: Vec<Option<Vec<usize>>> = row
+                    .iter()
+                    .map(|ph| {
+                        let nt = ph.taps.len();
+                        ph.packed.as_ref().map(|_| {
+                            (0..sp.c_in * nt)
+                                .map(|k| {
+                                    let (ci, (dy, dx)) = (k / nt, ph.taps[k % nt]);
+                                    let r = (dy + pads[0] as isize) as usize;
+                                    let c = (dx + pads[2] as isize) as usize;
+                                    ci * hp * wp + r * wp + c
+                                })
+                                .collect()
+                        })
+                    })
+                    .collect();
+                let parts: Vec<Option<PhasePart<'_>>> = row
+                    .iter()
+                    .zip(&offs)
+                    .map(|(ph, o)| {
+                        Some(PhasePart {
+                            a: ph.packed.as_ref()?,
+                            offs: o.as_deref()?,
+                        })
+                    })
+                    .collect();
+                let map = RowPhaseMap {
+                    base: ry * ow,
                     cs: oh * ow,
                     rs: s * ow,
-                    xs: s,
                     oh: mh,
-                    ow: mw,
+                    ow,
+                    s,
                 };
-                match &ph.packed {
-                    Some(packed) => {
-                        let nt = ph.taps.len();
-                        let offs: Vec<usize> = (0..sp.c_in * nt)
-                            .map(|k| {
-                                let (ci, (dy, dx)) = (k / nt, ph.taps[k % nt]);
-                                let row = (dy + pads[0] as isize) as usize;
-                                let col = (dx + pads[2] as isize) as usize;
-                                ci * hp * wp + row * wp + col
-                            })
-                            .collect();
-                        let bsrc = ShiftedB {
-                            src: &src,
-                            offs: &offs,
-                            wp,
-                        };
-                        shifted_gemm(packed, &bsrc, &map, dst, &epi);
-                    }
-                    None => {
-                        for co in 0..sp.c_out {
-                            let v = self
-                                .act
-                                .apply_one(self.bias.as_ref().map_or(0.0, |bb| bb[co]));
-                            for m in 0..mh {
-                                for n in 0..mw {
-                                    dst[map.base + co * map.cs + m * map.rs + n * map.xs] = v;
-                                }
-                            }
+                if parts.iter().any(Option::is_some) {
+                    shifted_gemm_interleaved(&parts, &src, wp, &map, dst, &epi);
+                } else {
+                    // No tap reaches this row phase: every value is the bias.
+                    for co in 0..sp.c_out {
+                        let v = self
+                            .act
+                            .apply_one(self.bias.as_ref().map_or(0.0, |bb| bb[co]));
+                        for m in 0..mh {
+                            let i0 = map.base + co * map.cs + m * map.rs;
+                            dst[i0..i0 + ow].fill(v);
                         }
                     }
                 }

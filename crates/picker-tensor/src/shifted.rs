@@ -213,6 +213,298 @@ pub(crate) fn shifted_gemm(
     }
 }
 
+/// `dst[j] = src[s·j]` (`src` holds at least `s·(len − 1) + 1` floats).
+#[inline(always)]
+fn strided_copy_body(src: &[f32], s: usize, dst: &mut [f32]) {
+    let n = dst.len();
+    if n == 0 {
+        return;
+    }
+    if s == 2 {
+        // Whole pairs, so the loop vectorises into two loads and a permute.
+        let pairs = (src.len() / 2).min(n);
+        for (d, p) in dst[..pairs].iter_mut().zip(src.chunks_exact(2)) {
+            *d = p[0];
+        }
+        for (j, d) in dst.iter_mut().enumerate().skip(pairs) {
+            *d = src[2 * j];
+        }
+    } else {
+        for (d, v) in dst.iter_mut().zip(src.iter().step_by(s)) {
+            *d = *v;
+        }
+    }
+}
+
+macro_rules! strided_for {
+    ($name:ident, $($feat:literal)?) => {
+        $(#[target_feature(enable = $feat)])?
+        unsafe fn $name(src: &[f32], s: usize, dst: &mut [f32]) {
+            strided_copy_body(src, s, dst)
+        }
+    };
+}
+
+#[cfg(target_arch = "x86_64")]
+strided_for!(strided_avx512, "avx512f,avx2,fma");
+#[cfg(target_arch = "x86_64")]
+strided_for!(strided_avx2, "avx2,fma");
+strided_for!(strided_portable,);
+
+/// [`strided_copy_body`] compiled for the widest ISA this CPU has.
+fn strided_copy(isa: crate::isa::Isa, src: &[f32], s: usize, dst: &mut [f32]) {
+    use crate::isa::Isa;
+    // SAFETY: `isa` is `Isa::best()`, which this CPU has.
+    unsafe {
+        match isa {
+            #[cfg(target_arch = "x86_64")]
+            Isa::Avx512 => strided_avx512(src, s, dst),
+            #[cfg(target_arch = "x86_64")]
+            Isa::Avx2Fma => strided_avx2(src, s, dst),
+            _ => strided_portable(src, s, dst),
+        }
+    }
+}
+
+/// One column phase of [`shifted_gemm_interleaved`]: the product `a · b`
+/// with B row `k` at `src[offs[k] ..]`.
+pub(crate) struct PhasePart<'a> {
+    pub(crate) a: &'a PackedA,
+    pub(crate) offs: &'a [usize],
+}
+
+/// Where [`shifted_gemm_interleaved`] writes: output `(co, y, j)` is
+/// `out[base + co·cs + y·rs + j]` for `y < oh`, `j < ow`, column `j` from
+/// column phase `j % s` at grid column `j / s`.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct RowPhaseMap {
+    pub(crate) base: usize,
+    pub(crate) cs: usize,
+    pub(crate) rs: usize,
+    pub(crate) oh: usize,
+    pub(crate) ow: usize,
+    pub(crate) s: usize,
+}
+
+/// One row phase of a stride-`s` transposed convolution with its `s` column
+/// phases computed side by side, on the rayon pool: for each panel of the
+/// padded-width grid (column `n` is grid point `(n / wp, n % wp)`), every
+/// column phase `rx` runs its product (`parts[rx]`; `None`: no taps, a zero
+/// product) into a tile, and the tiles are interleaved into whole output
+/// rows, `out[… + s·x + rx] = epilogue(product_rx[y][x])`. Each output line
+/// is written once and contiguously, instead of once per column phase with
+/// stride `s`.
+///
+/// # Panics
+/// When `parts` is not `map.s` long, holds no product or products of
+/// different heights or kernels, a B row is shorter than the grid needs, or
+/// `out` is too short for `map`.
+pub(crate) fn shifted_gemm_interleaved(
+    parts: &[Option<PhasePart<'_>>],
+    src: &[f32],
+    wp: usize,
+    map: &RowPhaseMap,
+    out: &mut [f32],
+    epi: &Epilogue<'_>,
+) {
+    assert_eq!(
+        parts.len(),
+        map.s,
+        "shifted_gemm_interleaved: one part per column phase"
+    );
+    let first = parts
+        .iter()
+        .flatten()
+        .next()
+        .expect("shifted_gemm_interleaved: at least one column phase with taps");
+    let (m, kernel) = (first.a.m, first.a.kernel);
+    let (mr, nr, m_panels) = (kernel.mr, kernel.nr, first.a.m_panels);
+    assert!(mr <= MAX_MR && nr <= MAX_NR);
+    for p in parts.iter().flatten() {
+        assert!(p.a.m == m && p.a.kernel.isa == kernel.isa && p.a.kernel.nr == nr);
+        assert_eq!(
+            p.offs.len(),
+            p.a.k,
+            "shifted_gemm_interleaved: one offset per column of A"
+        );
+    }
+    if m == 0 || map.oh == 0 || map.ow == 0 {
+        return;
+    }
+    assert!(
+        map.s >= 1 && map.ow.div_ceil(map.s) <= wp,
+        "shifted_gemm_interleaved: grid narrower than the output"
+    );
+    let n_wide = map.oh * wp;
+    let n_panels = n_wide.div_ceil(nr);
+    for p in parts.iter().flatten() {
+        let max_off = p.offs.iter().copied().max().unwrap_or(0);
+        assert!(
+            max_off + n_panels * nr <= src.len(),
+            "shifted_gemm_interleaved: the padded input has too little slack"
+        );
+    }
+    let last = map.base + (m - 1) * map.cs + (map.oh - 1) * map.rs + map.ow - 1;
+    assert!(
+        last < out.len(),
+        "shifted_gemm_interleaved: output too short"
+    );
+    if let Some(r) = epi.residual {
+        assert!(
+            last < r.len(),
+            "shifted_gemm_interleaved: residual too short"
+        );
+    }
+    if let Some(bias) = epi.bias {
+        assert_eq!(
+            bias.len(),
+            m,
+            "shifted_gemm_interleaved: bias has the wrong length"
+        );
+    }
+    let s = map.s;
+    let threads = rayon::current_num_threads().max(1);
+    let per_task = n_panels
+        .div_ceil(threads * TASKS_PER_THREAD)
+        .clamp(1, MAX_PANELS_PER_TASK);
+    let n_tasks = n_panels.div_ceil(per_task);
+    let out_ptr = SharedPtr(out.as_mut_ptr());
+    let out_ptr = &out_ptr;
+    let tile = m_panels * mr * nr;
+    let task = |t: usize| {
+        // One tile per column phase and row panel; a phase without taps
+        // keeps its zeros.
+        let mut tmps = vec![0.0f32; s * tile];
+        let p0 = t * per_task;
+        let p1 = (p0 + per_task).min(n_panels);
+        for p in p0..p1 {
+            let n0 = p * nr;
+            for (rx, part) in parts.iter().enumerate() {
+                let Some(part) = part else { continue };
+                let a = part.a;
+                for (bi, &(k0, kc, aoff)) in a.kblocks.iter().enumerate() {
+                    let offs = part.offs[k0..k0 + kc].as_ptr();
+                    for mp in 0..m_panels {
+                        let ap = a.data.as_slice()[aoff + mp * kc * mr..].as_ptr();
+                        let c = &mut tmps[rx * tile + mp * mr * nr..][..mr * nr];
+                        // SAFETY: the A panel holds kc·mr floats; every B row has
+                        // nr floats from n0 (slack checked above); C is `mr` rows
+                        // of `nr` in this task's tile.
+                        unsafe {
+                            let bp = src.as_ptr().add(n0);
+                            (a.kernel.run_rows)(kc, ap, bp, offs, c.as_mut_ptr(), nr, bi > 0);
+                        }
+                    }
+                }
+            }
+            // Runs of the panel that stay in one grid row.
+            let end = (n0 + nr).min(n_wide);
+            let mut n = n0;
+            while n < end {
+                let (yy, xx) = (n / wp, n % wp);
+                let run = (wp - xx).min(end - n);
+                let (j0, j1) = (s * xx, (s * (xx + run)).min(map.ow));
+                if j1 > j0 {
+                    let lane0 = n - n0;
+                    for co in 0..m {
+                        let (mp, r) = (co / mr, co % mr);
+                        let i0 = map.base + co * map.cs + yy * map.rs + j0;
+                        // SAFETY: output row `yy` of channel `co`, columns
+                        // [j0, j1), lies inside `out` (checked through `last`)
+                        // and belongs to this task's panel only.
+                        let dst =
+                            unsafe { std::slice::from_raw_parts_mut(out_ptr.0.add(i0), j1 - j0) };
+                        let at = |rx: usize| &tmps[rx * tile + (mp * mr + r) * nr + lane0..][..run];
+                        let res = epi.residual.map(|rs| &rs[i0..i0 + (j1 - j0)]);
+                        let bias = bias_of(epi, co);
+                        interleave_finish(kernel.isa, s, at, dst, bias, epi.act, res);
+                    }
+                }
+                n += run;
+            }
+        }
+    };
+    if threads == 1 {
+        (0..n_tasks).for_each(task);
+    } else {
+        (0..n_tasks).into_par_iter().for_each(task);
+    }
+}
+
+/// `dst[j] = act(src(j % s)[j / s] + bias) [+ res[j]]`.
+#[inline(always)]
+fn interleave_finish_body<'a>(
+    s: usize,
+    src: impl Fn(usize) -> &'a [f32],
+    dst: &mut [f32],
+    bias: f32,
+    act: Activation,
+    res: Option<&[f32]>,
+) {
+    if s == 2 {
+        let (a, b) = (src(0), src(1));
+        let pairs = dst.len() / 2;
+        let (a, b) = (&a[..pairs + dst.len() % 2], &b[..pairs]);
+        for (k, o) in dst.chunks_exact_mut(2).enumerate() {
+            o[0] = a[k];
+            o[1] = b[k];
+        }
+        if dst.len() % 2 == 1 {
+            dst[2 * pairs] = a[pairs];
+        }
+    } else {
+        for (j, o) in dst.iter_mut().enumerate() {
+            *o = src(j % s)[j / s];
+        }
+    }
+    finish_run(dst, bias, act, res);
+}
+
+macro_rules! interleave_for {
+    ($name:ident, $($feat:literal)?) => {
+        $(#[target_feature(enable = $feat)])?
+        unsafe fn $name<'a>(
+            s: usize,
+            src: &dyn Fn(usize) -> &'a [f32],
+            dst: &mut [f32],
+            bias: f32,
+            act: Activation,
+            res: Option<&[f32]>,
+        ) {
+            interleave_finish_body(s, src, dst, bias, act, res)
+        }
+    };
+}
+
+#[cfg(target_arch = "x86_64")]
+interleave_for!(interleave_avx512, "avx512f,avx2,fma");
+#[cfg(target_arch = "x86_64")]
+interleave_for!(interleave_avx2, "avx2,fma");
+interleave_for!(interleave_portable,);
+
+/// [`interleave_finish_body`] compiled for the kernel family's ISA.
+fn interleave_finish<'a>(
+    isa: crate::isa::Isa,
+    s: usize,
+    src: impl Fn(usize) -> &'a [f32],
+    dst: &mut [f32],
+    bias: f32,
+    act: Activation,
+    res: Option<&[f32]>,
+) {
+    use crate::isa::Isa;
+    // SAFETY: the packed weights were made for `isa`, which this CPU has.
+    unsafe {
+        match isa {
+            #[cfg(target_arch = "x86_64")]
+            Isa::Avx512 => interleave_avx512(s, &src, dst, bias, act, res),
+            #[cfg(target_arch = "x86_64")]
+            Isa::Avx2Fma => interleave_avx2(s, &src, dst, bias, act, res),
+            _ => interleave_portable(s, &src, dst, bias, act, res),
+        }
+    }
+}
+
 /// `act(v + bias[co]) + residual[i]`.
 #[inline(always)]
 fn finish(v: f32, co: usize, i: usize, epi: &Epilogue<'_>) -> f32 {
@@ -312,27 +604,36 @@ pub(crate) fn phase_copy(
     let mut buf = crate::pool::take(s * s * c * plane + slack);
     let (body, tail) = buf.split_at_mut(s * s * c * plane);
     tail.fill(0.0);
-    body.par_chunks_mut(plane.max(1))
-        .enumerate()
-        .for_each(|(idx, dst)| {
-            let (ab, ci) = (idx / c, idx % c);
-            let (a, b) = (ab / s, ab % s);
-            let src = &x[ci * h * w..(ci + 1) * h * w];
-            for (i, drow) in dst.chunks_exact_mut(wq).enumerate() {
-                match src_of(s * i + a, h, hp) {
-                    None => drow.fill(0.0),
-                    Some(sy) => {
-                        let srow = &src[sy * w..(sy + 1) * w];
+    let isa = crate::isa::Isa::best();
+    let ptr = SharedPtr(body.as_mut_ptr());
+    let ptr = &ptr;
+    // One task per (row phase a, channel): it reads each source row once and
+    // writes that row of all `s` column-phase planes.
+    (0..s * c).into_par_iter().for_each(|idx| {
+        let (a, ci) = (idx / c, idx % c);
+        let src = &x[ci * h * w..(ci + 1) * h * w];
+        // SAFETY: planes (a, b, ci) for b < s are written by this task only,
+        // and lie inside `body` (s·s·c planes of `plane` floats).
+        let mut planes: Vec<&mut [f32]> = (0..s)
+            .map(|b| unsafe {
+                std::slice::from_raw_parts_mut(ptr.0.add(((a * s + b) * c + ci) * plane), plane)
+            })
+            .collect();
+        for i in 0..hq {
+            match src_of(s * i + a, h, hp) {
+                None => planes
+                    .iter_mut()
+                    .for_each(|p| p[i * wq..(i + 1) * wq].fill(0.0)),
+                Some(sy) => {
+                    let srow = &src[sy * w..(sy + 1) * w];
+                    for (b, p) in planes.iter_mut().enumerate() {
+                        let drow = &mut p[i * wq..(i + 1) * wq];
                         // Columns j with 0 ≤ s·j + b − pad < w read the row with
                         // stride s; the few others go through the map.
                         let (lo, hi) = interior[b];
                         if lo < hi {
                             let first = s * lo + b - pad;
-                            for (d, v) in
-                                drow[lo..hi].iter_mut().zip(srow[first..].iter().step_by(s))
-                            {
-                                *d = *v;
-                            }
+                            strided_copy(isa, &srow[first..], s, &mut drow[lo..hi]);
                         }
                         for j in (0..lo.min(wq)).chain(hi.max(lo)..wq) {
                             drow[j] = cols[b][j].map_or(0.0, |cx| srow[cx]);
@@ -340,6 +641,7 @@ pub(crate) fn phase_copy(
                     }
                 }
             }
-        });
+        }
+    });
     (buf, hq, wq)
 }

@@ -304,14 +304,18 @@ fn conv_transpose2d_shapes() {
         act: Activation::Relu,
     };
     let mut problems = vec![
-        t(1, 1, 1, 1, 1, 3, 2, 1, 1),   // 1x1 input
-        t(1, 5, 7, 16, 12, 3, 2, 1, 1), // the decoder's layer, scaled down
-        t(2, 6, 3, 9, 5, 3, 2, 1, 1),   // batch 2, odd channels
-        t(1, 4, 4, 3, 4, 3, 2, 1, 0),   // no output padding
-        t(1, 3, 5, 4, 6, 4, 2, 1, 0),   // even kernel
-        t(1, 4, 3, 5, 3, 3, 1, 1, 0),   // stride 1
-        t(1, 3, 4, 2, 3, 5, 3, 2, 2),   // stride 3, output padding 2
-        t(1, 2, 3, 70, 8, 3, 2, 0, 1),  // no padding
+        t(1, 1, 1, 1, 1, 3, 2, 1, 1),    // 1x1 input
+        t(1, 5, 7, 16, 12, 3, 2, 1, 1),  // the decoder's layer, scaled down
+        t(2, 6, 3, 9, 5, 3, 2, 1, 1),    // batch 2, odd channels
+        t(1, 4, 4, 3, 4, 3, 2, 1, 0),    // no output padding
+        t(1, 3, 5, 4, 6, 4, 2, 1, 0),    // even kernel
+        t(1, 4, 3, 5, 3, 3, 1, 1, 0),    // stride 1
+        t(1, 3, 4, 2, 3, 5, 3, 2, 2),    // stride 3, output padding 2
+        t(1, 2, 3, 70, 8, 3, 2, 0, 1),   // no padding
+        t(1, 9, 61, 12, 10, 3, 2, 1, 1), // rows wider than a panel, runs across rows
+        t(1, 5, 30, 20, 9, 3, 2, 1, 0),  // odd output width: the last pair is half full
+        t(1, 3, 4, 3, 2, 1, 2, 0, 1),    // 1x1 kernel, stride 2: phases without taps
+        t(1, 4, 5, 6, 4, 2, 3, 0, 2),    // stride 3, a row phase without taps
     ];
     let mut rng = Rng::new(77);
     for _ in 0..25 {
