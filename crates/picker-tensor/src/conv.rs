@@ -216,8 +216,8 @@ pub struct Conv2d {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 #[non_exhaustive]
 pub enum ConvAlgorithm {
-    /// Chosen from the shape: the shifted GEMM with folded columns for
-    /// stride-1 layers with ≤ 4 outputs; Winograd for 3×3 stride-1 layers with
+    /// Chosen from the shape: the direct convolution for stride-1 layers
+    /// with ≤ 4 outputs and kernels wider than 1; Winograd for 3×3 stride-1 layers with
     /// ≥ 16 input and output channels (`PICKER_WINOGRAD_WEIGHTS=lazy` picks
     /// [`ConvAlgorithm::WinogradLowMemory`]); the shifted GEMM for other
     /// kernels larger than 1×1 or with padding; else (1×1) the packed GEMM.
@@ -226,7 +226,8 @@ pub enum ConvAlgorithm {
     Auto,
     /// Packed GEMM over an implicit im2col (any shape).
     Gemm,
-    /// Direct row-vectorised convolution (stride 1, no padding, ≤ 4 outputs).
+    /// Direct row-vectorised convolution (stride 1, ≤ 4 outputs; the
+    /// padding filled in per task, no padded copy).
     Direct,
     /// Winograd F(4×4, 3×3) (3×3 kernels, stride 1, any zero padding), its
     /// transformed weights packed once (4× the memory of the 3×3 weights).
@@ -255,7 +256,7 @@ impl ConvAlgorithm {
     pub fn applies(self, s: &ConvSpec) -> bool {
         match self {
             ConvAlgorithm::Auto | ConvAlgorithm::Gemm => true,
-            ConvAlgorithm::Direct => s.stride == 1 && s.pad == 0 && s.c_out <= direct::MAX_CO,
+            ConvAlgorithm::Direct => s.stride == 1 && s.c_out <= direct::MAX_CO,
             ConvAlgorithm::Winograd | ConvAlgorithm::WinogradLowMemory => {
                 s.kh == 3 && s.kw == 3 && s.stride == 1
             }
@@ -267,8 +268,8 @@ impl ConvAlgorithm {
         let force_gemm = std::env::var("PICKER_CONV").as_deref() == Ok("gemm");
         match self {
             ConvAlgorithm::Auto if force_gemm => ConvAlgorithm::Gemm,
-            ConvAlgorithm::Auto if s.stride == 1 && s.c_out <= FOLD_MAX_CO && s.kw > 1 => {
-                ConvAlgorithm::Shifted
+            ConvAlgorithm::Auto if s.stride == 1 && s.c_out <= direct::MAX_CO && s.kw > 1 => {
+                ConvAlgorithm::Direct
             }
             ConvAlgorithm::Auto
                 if ConvAlgorithm::Winograd.applies(s) && s.c_in >= 16 && s.c_out >= 16 =>
@@ -294,7 +295,8 @@ enum ConvPath {
         packed: PackedA,
         taps: Vec<(isize, isize)>,
     },
-    /// Direct convolution (stride 1, no padding, ≤ `direct::MAX_CO` outputs).
+    /// Direct convolution (stride 1, ≤ `direct::MAX_CO` outputs), weights as
+    /// `direct::pack_weights` lays them out.
     Direct { isa: Isa, weight: Vec<f32> },
     /// Winograd F(4×4, 3×3).
     Winograd { isa: Isa, wino: Winograd },
@@ -476,7 +478,7 @@ impl Conv2d {
         let path = match algorithm.resolve(&spec) {
             ConvAlgorithm::Direct => ConvPath::Direct {
                 isa,
-                weight: weight.to_vec(),
+                weight: direct::pack_weights(weight, spec.c_out, spec.c_in, spec.kh * spec.kw),
             },
             algo @ (ConvAlgorithm::Winograd | ConvAlgorithm::WinogradLowMemory) => {
                 ConvPath::Winograd {
@@ -609,7 +611,7 @@ impl Conv2d {
         if reflect > 0
             && !matches!(
                 self.path,
-                ConvPath::Winograd { .. } | ConvPath::Shifted { .. }
+                ConvPath::Winograd { .. } | ConvPath::Shifted { .. } | ConvPath::Direct { .. }
             )
         {
             let padded = reflect_pad(x, [reflect; 4])?;
@@ -637,6 +639,11 @@ impl Conv2d {
             let residual = residual.map(|r| r.image(b));
             match &self.path {
                 ConvPath::Direct { isa, weight } => {
+                    let (pad, fill) = if reflect > 0 {
+                        (reflect, Fill::Reflect)
+                    } else {
+                        (s.pad, Fill::Zero)
+                    };
                     let p = DirectProblem {
                         x: img,
                         c_in: s.c_in,
@@ -644,13 +651,21 @@ impl Conv2d {
                         w: x.w(),
                         kh: s.kh,
                         kw: s.kw,
+                        pad,
+                        fill,
                         oh,
                         ow,
                     };
-                    conv_direct(*isa, &p, s.c_out, weight, self.bias.as_deref(), self.act, c);
-                    if let Some(r) = residual {
-                        c.iter_mut().zip(r).for_each(|(v, r)| *v += r);
-                    }
+                    conv_direct(
+                        *isa,
+                        &p,
+                        s.c_out,
+                        weight,
+                        self.bias.as_deref(),
+                        self.act,
+                        residual,
+                        c,
+                    );
                 }
                 ConvPath::Winograd { wino, .. } => {
                     let (pad, border) = if reflect > 0 {

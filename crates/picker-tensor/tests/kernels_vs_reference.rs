@@ -140,6 +140,8 @@ fn named_conv_problems() -> Vec<ConvProblem> {
         conv(1, 4, 66, 3, 2, 1, 1, 0),        // direct path, 1x1
         relu(conv(1, 9, 13, 6, 3, 7, 1, 2)),  // folded shifted GEMM with zero padding
         conv(1, 8, 70, 5, 2, 5, 1, 0),        // folded, two outputs, rows across panels
+        tanh(conv(1, 7, 130, 9, 1, 7, 1, 3)), // direct: one output, zero pad, 3 column blocks
+        relu(conv(1, 1, 3, 2, 4, 3, 1, 1)),   // direct: one output row (half a row pair)
         relu(conv(1, 19, 21, 3, 10, 7, 2, 3)), // shifted via phase planes, 7x7 stride 2
         conv(1, 23, 17, 9, 11, 3, 3, 1),      // phase planes, stride 3
         res(conv(1, 14, 28, 16, 16, 3, 1, 0)), // Winograd: 28 tiles, one narrow panel (2 zmm)
@@ -213,7 +215,7 @@ fn auto_algorithm_choice() {
     );
     assert_eq!(
         pick(ConvSpec::square(64, 3, 7, 1, 0)),
-        ConvAlgorithm::Shifted
+        ConvAlgorithm::Direct
     );
     assert_eq!(
         pick(ConvSpec::square(64, 128, 3, 2, 1)),
