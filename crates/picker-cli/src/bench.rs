@@ -101,6 +101,7 @@ pub fn run(a: Args) -> Result<()> {
     // The network holds its own (folded, packed) copy: unmap the file.
     drop(weights);
     let load_ms = t0.elapsed().as_secs_f64() * 1e3;
+    let load_rss_mb = peak_rss_mb();
     let kind = net.kind();
     let config = net.config();
 
@@ -152,6 +153,7 @@ pub fn run(a: Args) -> Result<()> {
             "gflop": flops / 1e9,
             "gflops": gflops,
             "peak_rss_mb": peak_rss_mb,
+            "peak_rss_after_load_mb": load_rss_mb,
             "peak_rss_scope": if rss_reset { "process, from weight loading on" } else { "process" },
             "isa": isa,
             "params": config.param_count(),

@@ -180,15 +180,29 @@ impl Irn {
         } else {
             // The towers are independent: run them side by side (each layer's
             // kernels still split over the pool), so no thread waits at the
-            // end of one small layer for the other. Results do not depend on
-            // the schedule: every kernel's arithmetic is fixed per element.
+            // end of one small layer for the other. One group of towers per
+            // thread, each group's towers one after another: a thread that
+            // waits inside a layer can then only pick up kernel tasks or a
+            // group not yet started, never a further tower, so at most one
+            // tower per thread holds its activations at a time. Results do
+            // not depend on the schedule: every kernel's arithmetic is fixed
+            // per element.
             use rayon::prelude::*;
-            let ys: Vec<Result<Tensor>> = self
-                .heads
-                .par_iter()
-                .map(|(_, tower)| tower.forward_traced(&e, &mut Tracer::new(None), ""))
+            let groups = rayon::current_num_threads().clamp(1, self.heads.len().max(1));
+            let ys: Vec<Vec<Result<Tensor>>> = (0..groups)
+                .into_par_iter()
+                .map(|g| {
+                    self.heads
+                        .iter()
+                        .skip(g)
+                        .step_by(groups)
+                        .map(|(_, tower)| tower.forward_traced(&e, &mut Tracer::new(None), ""))
+                        .collect()
+                })
                 .collect();
-            for ((name, _), y) in self.heads.iter().zip(ys) {
+            let mut ys: Vec<_> = ys.into_iter().map(Vec::into_iter).collect();
+            for (i, (name, _)) in self.heads.iter().enumerate() {
+                let y = ys[i % groups].next().expect("one output per head");
                 heads.push((name.clone(), crop_back(y?, pads, x.h(), x.w())?));
             }
         }
