@@ -1,6 +1,6 @@
 //! Times one layer shape of the thesis networks at 240×320, for quick tuning
 //! without criterion: `cargo run --release -p picker-tensor --example tune -- res`
-//! (`res`, `resmany`, `envres`, `decout`, `encin`, `down0`, `down1`, `envin`, `envdown0`, `envdown1`, `up0`, `up1`; `RAYON_NUM_THREADS`, `PICKER_ISA` apply).
+//! (`res`, `resmany`, `envres`, `envresmany`, `decout`, `encin`, `down0`, `down1`, `envin`, `envdown0`, `envdown1`, `up0`, `up1`; `RAYON_NUM_THREADS`, `PICKER_ISA` apply).
 
 use picker_tensor::{
     Activation, Conv2d, ConvAlgorithm, ConvSpec, ConvTranspose2d, ConvTransposeSpec, Isa, Rng,
@@ -36,9 +36,10 @@ fn main() {
         "up1" => Some((120, 160, ConvTransposeSpec::square(128, 64, 3, 2, 1, 1))),
         _ => None,
     };
-    if which == "resmany" {
+    if which == "resmany" || which == "envresmany" {
         // 24 different layers in turn, as in a network: the weights of each
         // come from memory, not from the cache.
+        let (h, w) = if which == "resmany" { (62, 82) } else { (32, 42) };
         let s = ConvSpec::square(256, 256, 3, 1, 0);
         let convs: Vec<Conv2d> = (0..24)
             .map(|_| {
@@ -46,9 +47,9 @@ fn main() {
                 Conv2d::new(s, &wt, None, Activation::Relu).expect("layer")
             })
             .collect();
-        let x = rng.tensor([1, 256, 62, 82]);
+        let x = rng.tensor([1, 256, h, w]);
         let mut i = 0;
-        return time_it("resmany (per layer)", s.flops(62, 82), || {
+        return time_it(&format!("{which} (per layer)"), s.flops(h, w), || {
             i = (i + 1) % convs.len();
             convs[i].forward(&x).expect("forward")
         });
