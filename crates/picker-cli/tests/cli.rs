@@ -208,6 +208,45 @@ fn infer_example_photo_writes_every_output() {
 }
 
 #[test]
+fn low_memory_mode_gives_the_same_bytes() {
+    // PICKER_MEMORY=low: lazy Winograd weights and the IRN's towers one
+    // after another; every output file must be byte-identical.
+    let dir = tempfile::tempdir().unwrap();
+    let (a, b) = (dir.path().join("default"), dir.path().join("low"));
+    assert_ok(&infer(&example_photo(), &a, &[]));
+    let mut args: Vec<std::ffi::OsString> = vec!["infer".into(), example_photo().into()];
+    args.extend([
+        "--weights".into(),
+        tiny_weights().into(),
+        "--out".into(),
+        b.clone().into(),
+    ]);
+    let o = Command::new(env!("CARGO_BIN_EXE_picker"))
+        .args(args)
+        .env("RAYON_NUM_THREADS", "2")
+        .env("PICKER_MEMORY", "low")
+        .output()
+        .expect("running picker");
+    assert_ok(&o);
+    let mut names: Vec<_> = std::fs::read_dir(&a)
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    names.sort();
+    assert!(names.len() > 10, "{names:?}");
+    for n in names {
+        if n.to_string_lossy().ends_with(".json") {
+            continue; // timings differ
+        }
+        let (x, y) = (
+            std::fs::read(a.join(&n)).unwrap(),
+            std::fs::read(b.join(&n)).unwrap(),
+        );
+        assert!(x == y, "{n:?} differs in the low-memory mode");
+    }
+}
+
+#[test]
 fn infer_odd_size_rgb_png_upscales_to_work_size() {
     let dir = tempfile::tempdir().unwrap();
     let photo = dir.path().join("odd.png");

@@ -172,7 +172,7 @@ impl Irn {
         let (xp, pads) = pad_input(NetKind::Irn, x, 3)?;
         let e = self.enc.forward_traced(&xp, tr, "enc")?;
         let mut heads = Vec::with_capacity(self.heads.len());
-        if tr.is_recording() {
+        if tr.is_recording() || picker_tensor::low_memory() {
             for (name, tower) in &self.heads {
                 let y = tower.forward_traced(&e, tr, &format!("heads.{name}"))?;
                 heads.push((name.clone(), crop_back(y, pads, x.h(), x.w())?));

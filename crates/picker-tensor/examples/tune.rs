@@ -39,7 +39,11 @@ fn main() {
     if which == "resmany" || which == "envresmany" {
         // 24 different layers in turn, as in a network: the weights of each
         // come from memory, not from the cache.
-        let (h, w) = if which == "resmany" { (62, 82) } else { (32, 42) };
+        let (h, w) = if which == "resmany" {
+            (62, 82)
+        } else {
+            (32, 42)
+        };
         let s = ConvSpec::square(256, 256, 3, 1, 0);
         let convs: Vec<Conv2d> = (0..24)
             .map(|_| {

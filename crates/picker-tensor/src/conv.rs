@@ -218,7 +218,8 @@ pub struct Conv2d {
 pub enum ConvAlgorithm {
     /// Chosen from the shape: the direct convolution for stride-1 layers
     /// with ≤ 4 outputs and kernels wider than 1; Winograd for 3×3 stride-1 layers with
-    /// ≥ 16 input and output channels (`PICKER_WINOGRAD_WEIGHTS=lazy` picks
+    /// ≥ 16 input and output channels (`PICKER_WINOGRAD_WEIGHTS=lazy` or
+    /// [`crate::low_memory`] picks
     /// [`ConvAlgorithm::WinogradLowMemory`]); the shifted GEMM for other
     /// kernels larger than 1×1 or with padding; else (1×1) the packed GEMM.
     /// With the environment variable `PICKER_CONV=gemm` set when a layer is
@@ -274,7 +275,9 @@ impl ConvAlgorithm {
             ConvAlgorithm::Auto
                 if ConvAlgorithm::Winograd.applies(s) && s.c_in >= 16 && s.c_out >= 16 =>
             {
-                if std::env::var("PICKER_WINOGRAD_WEIGHTS").as_deref() == Ok("lazy") {
+                if crate::low_memory()
+                    || std::env::var("PICKER_WINOGRAD_WEIGHTS").as_deref() == Ok("lazy")
+                {
                     ConvAlgorithm::WinogradLowMemory
                 } else {
                     ConvAlgorithm::Winograd

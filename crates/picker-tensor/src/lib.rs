@@ -47,6 +47,17 @@ mod tolerance;
 mod winograd;
 
 pub use activation::Activation;
+
+/// The low-memory mode, `PICKER_MEMORY=low` in the environment (read when
+/// layers are built and when a network runs): 3×3 layers keep only their
+/// 3×3 weights and make the Winograd ones at every pass
+/// ([`ConvAlgorithm::WinogradLowMemory`]), and networks with several towers
+/// run them one after another, so that one tower's activations are live at a
+/// time. Slower (IRN at 240×320 on 2 cores: ~30%), for machines where memory
+/// is the limit.
+pub fn low_memory() -> bool {
+    std::env::var("PICKER_MEMORY").as_deref() == Ok("low")
+}
 pub use bn::{fold_batchnorm, BatchNorm, WeightLayout};
 pub use conv::{Conv2d, ConvAlgorithm, ConvSpec, ConvTranspose2d, ConvTransposeSpec};
 pub use elementwise::{activate, add_assign};
