@@ -140,18 +140,19 @@ pub fn plane_coords(w: usize, h: usize, mask: &[bool], n: Vec3, focal: f32) -> C
                 rt[col] = -p.dot(e2);
             }
         });
-    // Both percentiles from one copy of the finite values (an order
-    // statistic does not depend on how the earlier selection permuted them).
+    // Both percentiles of the finite values, found in parallel without
+    // collecting them (`select::kth_smallest`: the values a selection over
+    // the collected finite values gives), both coordinates side by side.
     let pct2 = |v: &[f32], q0: f32, q1: f32| -> Option<(f32, f32)> {
-        let mut f: Vec<f32> = v.par_iter().copied().filter(|x| x.is_finite()).collect();
-        if f.is_empty() {
-            return None;
-        }
-        let mut at = |q: f32| {
-            let k = ((f.len() - 1) as f32 * q) as usize;
-            *f.select_nth_unstable_by(k, |a, b| a.total_cmp(b)).1
-        };
-        Some((at(q0), at(q1)))
+        let at = crate::select::kth_smallest(
+            v.len(),
+            |i| v[i].is_finite().then(|| v[i]),
+            |len| {
+                let k = |q: f32| ((len - 1) as f32 * q) as usize;
+                Some(vec![k(q0), k(q1)])
+            },
+        )?;
+        Some((at[0], at[1]))
     };
     let mut coords = Coords {
         width: w,
@@ -160,7 +161,9 @@ pub fn plane_coords(w: usize, h: usize, mask: &[bool], n: Vec3, focal: f32) -> C
         v: vec![f32::NAN; w * h],
         wrap: false,
     };
-    let (Some((s0, s1)), Some((t0, t1))) = (pct2(&s, 0.02, 0.98), pct2(&t, 0.02, 0.98)) else {
+    let (Some((s0, s1)), Some((t0, t1))) =
+        rayon::join(|| pct2(&s, 0.02, 0.98), || pct2(&t, 0.02, 0.98))
+    else {
         return coords;
     };
     let side = ((s1 - s0).max(1e-9) * (t1 - t0).max(1e-9)).sqrt();
