@@ -749,6 +749,57 @@ pub fn extract(
 pub fn preview_sphere(m: &Material, env: &EnvMap, size: usize, repeats: f32) -> Image {
     let shader = Shader::new(env, Quality::Fast);
     let mut out = Image::zeros(3, size, size);
+    // Rows in parallel: every pixel is shaded alone (the same bits whatever
+    // the threads; `tests::parallel_preview_matches_reference`).
+    let n = size * size;
+    let (r, rest) = out.data.split_at_mut(n);
+    let (g, b) = rest.split_at_mut(n);
+    let step = size.max(1);
+    r.par_chunks_mut(step)
+        .zip(g.par_chunks_mut(step))
+        .zip(b.par_chunks_mut(step))
+        .enumerate()
+        .for_each(|(row, ((r, g), b))| {
+            let mut phong = m.params.phong();
+            for col in 0..size {
+                if let Some(c) = preview_pixel(m, &shader, &mut phong, size, repeats, row, col) {
+                    (r[col], g[col], b[col]) = (c.x, c.y, c.z);
+                }
+            }
+        });
+    out
+}
+
+/// One pixel of [`preview_sphere`] (`None` off the sphere).
+fn preview_pixel(
+    m: &Material,
+    shader: &Shader,
+    phong: &mut picker_render::PhongMaterial,
+    size: usize,
+    repeats: f32,
+    row: usize,
+    col: usize,
+) -> Option<Vec3> {
+    let x = (col as f32 + 0.5) / size as f32 * 2.0 - 1.0;
+    let y = 1.0 - (row as f32 + 0.5) / size as f32 * 2.0;
+    let r2 = x * x + y * y;
+    if r2 >= 1.0 {
+        return None;
+    }
+    let n = Vec3::new(x, y, (1.0 - r2).sqrt());
+    if let Some(t) = &m.texture {
+        let u = (n.x.atan2(n.z) / std::f32::consts::TAU + 0.5) * repeats;
+        let v = n.y.clamp(-1.0, 1.0).acos() / std::f32::consts::PI * repeats / 2.0;
+        phong.diffuse = sample_wrapped(&t.texture, u.rem_euclid(1.0), v.rem_euclid(1.0));
+    }
+    Some(shader.shade(n, Vec3::Z, phong))
+}
+
+/// The plain, sequential [`preview_sphere`].
+#[cfg(test)]
+fn preview_sphere_reference(m: &Material, env: &EnvMap, size: usize, repeats: f32) -> Image {
+    let shader = Shader::new(env, Quality::Fast);
+    let mut out = Image::zeros(3, size, size);
     let mut phong = m.params.phong();
     for row in 0..size {
         for col in 0..size {
@@ -773,6 +824,52 @@ pub fn preview_sphere(m: &Material, env: &EnvMap, size: usize, repeats: f32) -> 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn parallel_preview_matches_reference() {
+        let mut rng = picker_tensor::Rng::new(10);
+        let env = EnvMap::from_image(
+            &Image::new(3, 8, 16, rng.uniform_vec(3 * 8 * 16, 0.0, 2.0)).unwrap(),
+        )
+        .unwrap();
+        let tex = Image::new(3, 8, 8, rng.uniform_vec(3 * 64, 0.0, 1.0)).unwrap();
+        let mut m = Material {
+            name: "m".into(),
+            pick: None,
+            params: MaterialParams {
+                diffuse: [0.5, 0.3, 0.2],
+                specular: [0.04, 0.04, 0.04],
+                glossiness: 0.5,
+                exponent: conv::phong_exponent(0.5),
+            },
+            textured: true,
+            texture: Some(crate::TextureResult {
+                seam: seam_score(&tex),
+                texture: tex.clone(),
+                raw: tex.clone(),
+                coverage: Image::zeros(1, 8, 8),
+                coverage_fraction: 1.0,
+                uv_mode: UvMode::Plane,
+                inpainter: "test".into(),
+            }),
+            mask: Image::zeros(1, 1, 1),
+            area_fraction: 1.0,
+            rerender_psnr: None,
+        };
+        let bits = |v: &Image| v.data.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        for size in [1, 2, 17, 64] {
+            assert_eq!(
+                bits(&preview_sphere(&m, &env, size, 2.0)),
+                bits(&preview_sphere_reference(&m, &env, size, 2.0)),
+                "{size}"
+            );
+        }
+        m.texture = None;
+        assert_eq!(
+            bits(&preview_sphere(&m, &env, 33, 2.0)),
+            bits(&preview_sphere_reference(&m, &env, 33, 2.0))
+        );
+    }
 
     #[test]
     fn fused_linear_and_luma_match() {
