@@ -292,8 +292,17 @@ impl Models {
     ) -> Result<(ElementImages, Image, Option<EnvMap>, Value)> {
         let (pw, ph) = photo_rgb.dimensions();
         let (ww, wh) = photo::working_size(pw, ph, work_size);
-        let work = photo::resize(photo_rgb, ww, wh);
-        let mut x = Tensor::new([1, 3, wh as usize, ww as usize], photo::to_planar(&work))
+        self.infer_work(&photo::resize(photo_rgb, ww, wh), timings)
+    }
+
+    /// [`Models::infer`] of the photo already resized to the working size.
+    fn infer_work(
+        &self,
+        work: &image::Rgb32FImage,
+        timings: &mut serde_json::Map<String, Value>,
+    ) -> Result<(ElementImages, Image, Option<EnvMap>, Value)> {
+        let (ww, wh) = work.dimensions();
+        let mut x = Tensor::new([1, 3, wh as usize, ww as usize], photo::to_planar(work))
             .map_err(|e| anyhow!("making the input tensor: {e}"))?;
         conv::normalize_input(&mut x);
         let (mut elements, mut seg, mut env) = (None, None, None);
@@ -400,7 +409,19 @@ pub fn load_inputs_from(
         None => photo::load_with(photo_path, &flags.photo_limits())?,
     };
     let (w, h) = p.rgb.dimensions();
-    let photo_img = Image::new(3, h as usize, w as usize, photo::to_planar(&p.rgb))
+    // The planar copy (parallel) and the networks' working copy (the `image`
+    // crate's resize, one thread) side by side.
+    let (planar, work) = rayon::join(
+        || photo::to_planar(&p.rgb),
+        || match source {
+            Source::Nets(_) => {
+                let (ww, wh) = photo::working_size(w, h, flags.work_size);
+                Some(photo::resize(&p.rgb, ww, wh))
+            }
+            Source::Elements(_) => None,
+        },
+    );
+    let photo_img = Image::new(3, h as usize, w as usize, planar)
         .map_err(|e| anyhow!("{}: {e}", photo_path.display()))?;
     let photo_info = json!({
         "path": label,
@@ -415,9 +436,10 @@ pub fn load_inputs_from(
     let t = Instant::now();
     let (inputs, source) = match source {
         Source::Nets(models) => {
-            let (elements, segmentation, envmap, source) =
-                models.infer(&p.rgb, flags.work_size, &mut timings)?;
             drop(p);
+            let work = work.expect("resized for the networks");
+            let (elements, segmentation, envmap, source) =
+                models.infer_work(&work, &mut timings)?;
             (
                 Inputs {
                     photo: photo_img,

@@ -154,38 +154,42 @@ pub fn plane_coords(w: usize, h: usize, mask: &[bool], n: Vec3, focal: f32) -> C
         )?;
         Some((at[0], at[1]))
     };
-    let mut coords = Coords {
-        width: w,
-        height: h,
-        u: vec![f32::NAN; w * h],
-        v: vec![f32::NAN; w * h],
-        wrap: false,
-    };
     let (Some((s0, s1)), Some((t0, t1))) =
         rayon::join(|| pct2(&s, 0.02, 0.98), || pct2(&t, 0.02, 0.98))
     else {
-        return coords;
+        return Coords {
+            width: w,
+            height: h,
+            u: vec![f32::NAN; w * h],
+            v: vec![f32::NAN; w * h],
+            wrap: false,
+        };
     };
     let side = ((s1 - s0).max(1e-9) * (t1 - t0).max(1e-9)).sqrt();
     let (sc, tc) = ((s0 + s1) / 2.0 - side / 2.0, (t0 + t1) / 2.0 - side / 2.0);
-    coords
-        .u
-        .par_chunks_mut(step)
-        .zip(coords.v.par_chunks_mut(step))
-        .enumerate()
-        .for_each(|(row, (ru, rv))| {
-            for col in 0..ru.len() {
-                let i = row * w + col;
-                if s[i].is_finite() {
-                    let (u, v) = ((s[i] - sc) / side, (t[i] - tc) / side);
-                    if (0.0..1.0).contains(&u) && (0.0..1.0).contains(&v) {
-                        ru[col] = u;
-                        rv[col] = v;
+    // The plane coordinates become the texture coordinates in place (NaN
+    // where a pixel has none or falls outside the square).
+    s.par_chunks_mut(step)
+        .zip(t.par_chunks_mut(step))
+        .for_each(|(rs, rt)| {
+            for (ps, pt) in rs.iter_mut().zip(rt.iter_mut()) {
+                let (mut u, mut v) = (f32::NAN, f32::NAN);
+                if ps.is_finite() {
+                    let (uu, vv) = ((*ps - sc) / side, (*pt - tc) / side);
+                    if (0.0..1.0).contains(&uu) && (0.0..1.0).contains(&vv) {
+                        (u, v) = (uu, vv);
                     }
                 }
+                (*ps, *pt) = (u, v);
             }
         });
-    coords
+    Coords {
+        width: w,
+        height: h,
+        u: s,
+        v: t,
+        wrap: false,
+    }
 }
 
 /// The plain, sequential implementation of [`plane_coords`] (the reference
