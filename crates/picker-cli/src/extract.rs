@@ -292,8 +292,17 @@ impl Models {
     ) -> Result<(ElementImages, Image, Option<EnvMap>, Value)> {
         let (pw, ph) = photo_rgb.dimensions();
         let (ww, wh) = photo::working_size(pw, ph, work_size);
-        let work = photo::resize(photo_rgb, ww, wh);
-        let mut x = Tensor::new([1, 3, wh as usize, ww as usize], photo::to_planar(&work))
+        self.infer_work(&photo::resize(photo_rgb, ww, wh), timings)
+    }
+
+    /// [`Models::infer`] of the photo already resized to the working size.
+    fn infer_work(
+        &self,
+        work: &image::Rgb32FImage,
+        timings: &mut serde_json::Map<String, Value>,
+    ) -> Result<(ElementImages, Image, Option<EnvMap>, Value)> {
+        let (ww, wh) = work.dimensions();
+        let mut x = Tensor::new([1, 3, wh as usize, ww as usize], photo::to_planar(work))
             .map_err(|e| anyhow!("making the input tensor: {e}"))?;
         conv::normalize_input(&mut x);
         let (mut elements, mut seg, mut env) = (None, None, None);
@@ -400,7 +409,19 @@ pub fn load_inputs_from(
         None => photo::load_with(photo_path, &flags.photo_limits())?,
     };
     let (w, h) = p.rgb.dimensions();
-    let photo_img = Image::new(3, h as usize, w as usize, photo::to_planar(&p.rgb))
+    // The planar copy (parallel) and the networks' working copy (the `image`
+    // crate's resize, one thread) side by side.
+    let (planar, work) = rayon::join(
+        || photo::to_planar(&p.rgb),
+        || match source {
+            Source::Nets(_) => {
+                let (ww, wh) = photo::working_size(w, h, flags.work_size);
+                Some(photo::resize(&p.rgb, ww, wh))
+            }
+            Source::Elements(_) => None,
+        },
+    );
+    let photo_img = Image::new(3, h as usize, w as usize, planar)
         .map_err(|e| anyhow!("{}: {e}", photo_path.display()))?;
     let photo_info = json!({
         "path": label,
@@ -415,9 +436,10 @@ pub fn load_inputs_from(
     let t = Instant::now();
     let (inputs, source) = match source {
         Source::Nets(models) => {
-            let (elements, segmentation, envmap, source) =
-                models.infer(&p.rgb, flags.work_size, &mut timings)?;
             drop(p);
+            let work = work.expect("resized for the networks");
+            let (elements, segmentation, envmap, source) =
+                models.infer_work(&work, &mut timings)?;
             (
                 Inputs {
                     photo: photo_img,
@@ -527,105 +549,62 @@ fn direction_colours(img: &Image) -> Image {
     out
 }
 
-fn tiled(tex: &Image, k: usize) -> Image {
-    let (w, h) = (tex.width, tex.height);
-    let mut out = Image::zeros(tex.channels, h * k, w * k);
-    for c in 0..tex.channels {
-        for y in 0..h * k {
-            for x in 0..w * k {
-                out.data[c * h * w * k * k + y * w * k + x] =
-                    tex.data[c * h * w + (y % h) * w + x % w];
-            }
-        }
-    }
-    out
-}
-
-/// The report sheet (thesis fig. 6.7 and more).
+/// The report sheet (thesis fig. 6.7 and more). The photo-resolution tiles
+/// (photo + pick, mask overlay) and the 2×2 tiling are made row by row at
+/// the tile size ([`report::LazyTile`]): the same sheet as resizing copies of
+/// the whole pictures.
 fn report_sheet(p: &Prepared, m: &Material, preview: &Image) -> Image {
     let el = &p.inputs.elements;
-    let mut photo = p.inputs.photo.clone();
-    if let Some([x, y]) = m.pick {
-        let r = (photo.width.max(photo.height) as f32 / 40.0).max(4.0);
-        report::draw_marker(&mut photo, x as f32 + 0.5, y as f32 + 0.5, r);
-    }
-    let mut overlay = p.inputs.photo.clone();
-    let n = overlay.plane_len();
-    {
-        use rayon::prelude::*;
-        overlay.data.par_chunks_mut(n.max(1)).for_each(|plane| {
-            for (v, &mk) in plane.iter_mut().zip(&m.mask.data) {
-                if mk <= 0.5 {
-                    *v *= 0.25;
-                }
-            }
-        });
-    }
+    let photo = &p.inputs.photo;
+    let shown = |label: &str, image: Image| {
+        report::LazyTile::from(Tile {
+            label: label.into(),
+            image,
+        })
+    };
+    let photo_tile = match m.pick {
+        Some([x, y]) => {
+            let r = (photo.width.max(photo.height) as f32 / 40.0).max(4.0);
+            report::marked_tile(
+                "photo + pick".into(),
+                photo,
+                x as f32 + 0.5,
+                y as f32 + 0.5,
+                r,
+            )
+        }
+        None => report::borrowed_tile("photo + pick".into(), photo),
+    };
     let mut tiles = vec![
-        Tile {
-            label: "photo + pick".into(),
-            image: photo,
-        },
-        Tile {
-            label: "diffuse albedo".into(),
-            image: display(&el.diffuse),
-        },
-        Tile {
-            label: "specular albedo".into(),
-            image: display(&el.specular),
-        },
-        Tile {
-            label: "glossiness".into(),
-            image: el.glossiness.clone(),
-        },
-        Tile {
-            label: "normals".into(),
-            image: direction_colours(&el.normals),
-        },
-        Tile {
-            label: "segmentation".into(),
-            image: p.inputs.segmentation.clone(),
-        },
-        Tile {
-            label: "mask".into(),
-            image: overlay,
-        },
+        photo_tile,
+        shown("diffuse albedo", display(&el.diffuse)),
+        shown("specular albedo", display(&el.specular)),
+        shown("glossiness", el.glossiness.clone()),
+        shown("normals", direction_colours(&el.normals)),
+        shown("segmentation", p.inputs.segmentation.clone()),
+        report::dimmed_tile("mask".into(), photo, &m.mask.data, 0.25),
     ];
     if let Some(e) = &p.inputs.envmap {
-        tiles.push(Tile {
-            label: "lighting (envmap)".into(),
-            image: tone_mapped(&e.to_image()),
-        });
+        tiles.push(shown("lighting (envmap)", tone_mapped(&e.to_image())));
     }
     if let Some(t) = &m.texture {
-        tiles.push(Tile {
-            label: "reprojected".into(),
-            image: display(&t.raw),
-        });
-        tiles.push(Tile {
-            label: "coverage".into(),
-            image: t.coverage.clone(),
-        });
+        tiles.push(shown("reprojected", display(&t.raw)));
+        tiles.push(shown("coverage", t.coverage.clone()));
         // The display map is per value, so tiling the displayed texture is
         // the same as displaying the tiled one (at a quarter of the cost).
-        let shown = display(&t.texture);
-        tiles.push(Tile {
-            label: "texture tiled 2x2".into(),
-            image: tiled(&shown, 2),
-        });
-        tiles.insert(
-            tiles.len() - 1,
-            Tile {
-                label: format!("texture ({})", t.inpainter),
-                image: shown,
-            },
-        );
+        let shown_texture = display(&t.texture);
+        tiles.push(shown(
+            &format!("texture ({})", t.inpainter),
+            shown_texture.clone(),
+        ));
+        tiles.push(report::tiled_tile(
+            "texture tiled 2x2".into(),
+            shown_texture,
+            2,
+        ));
     }
-    tiles.push(Tile {
-        label: "preview".into(),
-        image: preview.clone(),
-    });
-    report::compose_sheet(&tiles, 4, 192)
+    tiles.push(shown("preview", preview.clone()));
+    report::compose_lazy_sheet(&tiles, 4, 192)
 }
 
 /// What to extract from one photo.
@@ -724,15 +703,24 @@ pub fn write_materials(
             out_dir.join(name)
         };
         std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
-        let t = Instant::now();
-        let preview = tone_mapped(&pipeline::preview_sphere(&m, &preview_env, 256, 2.0));
-        rio::write_png(&dir.join("preview.png"), &preview)?;
-        let preview_ms = ms(t);
-        let t_sheet = Instant::now();
-        let sheet = report_sheet(prepared, &m, &preview);
-        rio::write_png(&dir.join("report.png"), &sheet)?;
-        let sheet_ms = ms(t_sheet);
-        let report_ms = ms(t);
+        // The image files (texture, coverage, mask) are written while the
+        // preview and the report sheet are made; the descriptions, which
+        // hold their timings, after both.
+        let (timed, images) = rayon::join(
+            || -> Result<_> {
+                let t = Instant::now();
+                let preview = tone_mapped(&pipeline::preview_sphere(&m, &preview_env, 256, 2.0));
+                rio::write_png(&dir.join("preview.png"), &preview)?;
+                let preview_ms = ms(t);
+                let t_sheet = Instant::now();
+                let sheet = report_sheet(prepared, &m, &preview);
+                rio::write_png(&dir.join("report.png"), &sheet)?;
+                Ok((preview_ms, ms(t_sheet), ms(t)))
+            },
+            || export::write_material_images(&dir, &m, &export_opts),
+        );
+        let (preview_ms, sheet_ms, report_ms) = timed?;
+        let mut files = images.with_context(|| format!("writing {name} to {}", dir.display()))?;
         let mut diagnostics = serde_json::to_value(&diag).context("serialising diagnostics")?;
         if !layout.timings {
             if let Some(o) = diagnostics.as_object_mut() {
@@ -751,8 +739,10 @@ pub fn write_materials(
         if layout.timings {
             extra["timings_ms"] = json!({"extract": extract_ms, "preview_and_report": report_ms, "preview": preview_ms, "report_sheet": sheet_ms, "steps": diag.timings_ms});
         }
-        let files = export::write_material_files(&dir, &m, &extra, &export_opts)
-            .with_context(|| format!("writing {name} to {}", dir.display()))?;
+        files.extend(
+            export::write_material_descriptions(&dir, &m, &extra, &export_opts)
+                .with_context(|| format!("writing {name} to {}", dir.display()))?,
+        );
         let mut s = export::material_json(&m, &Value::Null, &export_opts)?;
         if let Some(o) = s.as_object_mut() {
             let shown = if layout.absolute_paths {

@@ -151,6 +151,16 @@ pub fn write_material_files(
     extra: &Value,
     opts: &ExportOptions,
 ) -> Result<Vec<PathBuf>> {
+    // (A bad directory fails before any file is made.)
+    check_dir(dir)?;
+    material_json(m, extra, opts)?;
+    let mut written = write_material_images(dir, m, opts)?;
+    written.extend(write_material_descriptions(dir, m, extra, opts)?);
+    Ok(written)
+}
+
+/// An error unless `dir` is an existing directory.
+fn check_dir(dir: &Path) -> Result<()> {
     if !dir.is_dir() {
         let source = if dir.exists() {
             std::io::Error::other("not a directory")
@@ -165,32 +175,76 @@ pub fn write_material_files(
             source,
         });
     }
+    Ok(())
+}
+
+/// The image files of [`write_material_files`]: `texture.png`,
+/// `texture.exr` and `coverage.png` when textured, and `mask.png`, encoded
+/// and written side by side (the same bytes as one after the other; the
+/// first failure in that order is returned). Returns the paths in that order.
+pub fn write_material_images(
+    dir: &Path,
+    m: &Material,
+    opts: &ExportOptions,
+) -> Result<Vec<PathBuf>> {
+    use rayon::prelude::*;
+    check_dir(dir)?;
+    type Job<'a> = (PathBuf, Box<dyn Fn(&Path) -> Result<()> + Sync + 'a>);
+    let mut jobs: Vec<Job<'_>> = Vec::new();
+    if let Some(tex) = &m.texture {
+        let sixteen = opts.sixteen_bit;
+        jobs.push((
+            dir.join(TEXTURE_PNG),
+            Box::new(move |path| {
+                // `map(srgb_encode)` in parallel (per value: the same bits).
+                let srgb = Image {
+                    channels: tex.texture.channels,
+                    height: tex.texture.height,
+                    width: tex.texture.width,
+                    data: tex
+                        .texture
+                        .data
+                        .par_iter()
+                        .map(|&v| srgb_encode(v))
+                        .collect(),
+                };
+                if sixteen {
+                    write_png16(path, &srgb)
+                } else {
+                    write_png(path, &srgb)
+                }
+                .map_err(Error::from)
+            }),
+        ));
+        jobs.push((
+            dir.join(TEXTURE_EXR),
+            Box::new(move |path| Ok(write_exr(path, &tex.texture)?)),
+        ));
+        jobs.push((
+            dir.join(COVERAGE_PNG),
+            Box::new(move |path| Ok(write_png(path, &first_plane(&tex.coverage))?)),
+        ));
+    }
+    jobs.push((
+        dir.join(MASK_PNG),
+        Box::new(move |path| Ok(write_png(path, &first_plane(&m.mask))?)),
+    ));
+    let results: Vec<Result<()>> = jobs.par_iter().map(|(path, job)| job(path)).collect();
+    results.into_iter().collect::<Result<Vec<()>>>()?;
+    Ok(jobs.into_iter().map(|(path, _)| path).collect())
+}
+
+/// The description files of [`write_material_files`]: `material.json` (with
+/// `extra`), `material.mtl` and `material.gltf`. Returns their paths.
+pub fn write_material_descriptions(
+    dir: &Path,
+    m: &Material,
+    extra: &Value,
+    opts: &ExportOptions,
+) -> Result<Vec<PathBuf>> {
+    check_dir(dir)?;
     let json = material_json(m, extra, opts)?;
     let mut written = Vec::new();
-
-    if let Some(tex) = &m.texture {
-        let path = dir.join(TEXTURE_PNG);
-        let srgb = tex.texture.map(srgb_encode);
-        if opts.sixteen_bit {
-            write_png16(&path, &srgb)?;
-        } else {
-            write_png(&path, &srgb)?;
-        }
-        written.push(path);
-
-        let path = dir.join(TEXTURE_EXR);
-        write_exr(&path, &tex.texture)?;
-        written.push(path);
-
-        let path = dir.join(COVERAGE_PNG);
-        write_png(&path, &first_plane(&tex.coverage))?;
-        written.push(path);
-    }
-
-    let path = dir.join(MASK_PNG);
-    write_png(&path, &first_plane(&m.mask))?;
-    written.push(path);
-
     let path = dir.join(MATERIAL_JSON);
     write_json(&path, &json, "material.json")?;
     written.push(path);
@@ -419,11 +473,11 @@ fn write_json(path: &Path, value: &Value, what: &str) -> Result<()> {
 }
 
 /// Plane 0 of `img` as a one-channel image (a mask or coverage map).
-fn first_plane(img: &Image) -> Image {
+fn first_plane(img: &Image) -> std::borrow::Cow<'_, Image> {
     if img.channels == 1 {
-        return img.clone();
+        return std::borrow::Cow::Borrowed(img);
     }
-    Image {
+    std::borrow::Cow::Owned(Image {
         channels: 1,
         height: img.height,
         width: img.width,
@@ -432,7 +486,7 @@ fn first_plane(img: &Image) -> Image {
         } else {
             img.plane(0).to_vec()
         },
-    }
+    })
 }
 
 /// `v` as the `f64` with the shortest decimal form that reads back as `v`

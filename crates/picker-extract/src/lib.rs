@@ -9,6 +9,8 @@
 //! - [`plane`], [`reproject`]: texture coordinates (predicted UVs or a
 //!   rectified plane) and the scatter into the texture square with coverage.
 //! - inpainting ([`picker_inpaint`]) fills the unobserved texels, tileably.
+//! - [`select`]: order statistics (quantiles, medians) of photo-resolution
+//!   values in parallel, without sorting them.
 //! - [`pipeline`]: the whole extraction, material parameters and the
 //!   re-render self-check; [`export`], [`report`]: files; [`eval`]: metrics.
 
@@ -26,6 +28,7 @@ pub mod plane;
 pub mod report;
 pub mod reproject;
 pub mod resample;
+pub mod select;
 
 pub use error::{Error, Result};
 pub use material::{Material, MaterialParams, TextureResult, UvMode};

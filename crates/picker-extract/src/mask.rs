@@ -63,26 +63,23 @@ impl Mask {
         use rayon::prelude::*;
         let (w, h) = (self.width, self.height);
         let mut out = self.data.clone();
-        // Rows in parallel (each output pixel depends on the input only).
+        // Rows in parallel (each output pixel depends on the input only),
+        // the three input rows as slices: a pixel stays when it and its
+        // neighbours inside the image are in (`tests::eroded_matches_reference`).
         out.par_chunks_mut(w.max(1))
             .enumerate()
             .for_each(|(y, row)| {
+                let at = |yy: usize| &self.data[yy * w..(yy + 1) * w];
+                let mid = at(y);
+                let up = (y > 0).then(|| at(y - 1));
+                let down = (y + 1 < h).then(|| at(y + 1));
                 for (x, o) in row.iter_mut().enumerate() {
-                    if !self.data[y * w + x] {
+                    if !mid[x] {
                         continue;
                     }
-                    'n: for dy in -1i64..=1 {
-                        for dx in -1i64..=1 {
-                            let (xx, yy) = (x as i64 + dx, y as i64 + dy);
-                            if xx < 0 || yy < 0 || xx >= w as i64 || yy >= h as i64 {
-                                continue;
-                            }
-                            if !self.data[yy as usize * w + xx as usize] {
-                                *o = false;
-                                break 'n;
-                            }
-                        }
-                    }
+                    let (l, r) = (x.saturating_sub(1), (x + 1).min(w - 1));
+                    let all = |s: &[bool]| s[l] && s[x] && s[r];
+                    *o = all(mid) && up.is_none_or(all) && down.is_none_or(all);
                 }
             });
         Mask {
@@ -399,6 +396,51 @@ pub fn refine_reference(mask: &Mask, guide: &[f32], fw: usize, fh: usize) -> Mas
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The plain erosion [`Mask::eroded`] is tested against.
+    fn eroded_reference(m: &Mask) -> Mask {
+        let (w, h) = (m.width, m.height);
+        let mut out = m.data.clone();
+        for y in 0..h {
+            for x in 0..w {
+                if !m.data[y * w + x] {
+                    continue;
+                }
+                'n: for dy in -1i64..=1 {
+                    for dx in -1i64..=1 {
+                        let (xx, yy) = (x as i64 + dx, y as i64 + dy);
+                        if xx < 0 || yy < 0 || xx >= w as i64 || yy >= h as i64 {
+                            continue;
+                        }
+                        if !m.data[yy as usize * w + xx as usize] {
+                            out[y * w + x] = false;
+                            break 'n;
+                        }
+                    }
+                }
+            }
+        }
+        Mask {
+            width: w,
+            height: h,
+            data: out,
+        }
+    }
+
+    #[test]
+    fn eroded_matches_reference() {
+        let mut rng = picker_tensor::Rng::new(22);
+        for &(w, h) in &[(1, 1), (1, 5), (6, 1), (2, 2), (17, 13)] {
+            for density in [0.0, 0.5, 0.9, 1.0] {
+                let m = Mask {
+                    width: w,
+                    height: h,
+                    data: (0..w * h).map(|_| rng.f64() < density).collect(),
+                };
+                assert_eq!(m.eroded(), eroded_reference(&m), "{w}x{h} {density}");
+            }
+        }
+    }
 
     #[test]
     fn fused_refine_matches_reference() {

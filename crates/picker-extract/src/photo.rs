@@ -480,10 +480,12 @@ pub fn decode(bytes: &[u8], label: &Path, limits: &PhotoLimits) -> Result<Photo,
 
     let img = DynamicImage::from_decoder(decoder).map_err(fail)?;
     // Native buffer + 12 B/px here; the native buffer is freed right after.
-    let mut rgb = img.into_rgb32f();
+    let eight_bit_rgb = matches!(img, DynamicImage::ImageRgb8(_));
+    let mut rgb = rgb32f(img);
     if kind.linear {
         expose_linear(&mut rgb);
-    } else {
+    } else if !eight_bit_rgb {
+        // (8-bit values are k / 255, always in [0, 1].)
         // Float formats (e.g. 32-bit TIFF) may hold values outside [0, 1] or NaN.
         for v in rgb.iter_mut() {
             *v = if v.is_nan() { 0.0 } else { v.clamp(0.0, 1.0) };
@@ -498,6 +500,38 @@ pub fn decode(bytes: &[u8], label: &Path, limits: &PhotoLimits) -> Result<Photo,
         channels_in_file,
         linear_input: kind.linear,
     })
+}
+
+/// `img.into_rgb32f()`, with 8-bit RGB (the usual photo) converted in
+/// parallel through a table of the 256 values that `into_rgb32f` itself gives
+/// (so the same bits; `tests::parallel_rgb8_conversion_matches_image`).
+pub fn rgb32f(img: DynamicImage) -> Rgb32FImage {
+    use rayon::prelude::*;
+    let DynamicImage::ImageRgb8(src) = img else {
+        return img.into_rgb32f();
+    };
+    let table: Vec<f32> = {
+        let ramp = image::RgbImage::from_fn(256, 1, |x, _| image::Rgb([x as u8; 3]));
+        DynamicImage::ImageRgb8(ramp)
+            .into_rgb32f()
+            .pixels()
+            .map(|p| p.0[0])
+            .collect()
+    };
+    let (w, h) = src.dimensions();
+    let mut data = vec![0.0f32; src.as_raw().len()];
+    let row = (3 * w as usize).max(1);
+    data.par_chunks_mut(row)
+        .zip(src.as_raw().par_chunks(row))
+        .for_each(|(o, i)| {
+            for (o, &v) in o.iter_mut().zip(i) {
+                *o = table[v as usize];
+            }
+        });
+    let mut out = Rgb32FImage::from_raw(w, h, data).expect("3 values per pixel");
+    // The colour space travels with the pixels, as `into_rgb32f` keeps it.
+    out.set_color_space(src.color_space()).ok();
+    out
 }
 
 /// Applies an EXIF orientation (flips in place, rotations into a new image).
@@ -747,15 +781,20 @@ pub fn to_planar(rgb: &Rgb32FImage) -> Vec<f32> {
     let n = (w * h) as usize;
     let raw: &[f32] = rgb.as_raw();
     let mut planes = vec![0.0f32; 3 * n];
-    // Plane by plane, rows in parallel (pure copies).
+    // Rows in parallel, the three planes' rows written in one pass over the
+    // pixels (pure copies).
     let row = (w as usize).max(1);
-    for (c, plane) in planes.chunks_mut(n.max(1)).enumerate() {
-        plane.par_chunks_mut(row).enumerate().for_each(|(y, out)| {
-            for (x, o) in out.iter_mut().enumerate() {
-                *o = raw[3 * (y * row + x) + c];
+    let (r, rest) = planes.split_at_mut(n);
+    let (g, b) = rest.split_at_mut(n);
+    r.par_chunks_mut(row)
+        .zip(g.par_chunks_mut(row))
+        .zip(b.par_chunks_mut(row))
+        .zip(raw.par_chunks(3 * row))
+        .for_each(|(((r, g), b), px)| {
+            for (x, p) in px.chunks_exact(3).enumerate() {
+                (r[x], g[x], b[x]) = (p[0], p[1], p[2]);
             }
         });
-    }
     planes
 }
 
@@ -792,6 +831,31 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn parallel_rgb8_conversion_matches_image() {
+        let mut rng = picker_tensor::Rng::new(9);
+        for (w, h) in [(1u32, 1u32), (256, 1), (17, 9), (64, 48)] {
+            let img = image::RgbImage::from_fn(w, h, |x, y| {
+                if y == 0 && x < 256 {
+                    image::Rgb([x as u8, 255 - x as u8, (x * 7) as u8])
+                } else {
+                    image::Rgb([rng.range(0, 255) as u8, rng.range(0, 255) as u8, 0])
+                }
+            });
+            let a = rgb32f(DynamicImage::ImageRgb8(img.clone()));
+            let b = DynamicImage::ImageRgb8(img).into_rgb32f();
+            assert_eq!(a.dimensions(), b.dimensions());
+            let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(a.as_raw()), bits(b.as_raw()), "{w}x{h}");
+            assert_eq!(a.color_space(), b.color_space());
+        }
+        // Other layouts go through `into_rgb32f` itself.
+        let grey = DynamicImage::ImageLuma16(image::ImageBuffer::from_fn(5, 3, |x, y| {
+            image::Luma([(x * 9000 + y) as u16])
+        }));
+        assert_eq!(rgb32f(grey.clone()), grey.into_rgb32f());
     }
 
     #[test]

@@ -41,7 +41,7 @@ use serde::Serialize;
 use crate::mask::{Mask, MaskOptions, PickMask};
 use crate::reproject::{self, Coords};
 use crate::{
-    guided, mask, plane, resample, Error, Material, MaterialParams, Result, TextureResult, UvMode,
+    mask, plane, resample, Error, Material, MaterialParams, Result, TextureResult, UvMode,
 };
 
 /// Smallest cross-validated R² for which `auto` trusts the predicted UVs.
@@ -144,22 +144,8 @@ impl Prepared {
         }
         check_size("photo", &inputs.photo, 3, fw, fh)?;
         check_size("segmentation", &inputs.segmentation, 3, w, h)?;
-        // `Image::map(srgb_decode)` in parallel, 8-bit values from a table
-        // (per value: the same bits).
-        let lut = SrgbDecode8::new();
-        let photo_linear = Image {
-            data: inputs
-                .photo
-                .data
-                .par_iter()
-                .map(|&v| lut.decode(v))
-                .collect(),
-            channels: inputs.photo.channels,
-            height: inputs.photo.height,
-            width: inputs.photo.width,
-        };
+        let (photo_linear, luma) = linear_and_luma(&inputs.photo);
         let photo_work = resample::area(&photo_linear, w, h);
-        let luma = guided::luma(&inputs.photo);
         let valid = (0..w * h).map(|i| inputs.elements.is_valid(i)).collect();
         Ok(Self {
             inputs,
@@ -277,11 +263,53 @@ impl Prepared {
     }
 }
 
+/// `photo.map(srgb_decode)` and [`crate::guided::luma`]`(photo)` of a 3-channel
+/// photo in one pass, rows in parallel: 8-bit values decoded from a table
+/// ([`SrgbDecode8`]), the luma by the same expression (per value: the same
+/// bits; `tests::fused_linear_and_luma_match`).
+fn linear_and_luma(photo: &Image) -> (Image, Vec<f32>) {
+    let lut = SrgbDecode8::new();
+    let (w, n) = (photo.width.max(1), photo.plane_len());
+    let mut data = vec![0.0f32; 3 * n];
+    let mut luma = vec![0.0f32; n];
+    let (l0, rest) = data.split_at_mut(n);
+    let (l1, l2) = rest.split_at_mut(n);
+    let (p0, p1, p2) = (photo.plane(0), photo.plane(1), photo.plane(2));
+    l0.par_chunks_mut(w)
+        .zip(l1.par_chunks_mut(w))
+        .zip(l2.par_chunks_mut(w))
+        .zip(luma.par_chunks_mut(w))
+        .enumerate()
+        .for_each(|(y, (((l0, l1), l2), g))| {
+            let o = y * w;
+            let (r, gr, b) = (
+                &p0[o..o + l0.len()],
+                &p1[o..o + l0.len()],
+                &p2[o..o + l0.len()],
+            );
+            for x in 0..l0.len() {
+                l0[x] = lut.decode(r[x]);
+                l1[x] = lut.decode(gr[x]);
+                l2[x] = lut.decode(b[x]);
+                g[x] = 0.2126 * r[x] + 0.7152 * gr[x] + 0.0722 * b[x];
+            }
+        });
+    let linear = Image {
+        channels: 3,
+        height: photo.height,
+        width: photo.width,
+        data,
+    };
+    (linear, luma)
+}
+
 /// [`picker_render::io::srgb_decode`] with the 256 values of 8-bit photos
 /// (`k / 255`, as the `image` crate converts them) looked up in a table of
 /// that function's own results: the same bits, without a `powf` per value.
 pub struct SrgbDecode8 {
     table: [f32; 256],
+    /// The bits of `k / 255`.
+    codes: [u32; 256],
 }
 
 impl Default for SrgbDecode8 {
@@ -295,6 +323,7 @@ impl SrgbDecode8 {
     pub fn new() -> Self {
         Self {
             table: std::array::from_fn(|k| picker_render::io::srgb_decode(k as f32 / 255.0)),
+            codes: std::array::from_fn(|k| (k as f32 / 255.0).to_bits()),
         }
     }
 
@@ -302,9 +331,11 @@ impl SrgbDecode8 {
     #[inline]
     pub fn decode(&self, v: f32) -> f32 {
         if (0.0..=1.0).contains(&v) {
-            let k = (v * 255.0).round() as usize;
+            // The nearest code (`v · 255 + ½` truncated: `round` for these
+            // non-negative values wherever `v` can be a code at all).
+            let k = ((v * 255.0 + 0.5) as usize).min(255);
             // Bit equality: −0.0 is not 0/255 (it decodes to −0.0).
-            if (k as f32 / 255.0).to_bits() == v.to_bits() {
+            if self.codes[k] == v.to_bits() {
                 return self.table[k];
             }
         }
@@ -718,6 +749,57 @@ pub fn extract(
 pub fn preview_sphere(m: &Material, env: &EnvMap, size: usize, repeats: f32) -> Image {
     let shader = Shader::new(env, Quality::Fast);
     let mut out = Image::zeros(3, size, size);
+    // Rows in parallel: every pixel is shaded alone (the same bits whatever
+    // the threads; `tests::parallel_preview_matches_reference`).
+    let n = size * size;
+    let (r, rest) = out.data.split_at_mut(n);
+    let (g, b) = rest.split_at_mut(n);
+    let step = size.max(1);
+    r.par_chunks_mut(step)
+        .zip(g.par_chunks_mut(step))
+        .zip(b.par_chunks_mut(step))
+        .enumerate()
+        .for_each(|(row, ((r, g), b))| {
+            let mut phong = m.params.phong();
+            for col in 0..size {
+                if let Some(c) = preview_pixel(m, &shader, &mut phong, size, repeats, row, col) {
+                    (r[col], g[col], b[col]) = (c.x, c.y, c.z);
+                }
+            }
+        });
+    out
+}
+
+/// One pixel of [`preview_sphere`] (`None` off the sphere).
+fn preview_pixel(
+    m: &Material,
+    shader: &Shader,
+    phong: &mut picker_render::PhongMaterial,
+    size: usize,
+    repeats: f32,
+    row: usize,
+    col: usize,
+) -> Option<Vec3> {
+    let x = (col as f32 + 0.5) / size as f32 * 2.0 - 1.0;
+    let y = 1.0 - (row as f32 + 0.5) / size as f32 * 2.0;
+    let r2 = x * x + y * y;
+    if r2 >= 1.0 {
+        return None;
+    }
+    let n = Vec3::new(x, y, (1.0 - r2).sqrt());
+    if let Some(t) = &m.texture {
+        let u = (n.x.atan2(n.z) / std::f32::consts::TAU + 0.5) * repeats;
+        let v = n.y.clamp(-1.0, 1.0).acos() / std::f32::consts::PI * repeats / 2.0;
+        phong.diffuse = sample_wrapped(&t.texture, u.rem_euclid(1.0), v.rem_euclid(1.0));
+    }
+    Some(shader.shade(n, Vec3::Z, phong))
+}
+
+/// The plain, sequential [`preview_sphere`].
+#[cfg(test)]
+fn preview_sphere_reference(m: &Material, env: &EnvMap, size: usize, repeats: f32) -> Image {
+    let shader = Shader::new(env, Quality::Fast);
+    let mut out = Image::zeros(3, size, size);
     let mut phong = m.params.phong();
     for row in 0..size {
         for col in 0..size {
@@ -742,6 +824,74 @@ pub fn preview_sphere(m: &Material, env: &EnvMap, size: usize, repeats: f32) -> 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn parallel_preview_matches_reference() {
+        let mut rng = picker_tensor::Rng::new(10);
+        let env = EnvMap::from_image(
+            &Image::new(3, 8, 16, rng.uniform_vec(3 * 8 * 16, 0.0, 2.0)).unwrap(),
+        )
+        .unwrap();
+        let tex = Image::new(3, 8, 8, rng.uniform_vec(3 * 64, 0.0, 1.0)).unwrap();
+        let mut m = Material {
+            name: "m".into(),
+            pick: None,
+            params: MaterialParams {
+                diffuse: [0.5, 0.3, 0.2],
+                specular: [0.04, 0.04, 0.04],
+                glossiness: 0.5,
+                exponent: conv::phong_exponent(0.5),
+            },
+            textured: true,
+            texture: Some(crate::TextureResult {
+                seam: seam_score(&tex),
+                texture: tex.clone(),
+                raw: tex.clone(),
+                coverage: Image::zeros(1, 8, 8),
+                coverage_fraction: 1.0,
+                uv_mode: UvMode::Plane,
+                inpainter: "test".into(),
+            }),
+            mask: Image::zeros(1, 1, 1),
+            area_fraction: 1.0,
+            rerender_psnr: None,
+        };
+        let bits = |v: &Image| v.data.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        for size in [1, 2, 17, 64] {
+            assert_eq!(
+                bits(&preview_sphere(&m, &env, size, 2.0)),
+                bits(&preview_sphere_reference(&m, &env, size, 2.0)),
+                "{size}"
+            );
+        }
+        m.texture = None;
+        assert_eq!(
+            bits(&preview_sphere(&m, &env, 33, 2.0)),
+            bits(&preview_sphere_reference(&m, &env, 33, 2.0))
+        );
+    }
+
+    #[test]
+    fn fused_linear_and_luma_match() {
+        let mut rng = picker_tensor::Rng::new(8);
+        for (w, h) in [(1, 1), (7, 3), (33, 17)] {
+            let n = w * h;
+            let data: Vec<f32> = (0..3 * n)
+                .map(|i| match i % 3 {
+                    0 => rng.range(0, 255) as f32 / 255.0,
+                    1 => rng.uniform(-0.2, 1.2),
+                    _ => rng.range(0, 65535) as f32 / 65535.0,
+                })
+                .collect();
+            let photo = Image::new(3, h, w, data).unwrap();
+            let (lin, luma) = linear_and_luma(&photo);
+            let want = photo.map(picker_render::io::srgb_decode);
+            let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&lin.data), bits(&want.data), "{w}x{h}");
+            assert_eq!((lin.channels, lin.height, lin.width), (3, h, w));
+            assert_eq!(bits(&luma), bits(&crate::guided::luma(&photo)), "{w}x{h}");
+        }
+    }
 
     #[test]
     fn srgb_table_matches_the_function() {

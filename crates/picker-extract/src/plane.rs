@@ -140,49 +140,56 @@ pub fn plane_coords(w: usize, h: usize, mask: &[bool], n: Vec3, focal: f32) -> C
                 rt[col] = -p.dot(e2);
             }
         });
-    // Both percentiles from one copy of the finite values (an order
-    // statistic does not depend on how the earlier selection permuted them).
+    // Both percentiles of the finite values, found in parallel without
+    // collecting them (`select::kth_smallest`: the values a selection over
+    // the collected finite values gives), both coordinates side by side.
     let pct2 = |v: &[f32], q0: f32, q1: f32| -> Option<(f32, f32)> {
-        let mut f: Vec<f32> = v.par_iter().copied().filter(|x| x.is_finite()).collect();
-        if f.is_empty() {
-            return None;
-        }
-        let mut at = |q: f32| {
-            let k = ((f.len() - 1) as f32 * q) as usize;
-            *f.select_nth_unstable_by(k, |a, b| a.total_cmp(b)).1
+        let at = crate::select::kth_smallest(
+            v.len(),
+            |i| v[i].is_finite().then(|| v[i]),
+            |len| {
+                let k = |q: f32| ((len - 1) as f32 * q) as usize;
+                Some(vec![k(q0), k(q1)])
+            },
+        )?;
+        Some((at[0], at[1]))
+    };
+    let (Some((s0, s1)), Some((t0, t1))) =
+        rayon::join(|| pct2(&s, 0.02, 0.98), || pct2(&t, 0.02, 0.98))
+    else {
+        return Coords {
+            width: w,
+            height: h,
+            u: vec![f32::NAN; w * h],
+            v: vec![f32::NAN; w * h],
+            wrap: false,
         };
-        Some((at(q0), at(q1)))
-    };
-    let mut coords = Coords {
-        width: w,
-        height: h,
-        u: vec![f32::NAN; w * h],
-        v: vec![f32::NAN; w * h],
-        wrap: false,
-    };
-    let (Some((s0, s1)), Some((t0, t1))) = (pct2(&s, 0.02, 0.98), pct2(&t, 0.02, 0.98)) else {
-        return coords;
     };
     let side = ((s1 - s0).max(1e-9) * (t1 - t0).max(1e-9)).sqrt();
     let (sc, tc) = ((s0 + s1) / 2.0 - side / 2.0, (t0 + t1) / 2.0 - side / 2.0);
-    coords
-        .u
-        .par_chunks_mut(step)
-        .zip(coords.v.par_chunks_mut(step))
-        .enumerate()
-        .for_each(|(row, (ru, rv))| {
-            for col in 0..ru.len() {
-                let i = row * w + col;
-                if s[i].is_finite() {
-                    let (u, v) = ((s[i] - sc) / side, (t[i] - tc) / side);
-                    if (0.0..1.0).contains(&u) && (0.0..1.0).contains(&v) {
-                        ru[col] = u;
-                        rv[col] = v;
+    // The plane coordinates become the texture coordinates in place (NaN
+    // where a pixel has none or falls outside the square).
+    s.par_chunks_mut(step)
+        .zip(t.par_chunks_mut(step))
+        .for_each(|(rs, rt)| {
+            for (ps, pt) in rs.iter_mut().zip(rt.iter_mut()) {
+                let (mut u, mut v) = (f32::NAN, f32::NAN);
+                if ps.is_finite() {
+                    let (uu, vv) = ((*ps - sc) / side, (*pt - tc) / side);
+                    if (0.0..1.0).contains(&uu) && (0.0..1.0).contains(&vv) {
+                        (u, v) = (uu, vv);
                     }
                 }
+                (*ps, *pt) = (u, v);
             }
         });
-    coords
+    Coords {
+        width: w,
+        height: h,
+        u: s,
+        v: t,
+        wrap: false,
+    }
 }
 
 /// The plain, sequential implementation of [`plane_coords`] (the reference

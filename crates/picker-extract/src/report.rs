@@ -208,22 +208,73 @@ pub fn draw_text(img: &mut Image, x: usize, y: usize, text: &str, value: f32, ma
 /// caller decides whether that is an error). A tile with no pixels leaves
 /// its cell blank.
 pub fn compose_sheet(tiles: &[Tile], columns: usize, tile_height: usize) -> Image {
+    let lazy: Vec<LazyTile<'_>> = tiles
+        .iter()
+        .map(|t| borrowed_tile(t.label.clone(), &t.image))
+        .collect();
+    compose_lazy_sheet(&lazy, columns, tile_height)
+}
+
+/// A tile whose picture is made only at the size it is shown at: for large
+/// pictures (a photo-resolution tile) that need not exist at full size.
+pub struct LazyTile<'a> {
+    /// Text drawn above the tile (as [`Tile::label`]).
+    pub label: String,
+    /// Width of the full-size picture (with `height`, sets the aspect ratio).
+    pub width: usize,
+    /// Height of the full-size picture.
+    pub height: usize,
+    /// Channels of the picture (1 or 3, as [`Tile::image`]).
+    pub channels: usize,
+    /// The picture resized to `(rows, columns)`, as [`resize_rows`] (or the
+    /// crate's resize of the full-size picture) would make it.
+    #[allow(clippy::type_complexity)]
+    pub render: Box<dyn Fn(usize, usize) -> Image + Sync + 'a>,
+}
+
+impl From<Tile> for LazyTile<'static> {
+    /// The tile's picture, resized when shown.
+    fn from(t: Tile) -> Self {
+        LazyTile {
+            label: t.label,
+            width: t.image.width,
+            height: t.image.height,
+            channels: t.image.channels,
+            render: Box::new(move |h, w| resize(&t.image, h, w, false)),
+        }
+    }
+}
+
+/// A [`LazyTile`] of a picture that is only borrowed (resized when shown).
+pub fn borrowed_tile(label: String, img: &Image) -> LazyTile<'_> {
+    LazyTile {
+        label,
+        width: img.width,
+        height: img.height,
+        channels: img.channels,
+        render: Box::new(move |h, w| resize(img, h, w, false)),
+    }
+}
+
+/// [`compose_sheet`] of tiles given as [`LazyTile`]s (the same sheet for the
+/// same pictures); the tiles are rendered in parallel.
+pub fn compose_lazy_sheet(tiles: &[LazyTile<'_>], columns: usize, tile_height: usize) -> Image {
     if tiles.is_empty() {
         return Image::zeros(3, 0, 0);
     }
     let tile_height = tile_height.max(1);
     let columns = columns.clamp(1, tiles.len());
     let rows = tiles.len().div_ceil(columns);
-    let resized_width = |img: &Image| -> usize {
-        if img.width == 0 || img.height == 0 {
+    let resized_width = |t: &LazyTile<'_>| -> usize {
+        if t.width == 0 || t.height == 0 {
             0
         } else {
-            ((img.width as f64 * tile_height as f64 / img.height as f64).round() as usize).max(1)
+            ((t.width as f64 * tile_height as f64 / t.height as f64).round() as usize).max(1)
         }
     };
     let cell_w = tiles
         .iter()
-        .map(|t| resized_width(&t.image).max(text_width(&t.label)))
+        .map(|t| resized_width(t).max(text_width(&t.label)))
         .max()
         .unwrap_or(0)
         .max(1);
@@ -237,15 +288,21 @@ pub fn compose_sheet(tiles: &[Tile], columns: usize, tile_height: usize) -> Imag
         data: vec![SHEET_BACKGROUND; 3 * width * height],
     };
     let n = width * height;
-    for (k, tile) in tiles.iter().enumerate() {
+    let smalls: Vec<Option<Image>> = tiles
+        .par_iter()
+        .map(|t| {
+            let tw = resized_width(t);
+            (tw != 0 && t.channels != 0).then(|| (t.render)(tile_height, tw))
+        })
+        .collect();
+    for (k, (tile, small)) in tiles.iter().zip(&smalls).enumerate() {
         let x0 = SHEET_MARGIN + (k % columns) * (cell_w + SHEET_MARGIN);
         let y0 = SHEET_MARGIN + (k / columns) * (cell_h + SHEET_MARGIN);
         draw_text(&mut sheet, x0, y0 + 2, &tile.label, LABEL_COLOUR, cell_w);
-        let tw = resized_width(&tile.image);
-        if tw == 0 || tile.image.channels == 0 {
+        let Some(small) = small else {
             continue;
-        }
-        let small = resize(&tile.image, tile_height, tw, false);
+        };
+        let tw = resized_width(tile);
         let xoff = x0 + (cell_w - tw) / 2;
         let yoff = y0 + LABEL_BAND;
         for ch in 0..3 {
@@ -266,22 +323,47 @@ pub fn compose_sheet(tiles: &[Tile], columns: usize, tile_height: usize) -> Imag
 /// background. The centre itself is left untouched so the picked pixel stays
 /// visible. Works on any channel count; clipped to the image.
 pub fn draw_marker(img: &mut Image, x: f32, y: f32, radius: f32) {
+    let h = img.height;
+    draw_marker_in(img, h, 0, x, y, radius);
+}
+
+/// The rows `r0..r1` of an image `h` rows tall that [`draw_marker`] may
+/// change (`None`: none), and the marker's outer radius `r`.
+fn marker_rows(h: usize, x: f32, y: f32, radius: f32) -> Option<(usize, usize, f32)> {
     if !(x.is_finite() && y.is_finite()) {
-        return;
+        return None;
     }
     let r = if radius.is_finite() {
         radius.max(3.0)
     } else {
         3.0
     };
-    let (w, h, n) = (img.width, img.height, img.plane_len());
+    let reach = 1.6 * r + 1.75 + 1.0;
+    let r0 = ((y - reach).floor().max(0.0)) as usize;
+    let r1 = ((y + reach).ceil().max(0.0) as usize).min(h);
+    Some((r0, r1, r))
+}
+
+/// [`draw_marker`] on a window of an image `full_height` rows tall: `img`
+/// holds its rows `first_row..first_row + img.height`, and only those are
+/// drawn (the same pixels as drawing on the whole image and cutting the window).
+fn draw_marker_in(
+    img: &mut Image,
+    full_height: usize,
+    first_row: usize,
+    x: f32,
+    y: f32,
+    radius: f32,
+) {
+    let Some((r0, r1, r)) = marker_rows(full_height, x, y, radius) else {
+        return;
+    };
+    let (w, n) = (img.width, img.plane_len());
     let (gap, arm) = (0.4 * r, 1.6 * r);
     let (inner, outer) = (0.75f32, 1.75f32);
     let reach = arm + outer + 1.0;
     let c0 = ((x - reach).floor().max(0.0)) as usize;
     let c1 = ((x + reach).ceil().max(0.0) as usize).min(w);
-    let r0 = ((y - reach).floor().max(0.0)) as usize;
-    let r1 = ((y + reach).ceil().max(0.0) as usize).min(h);
     // Distance of a pixel centre to the marker's strokes.
     let stroke_distance = |dx: f32, dy: f32| -> f32 {
         let ring = ((dx * dx + dy * dy).sqrt() - r).abs();
@@ -297,7 +379,7 @@ pub fn draw_marker(img: &mut Image, x: f32, y: f32, radius: f32) {
         };
         ring.min(along(dx, dy)).min(along(dy, dx))
     };
-    for row in r0..r1 {
+    for row in r0.max(first_row)..r1.min(first_row + img.height) {
         for col in c0..c1 {
             let d = stroke_distance(col as f32 + 0.5 - x, row as f32 + 0.5 - y);
             let value = if d <= inner {
@@ -308,9 +390,85 @@ pub fn draw_marker(img: &mut Image, x: f32, y: f32, radius: f32) {
                 continue;
             };
             for ch in 0..img.channels {
-                img.data[ch * n + row * w + col] = value;
+                img.data[ch * n + (row - first_row) * w + col] = value;
             }
         }
+    }
+}
+
+/// A [`LazyTile`] of `img` with a pick marker drawn on it ([`draw_marker`]
+/// at `(x, y)`, `radius`): only the rows the marker touches are copied.
+pub fn marked_tile(label: String, img: &Image, x: f32, y: f32, radius: f32) -> LazyTile<'_> {
+    let (c, h, w) = (img.channels, img.height, img.width);
+    let (r0, r1) =
+        marker_rows(h, x, y, radius).map_or((0, 0), |(a, b, _)| (a.min(h), b.max(a.min(h))));
+    let mut window = Image::zeros(c, r1 - r0, w);
+    for ch in 0..c {
+        window.data[ch * (r1 - r0) * w..(ch + 1) * (r1 - r0) * w]
+            .copy_from_slice(&img.plane(ch)[r0 * w..r1 * w]);
+    }
+    draw_marker_in(&mut window, h, r0, x, y, radius);
+    LazyTile {
+        label,
+        width: w,
+        height: h,
+        channels: c,
+        render: Box::new(move |th, tw| {
+            resize_rows((c, h, w), th, tw, false, |ch, r, out| {
+                let src = if (r0..r1).contains(&r) {
+                    &window.plane(ch)[(r - r0) * w..(r - r0 + 1) * w]
+                } else {
+                    &img.plane(ch)[r * w..(r + 1) * w]
+                };
+                out.copy_from_slice(src);
+            })
+        }),
+    }
+}
+
+/// A [`LazyTile`] of `img` with every value outside `mask` (a plane of the
+/// image's size; outside: `≤ 0.5`) multiplied by `factor`, computed row by
+/// row instead of as a copy of the image.
+pub fn dimmed_tile<'a>(
+    label: String,
+    img: &'a Image,
+    mask: &'a [f32],
+    factor: f32,
+) -> LazyTile<'a> {
+    let (c, h, w) = (img.channels, img.height, img.width);
+    assert_eq!(mask.len(), h * w, "mask size");
+    LazyTile {
+        label,
+        width: w,
+        height: h,
+        channels: c,
+        render: Box::new(move |th, tw| {
+            resize_rows((c, h, w), th, tw, false, |ch, r, out| {
+                let src = &img.plane(ch)[r * w..(r + 1) * w];
+                for ((o, &v), &m) in out.iter_mut().zip(src).zip(&mask[r * w..(r + 1) * w]) {
+                    *o = if m <= 0.5 { v * factor } else { v };
+                }
+            })
+        }),
+    }
+}
+
+/// A [`LazyTile`] of `img` repeated `k × k` times, made row by row.
+pub fn tiled_tile(label: String, img: Image, k: usize) -> LazyTile<'static> {
+    let (c, h, w) = (img.channels, img.height, img.width);
+    LazyTile {
+        label,
+        width: w * k,
+        height: h * k,
+        channels: c,
+        render: Box::new(move |th, tw| {
+            resize_rows((c, h * k, w * k), th, tw, false, |ch, r, out| {
+                let src = &img.plane(ch)[(r % h) * w..(r % h + 1) * w];
+                for (x, o) in out.iter_mut().enumerate() {
+                    *o = src[x % w];
+                }
+            })
+        }),
     }
 }
 
@@ -320,25 +478,47 @@ pub fn draw_marker(img: &mut Image, x: f32, y: f32, radius: f32) {
 /// neighbours wrap around); otherwise edge texels are repeated. An empty
 /// source gives zeros.
 pub(crate) fn resize(img: &Image, height: usize, width: usize, wrap: bool) -> Image {
-    let c = img.channels;
-    if img.width == 0 || img.height == 0 || width == 0 || height == 0 {
+    let sw = img.width;
+    resize_rows(
+        (img.channels, img.height, img.width),
+        height,
+        width,
+        wrap,
+        |ch, r, row| row.copy_from_slice(&img.plane(ch)[r * sw..(r + 1) * sw]),
+    )
+}
+
+/// The resize of the sheets (area average along a shrinking axis, bilinear
+/// along a growing one; `wrap` as for tiles) of a `(channels, rows,
+/// columns)` picture that is given row by row: `row(ch, r, out)` writes row
+/// `r` of channel `ch` into `out`. The same values as resizing the whole
+/// picture (the same sums in the same order), without it ever existing.
+pub fn resize_rows(
+    (c, sh, sw): (usize, usize, usize),
+    height: usize,
+    width: usize,
+    wrap: bool,
+    row: impl Fn(usize, usize, &mut [f32]) + Sync,
+) -> Image {
+    if sw == 0 || sh == 0 || width == 0 || height == 0 {
         return Image::zeros(c, height, width);
     }
-    let wx = axis_weights(img.width, width, wrap);
-    let wy = axis_weights(img.height, height, wrap);
-    let (sw, sh) = (img.width, img.height);
+    let wx = axis_weights(sw, width, wrap);
+    let wy = axis_weights(sh, height, wrap);
     let mut out = vec![0.0f32; c * width * height];
     let mut tmp = vec![0.0f32; sh * width];
     // Rows in parallel in both passes; every value is one fixed-order sum, so
     // the bytes do not depend on the thread count.
     for (ch, plane) in out.chunks_mut(width * height).enumerate() {
-        let p = img.plane(ch);
-        tmp.par_chunks_mut(width).enumerate().for_each(|(r, row)| {
-            let src = &p[r * sw..(r + 1) * sw];
-            for (o, taps) in row.iter_mut().zip(&wx) {
-                *o = taps.iter().map(|&(i, wt)| src[i] * wt).sum();
-            }
-        });
+        tmp.par_chunks_mut(width).enumerate().for_each_init(
+            || vec![0.0f32; sw],
+            |src, (r, out)| {
+                row(ch, r, src);
+                for (o, taps) in out.iter_mut().zip(&wx) {
+                    *o = taps.iter().map(|&(i, wt)| src[i] * wt).sum();
+                }
+            },
+        );
         plane
             .par_chunks_mut(width)
             .zip(wy.par_iter())
@@ -429,6 +609,94 @@ mod tests {
             width,
             data: out,
         }
+    }
+
+    #[test]
+    fn row_resize_matches_resizing_the_whole_picture() {
+        let mut rng = picker_tensor::Rng::new(4);
+        for &(c, h, w, dh, dw) in &[(1, 1, 1, 1, 1), (3, 40, 30, 7, 5), (3, 300, 401, 192, 256)] {
+            let img = Image::new(c, h, w, rng.uniform_vec(c * h * w, 0.0, 1.0)).unwrap();
+            // A picture that differs from `img`: every other row darkened.
+            let mut changed = img.clone();
+            for ch in 0..c {
+                for r in (0..h).step_by(2) {
+                    for v in &mut changed.data[ch * h * w + r * w..ch * h * w + (r + 1) * w] {
+                        *v *= 0.25;
+                    }
+                }
+            }
+            for wrap in [false, true] {
+                let a = resize_rows((c, h, w), dh, dw, wrap, |ch, r, out| {
+                    out.copy_from_slice(&img.plane(ch)[r * w..(r + 1) * w]);
+                    if r % 2 == 0 {
+                        for v in out.iter_mut() {
+                            *v *= 0.25;
+                        }
+                    }
+                });
+                let b = resize_reference(&changed, dh, dw, wrap);
+                let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&a.data), bits(&b.data), "{c}x{h}x{w} -> {dh}x{dw}");
+            }
+        }
+    }
+
+    #[test]
+    fn lazy_tiles_match_the_pictures_they_stand_for() {
+        let mut rng = picker_tensor::Rng::new(5);
+        let (h, w) = (120, 160);
+        let img = Image::new(3, h, w, rng.uniform_vec(3 * h * w, 0.0, 1.0)).unwrap();
+        let mask: Vec<f32> = (0..h * w).map(|_| rng.range(0, 1) as f32).collect();
+        let bits = |v: &Image| v.data.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        // Markers inside, on every edge, outside and not finite.
+        for (x, y, r) in [
+            (80.5, 60.5, 4.0),
+            (0.5, 0.5, 9.0),
+            (159.5, 119.5, 3.0),
+            (80.5, 2.5, 30.0),
+            (-40.0, 500.0, 4.0),
+            (80.5, f32::NAN, 4.0),
+            (33.25, 71.7, 6.3),
+        ] {
+            let mut marked = img.clone();
+            draw_marker(&mut marked, x, y, r);
+            let lazy = marked_tile("m".into(), &img, x, y, r);
+            for (th, tw) in [(48, 64), (200, 260)] {
+                assert_eq!(
+                    bits(&(lazy.render)(th, tw)),
+                    bits(&resize(&marked, th, tw, false)),
+                    "marker at {x},{y} r {r}"
+                );
+            }
+        }
+        let mut dimmed = img.clone();
+        for plane in dimmed.data.chunks_mut(h * w) {
+            for (v, &m) in plane.iter_mut().zip(&mask) {
+                if m <= 0.5 {
+                    *v *= 0.25;
+                }
+            }
+        }
+        let lazy = dimmed_tile("d".into(), &img, &mask, 0.25);
+        assert_eq!(
+            bits(&(lazy.render)(48, 64)),
+            bits(&resize(&dimmed, 48, 64, false))
+        );
+        let mut tiled = Image::zeros(3, 2 * h, 2 * w);
+        for c in 0..3 {
+            for y in 0..2 * h {
+                for x in 0..2 * w {
+                    tiled.data[c * 4 * h * w + y * 2 * w + x] =
+                        img.data[c * h * w + (y % h) * w + x % w];
+                }
+            }
+        }
+        let lazy = tiled_tile("t".into(), img.clone(), 2);
+        assert_eq!((lazy.width, lazy.height), (2 * w, 2 * h));
+        assert_eq!(
+            bits(&(lazy.render)(192, 256)),
+            bits(&resize(&tiled, 192, 256, false))
+        );
     }
 
     #[test]

@@ -148,6 +148,7 @@ impl Reprojected {
 }
 
 /// One picked pixel to splat.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 struct Sample {
     u: f32,
     v: f32,
@@ -156,17 +157,202 @@ struct Sample {
     radius: f32,
 }
 
+/// The picked pixels with a positive confidence and finite coordinates and
+/// colour, in pixel order, with their splat radius and weight.
+///
+/// Rows in parallel: the samples of each row are counted first, then written
+/// straight into their place (the same samples in the same order as the plain
+/// filter over the pixels, `tests::parallel_samples_match_reference`).
+fn samples(
+    coords: &Coords,
+    mask: &[bool],
+    colour: &Image,
+    confidence: &[f32],
+    size: usize,
+) -> Vec<Sample> {
+    let w = coords.width.max(1);
+    let keep = |i: usize| -> Option<Vec3> {
+        if !mask[i] || confidence[i] <= 0.0 {
+            return None;
+        }
+        let c = colour.rgb(i);
+        (coords.u[i].is_finite() && coords.v[i].is_finite() && c.is_finite()).then_some(c)
+    };
+    let counts: Vec<usize> = (0..coords.height)
+        .into_par_iter()
+        .map(|y| (y * w..(y + 1) * w).filter(|&i| keep(i).is_some()).count())
+        .collect();
+    let mut out = vec![Sample::default(); counts.iter().sum()];
+    let mut rows = Vec::with_capacity(counts.len());
+    let mut rest = out.as_mut_slice();
+    for &k in &counts {
+        let (row, tail) = rest.split_at_mut(k);
+        rows.push(row);
+        rest = tail;
+    }
+    rows.into_par_iter().enumerate().for_each(|(y, row)| {
+        let mut slots = row.iter_mut();
+        let kept = (y * w..(y + 1) * w).filter_map(|i| keep(i).map(|c| (i, c)));
+        for (i, c) in kept {
+            // Footprint: the side of the pixel's area in texels (½ a texel at least).
+            let side = coords
+                .pixel_area(mask, i)
+                .map(|a| a.sqrt() * size as f32)
+                .unwrap_or(1.0);
+            let radius = side.clamp(1.0, MAX_SPLAT_RADIUS);
+            *slots.next().expect("counted") = Sample {
+                u: coords.u[i],
+                v: coords.v[i],
+                colour: c,
+                weight: confidence[i] / (radius * radius),
+                radius,
+            };
+        }
+    });
+    out
+}
+
+/// The plain implementation of [`samples`] (a filter over the pixels).
+#[cfg(test)]
+fn samples_reference(
+    coords: &Coords,
+    mask: &[bool],
+    colour: &Image,
+    confidence: &[f32],
+    size: usize,
+) -> Vec<Sample> {
+    (0..mask.len())
+        .filter_map(|i| {
+            if !mask[i] || confidence[i] <= 0.0 {
+                return None;
+            }
+            let (u, v) = (coords.u[i], coords.v[i]);
+            let c = colour.rgb(i);
+            if !u.is_finite() || !v.is_finite() || !c.is_finite() {
+                return None;
+            }
+            let side = coords
+                .pixel_area(mask, i)
+                .map(|a| a.sqrt() * size as f32)
+                .unwrap_or(1.0);
+            let radius = side.clamp(1.0, MAX_SPLAT_RADIUS);
+            Some(Sample {
+                u,
+                v,
+                colour: c,
+                weight: confidence[i] / (radius * radius),
+                radius,
+            })
+        })
+        .collect()
+}
+
 /// The rows of texture band `k` (`SPLAT_BAND_ROWS` rows each).
 const SPLAT_BAND_ROWS: usize = 16;
 
+/// Samples per parallel chunk when [`band_members`] sorts them into bands.
+const MEMBER_CHUNK: usize = 1 << 16;
+
+/// `x.floor() as i64` without a call to `floorf` (the baseline x86-64
+/// target has no rounding instruction): the same value for every `f32`,
+/// NaN and infinities included (`tests::integer_floor_and_ceil`).
+#[inline]
+fn floor_i64(x: f32) -> i64 {
+    let t = x as i64;
+    if (t as f32) > x {
+        t.saturating_sub(1)
+    } else {
+        t
+    }
+}
+
+/// `x.ceil() as i64` (see [`floor_i64`]).
+#[inline]
+fn ceil_i64(x: f32) -> i64 {
+    let t = x as i64;
+    if (t as f32) < x {
+        t.saturating_add(1)
+    } else {
+        t
+    }
+}
+
+/// `v.rem_euclid(n)` for `n > 0`, without a division for the values within
+/// one period of `0..n` (a splat reaches at most a few texels past an edge).
+#[inline]
+fn wrap_i64(v: i64, n: i64) -> i64 {
+    if (0..n).contains(&v) {
+        v
+    } else if (-n..0).contains(&v) {
+        v + n
+    } else if (n..2 * n).contains(&v) {
+        v - n
+    } else {
+        v.rem_euclid(n)
+    }
+}
+
+/// The texture rows a sample's tent covers (before wrapping).
+#[inline]
+fn sample_rows(s: &Sample, size: usize) -> (i64, i64) {
+    let py = s.v * size as f32 - 0.5;
+    (ceil_i64(py - s.radius), floor_i64(py + s.radius))
+}
+
+/// For every band of [`SPLAT_BAND_ROWS`] texture rows, the indices of the
+/// samples whose tent reaches it, in sample order (each sample once).
+///
+/// Chunks of samples in parallel, each chunk's lists then concatenated per
+/// band in chunk order: the lists of the plain sequential pass.
+fn band_members(samples: &[Sample], size: usize, wrap: bool) -> Vec<Vec<u32>> {
+    let bands = size.div_ceil(SPLAT_BAND_ROWS);
+    let n = size as i64;
+    let chunks: Vec<Vec<Vec<u32>>> = samples
+        .par_chunks(MEMBER_CHUNK)
+        .enumerate()
+        .map(|(c, chunk)| {
+            let mut members: Vec<Vec<u32>> = vec![Vec::new(); bands];
+            let mut seen = vec![usize::MAX; bands];
+            for (j, s) in chunk.iter().enumerate() {
+                let k = c * MEMBER_CHUNK + j;
+                let (y0, y1) = sample_rows(s, size);
+                for ty in y0..=y1 {
+                    let yy = if wrap { wrap_i64(ty, n) } else { ty };
+                    if yy < 0 || yy >= n {
+                        continue;
+                    }
+                    let b = yy as usize / SPLAT_BAND_ROWS;
+                    if seen[b] != k {
+                        seen[b] = k;
+                        members[b].push(k as u32);
+                    }
+                }
+            }
+            members
+        })
+        .collect();
+    (0..bands)
+        .into_par_iter()
+        .map(|b| {
+            let mut all = Vec::with_capacity(chunks.iter().map(|c| c[b].len()).sum());
+            for c in &chunks {
+                all.extend_from_slice(&c[b]);
+            }
+            all
+        })
+        .collect()
+}
+
 /// Accumulates the tent-weighted samples (optionally Cauchy-reweighted
-/// against `reference` with `scale`) into per-texel sums and weights.
+/// against `reference` with `scale`) into per-texel sums and weights;
+/// `members` are the samples of every band ([`band_members`]).
 ///
 /// Parallel over bands of texture rows: each band adds the samples that
 /// touch it in sample order, so every texel receives its contributions in
 /// the same order as `splat_reference` (same bits, whatever the threads).
 fn splat(
     samples: &[Sample],
+    members: &[Vec<u32>],
     size: usize,
     wrap: bool,
     reference: Option<&[Vec3]>,
@@ -178,32 +364,6 @@ fn splat(
         return (sum, wsum);
     }
     let n = size as i64;
-    let bands = size.div_ceil(SPLAT_BAND_ROWS);
-    // Row span of a sample (before wrapping).
-    let rows_of = |s: &Sample| -> (i64, i64) {
-        let py = s.v * size as f32 - 0.5;
-        (
-            (py - s.radius).ceil() as i64,
-            (py + s.radius).floor() as i64,
-        )
-    };
-    // Sample indices per band, in sample order.
-    let mut members: Vec<Vec<u32>> = vec![Vec::new(); bands];
-    let mut seen = vec![usize::MAX; bands];
-    for (k, s) in samples.iter().enumerate() {
-        let (y0, y1) = rows_of(s);
-        for ty in y0..=y1 {
-            let yy = if wrap { ty.rem_euclid(n) } else { ty };
-            if yy < 0 || yy >= n {
-                continue;
-            }
-            let b = yy as usize / SPLAT_BAND_ROWS;
-            if seen[b] != k {
-                seen[b] = k;
-                members[b].push(k as u32);
-            }
-        }
-    }
     let band_len = SPLAT_BAND_ROWS * size;
     sum.par_chunks_mut(band_len)
         .zip(wsum.par_chunks_mut(band_len))
@@ -219,33 +379,34 @@ fn splat(
                 let px = s.u * size as f32 - 0.5;
                 let py = s.v * size as f32 - 0.5;
                 let r = s.radius;
-                let (x0, x1) = ((px - r).ceil() as i64, (px + r).floor() as i64);
-                let (y0, y1) = ((py - r).ceil() as i64, (py + r).floor() as i64);
+                let (x0, x1) = (ceil_i64(px - r), floor_i64(px + r));
+                let (y0, y1) = (ceil_i64(py - r), floor_i64(py + r));
                 for ty in y0..=y1 {
+                    // (The band test first: both tests only skip the row.)
+                    let yy = if wrap { wrap_i64(ty, n) } else { ty };
+                    if yy < lo || yy >= hi {
+                        continue;
+                    }
                     let wy = 1.0 - (ty as f32 - py).abs() / r;
                     if wy <= 0.0 {
                         continue;
                     }
-                    let yy = if wrap { ty.rem_euclid(n) } else { ty };
-                    if yy < lo || yy >= hi {
-                        continue;
-                    }
+                    let row = (yy - lo) as usize * size;
                     for tx in x0..=x1 {
                         let wx = 1.0 - (tx as f32 - px).abs() / r;
                         if wx <= 0.0 {
                             continue;
                         }
-                        let xx = if wrap { tx.rem_euclid(n) } else { tx };
+                        let xx = if wrap { wrap_i64(tx, n) } else { tx };
                         if xx < 0 || xx >= n {
                             continue;
                         }
-                        let t = yy as usize * size + xx as usize;
+                        let lt = row + xx as usize;
                         let mut w = s.weight * wx * wy;
                         if let Some(mean) = reference {
-                            let d = (s.colour - mean[t]).length() / scale;
+                            let d = (s.colour - mean[lt + lo as usize * size]).length() / scale;
                             w /= 1.0 + d * d;
                         }
-                        let lt = t - (lo as usize) * size;
                         bsum[lt] += s.colour * w;
                         bw[lt] += w;
                     }
@@ -267,37 +428,9 @@ pub fn reproject(
     let n = coords.width * coords.height;
     assert_eq!(mask.len(), n, "mask size");
     assert_eq!(colour.plane_len(), n, "colour size");
-    // Rows in parallel, concatenated in pixel order.
-    let w = coords.width.max(1);
-    let samples: Vec<Sample> = (0..coords.height)
-        .into_par_iter()
-        .flat_map_iter(|y| {
-            (y * w..(y + 1) * w).filter_map(|i| {
-                if !mask[i] || confidence[i] <= 0.0 {
-                    return None;
-                }
-                let (u, v) = (coords.u[i], coords.v[i]);
-                let c = colour.rgb(i);
-                if !u.is_finite() || !v.is_finite() || !c.is_finite() {
-                    return None;
-                }
-                // Footprint: the side of the pixel's area in texels (½ a texel at least).
-                let side = coords
-                    .pixel_area(mask, i)
-                    .map(|a| a.sqrt() * size as f32)
-                    .unwrap_or(1.0);
-                let radius = side.clamp(1.0, MAX_SPLAT_RADIUS);
-                Some(Sample {
-                    u,
-                    v,
-                    colour: c,
-                    weight: confidence[i] / (radius * radius),
-                    radius,
-                })
-            })
-        })
-        .collect();
-    let (sum, wsum) = splat(&samples, size, coords.wrap, None, 1.0);
+    let samples = samples(coords, mask, colour, confidence, size);
+    let members = band_members(&samples, size, coords.wrap);
+    let (sum, wsum) = splat(&samples, &members, size, coords.wrap, None, 1.0);
     let mean: Vec<Vec3> = sum
         .iter()
         .zip(&wsum)
@@ -305,22 +438,20 @@ pub fn reproject(
         .collect();
     // Robust pass: Cauchy weights on the distance to the first-pass texel mean,
     // scale = 2 × the median deviation (at least 0.02).
-    let mut dev: Vec<f32> = samples
-        .par_iter()
-        .map(|s| {
-            let px = ((s.u * size as f32) as i64).rem_euclid(size as i64) as usize;
-            let py = ((s.v * size as f32) as i64).rem_euclid(size as i64) as usize;
-            (s.colour - mean[py * size + px]).length()
-        })
-        .collect();
-    let scale = if dev.is_empty() {
-        1.0
-    } else {
-        let mid = dev.len() / 2;
-        dev.select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
-        (2.0 * dev[mid]).max(0.02)
+    // (The median found in parallel without collecting the deviations:
+    // `select::kth_smallest`.)
+    let n = size as i64;
+    let dev = |k: usize| {
+        let s = &samples[k];
+        let px = wrap_i64((s.u * size as f32) as i64, n) as usize;
+        let py = wrap_i64((s.v * size as f32) as i64, n) as usize;
+        Some((s.colour - mean[py * size + px]).length())
     };
-    let (sum, wsum) = splat(&samples, size, coords.wrap, Some(&mean), scale);
+    let scale = match crate::select::kth_smallest(samples.len(), dev, |len| Some(vec![len / 2])) {
+        None => 1.0,
+        Some(m) => (2.0 * m[0]).max(0.02),
+    };
+    let (sum, wsum) = splat(&samples, &members, size, coords.wrap, Some(&mean), scale);
     let mut texture = Image::zeros(3, size, size);
     let mut weight = Image::zeros(1, size, size);
     let mut coverage = Image::zeros(1, size, size);
@@ -571,7 +702,8 @@ mod tests {
                     .map(|_| Vec3::splat(rng.uniform(0.0, 1.0)))
                     .collect();
                 for reference in [None, Some(mean.as_slice())] {
-                    let (a, aw) = splat(&samples, size, wrap, reference, 0.2);
+                    let members = band_members(&samples, size, wrap);
+                    let (a, aw) = splat(&samples, &members, size, wrap, reference, 0.2);
                     let (b, bw) = splat_reference(&samples, size, wrap, reference, 0.2);
                     let bits = |v: &[Vec3]| {
                         v.iter()
@@ -582,6 +714,79 @@ mod tests {
                     let wb = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
                     assert_eq!(wb(&aw), wb(&bw));
                 }
+            }
+        }
+    }
+
+    #[test]
+    fn parallel_samples_match_reference() {
+        let mut rng = picker_tensor::Rng::new(13);
+        for &(w, h) in &[(1usize, 1usize), (5, 1), (1, 6), (37, 23)] {
+            for wrap in [true, false] {
+                let n = w * h;
+                let mut u = rng.uniform_vec(n, -0.1, 1.1);
+                let v = rng.uniform_vec(n, -0.1, 1.1);
+                for i in (0..n).step_by(5) {
+                    u[i] = f32::NAN;
+                }
+                let coords = Coords {
+                    width: w,
+                    height: h,
+                    u,
+                    v,
+                    wrap,
+                };
+                let mut colour = Image::new(3, h, w, rng.uniform_vec(3 * n, 0.0, 1.0)).unwrap();
+                colour.data[n / 2] = f32::INFINITY;
+                let mask: Vec<bool> = (0..n).map(|_| rng.f64() < 0.7).collect();
+                let conf: Vec<f32> = (0..n)
+                    .map(|_| {
+                        if rng.f64() < 0.2 {
+                            0.0
+                        } else {
+                            rng.uniform(0.01, 1.0)
+                        }
+                    })
+                    .collect();
+                for size in [1, 16, 1024] {
+                    let a = samples(&coords, &mask, &colour, &conf, size);
+                    let b = samples_reference(&coords, &mask, &colour, &conf, size);
+                    assert_eq!(a, b, "{w}x{h} wrap {wrap} size {size}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn integer_floor_and_ceil() {
+        let mut rng = picker_tensor::Rng::new(14);
+        let mut values = rng.uniform_vec(20_000, -3000.0, 3000.0);
+        values.extend(rng.uniform_vec(2000, -2.0, 2.0));
+        for k in -50..50 {
+            let x = k as f32 * 0.5;
+            values.extend([x, x.next_up(), x.next_down()]);
+        }
+        values.extend([
+            0.0,
+            -0.0,
+            f32::NAN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::MAX,
+            f32::MIN,
+            1e20,
+            -1e20,
+            8388608.5,
+            -8388607.5,
+            f32::MIN_POSITIVE,
+        ]);
+        for x in values {
+            assert_eq!(floor_i64(x), x.floor() as i64, "floor {x}");
+            assert_eq!(ceil_i64(x), x.ceil() as i64, "ceil {x}");
+        }
+        for n in [1i64, 2, 7, 1024] {
+            for v in -5 * n..5 * n {
+                assert_eq!(wrap_i64(v, n), v.rem_euclid(n), "{v} mod {n}");
             }
         }
     }

@@ -192,40 +192,37 @@ pub fn masked_bilinear_where(
         .collect();
     let xs: Vec<_> = (0..dw).map(|x| src_coord(x, w, dw)).collect();
     let m = dw * dh;
-    // Interleaved per row while computing, planar at the end.
-    let mut rows = vec![0.0f32; m * c];
-    rows.par_chunks_mut((dw * c).max(1))
-        .enumerate()
-        .for_each(|(y, row)| {
-            let (y0, y1, fy) = src_coord(y, h, dh);
-            let (a0, a1) = (y0 * w, y1 * w);
-            let (w0, w1) = (&weight[a0..a0 + w], &weight[a1..a1 + w]);
-            for (x, &(x0, x1, fx)) in xs.iter().enumerate() {
-                if !keep[y * dw + x] {
-                    continue;
-                }
-                let den = lerp2(w0, w1, x0, x1, fx, fy);
-                for ch in 0..c {
-                    row[x * c + ch] = if den > 1e-6 {
-                        let p = &prods[ch];
-                        lerp2(&p[a0..a0 + w], &p[a1..a1 + w], x0, x1, fx, fy) / den
-                    } else {
-                        let sx = ((x as f32 + 0.5) * w as f32 / dw as f32) as usize;
-                        let sy = ((y as f32 + 0.5) * h as f32 / dh as f32) as usize;
-                        img.plane(ch)[nearest[sy.min(h - 1) * w + sx.min(w - 1)]]
-                    };
-                }
-            }
-        });
     let mut out = Image::zeros(c, dh, dw);
-    out.data
-        .par_chunks_mut(m.max(1))
-        .enumerate()
-        .for_each(|(ch, plane)| {
-            for (i, v) in plane.iter_mut().enumerate() {
-                *v = rows[i * c + ch];
+    // Rows in parallel, each writing its row of every plane.
+    let mut planes: Vec<_> = out
+        .data
+        .chunks_mut(m.max(1))
+        .map(|p| p.chunks_mut(dw.max(1)))
+        .collect();
+    let rows: Vec<Vec<&mut [f32]>> = (0..dh)
+        .map(|_| planes.iter_mut().filter_map(|p| p.next()).collect())
+        .collect();
+    rows.into_par_iter().enumerate().for_each(|(y, mut row)| {
+        let (y0, y1, fy) = src_coord(y, h, dh);
+        let (a0, a1) = (y0 * w, y1 * w);
+        let (w0, w1) = (&weight[a0..a0 + w], &weight[a1..a1 + w]);
+        for (x, &(x0, x1, fx)) in xs.iter().enumerate() {
+            if !keep[y * dw + x] {
+                continue;
             }
-        });
+            let den = lerp2(w0, w1, x0, x1, fx, fy);
+            for (ch, plane) in row.iter_mut().enumerate() {
+                plane[x] = if den > 1e-6 {
+                    let p = &prods[ch];
+                    lerp2(&p[a0..a0 + w], &p[a1..a1 + w], x0, x1, fx, fy) / den
+                } else {
+                    let sx = ((x as f32 + 0.5) * w as f32 / dw as f32) as usize;
+                    let sy = ((y as f32 + 0.5) * h as f32 / dh as f32) as usize;
+                    img.plane(ch)[nearest[sy.min(h - 1) * w + sx.min(w - 1)]]
+                };
+            }
+        }
+    });
     out
 }
 

@@ -336,18 +336,31 @@ impl Ctx<'_> {
     /// SSD between the patches centred at positions `t` and `s` of the padded
     /// estimate; stops early (returning a value ≥ `bound`) once past `bound`.
     ///
+    /// The padded offsets of the two patches go to [`Ctx::dist_at`].
+    #[inline]
+    fn dist(&self, pad: &[f32], t: usize, s: usize, bound: f32) -> f32 {
+        let w = self.w;
+        let (ty, tx) = (t / w, t % w);
+        let (sy, sx) = (s / w, s % w);
+        self.dist_at(pad, self.pad_offset(ty, tx), self.pad_offset(sy, sx), bound)
+    }
+
+    /// Offset in the padded estimate of the top-left texel of the patch
+    /// centred at position `(y, x)`.
+    #[inline]
+    fn pad_offset(&self, y: usize, x: usize) -> usize {
+        (y * (self.w + 2 * self.r) + x) * self.c
+    }
+
+    /// [`Ctx::dist`] for patches whose top-left texels are at padded offsets
+    /// `a` and `b` ([`Ctx::pad_offset`]).
+    ///
     /// Dispatches to a row-length specialised copy of [`Ctx::dist_reference`]
     /// for the usual patch × channel sizes (same operations in the same
     /// order, so the same bits; `tests::fast_distance_matches_reference`).
     #[inline]
-    fn dist(&self, pad: &[f32], t: usize, s: usize, bound: f32) -> f32 {
-        let w = self.w;
-        let pw = w + 2 * self.r;
-        let (ty, tx) = (t / w, t % w);
-        let (sy, sx) = (s / w, s % w);
-        let a = (ty * pw + tx) * self.c;
-        let b = (sy * pw + sx) * self.c;
-        let stride = pw * self.c;
+    fn dist_at(&self, pad: &[f32], a: usize, b: usize, bound: f32) -> f32 {
+        let stride = (self.w + 2 * self.r) * self.c;
         match (self.p, self.c) {
             (7, 3) => dist_fixed::<7, 21>(pad, a, b, stride, bound),
             (7, 4) => dist_fixed::<7, 28>(pad, a, b, stride, bound),
@@ -355,11 +368,23 @@ impl Ctx<'_> {
             (7, 2) => dist_fixed::<7, 14>(pad, a, b, stride, bound),
             (5, 3) => dist_fixed::<5, 15>(pad, a, b, stride, bound),
             (3, 3) => dist_fixed::<3, 9>(pad, a, b, stride, bound),
-            _ => self.dist_reference(pad, t, s, bound),
+            _ => {
+                let row = self.p * self.c;
+                let mut acc = 0.0f32;
+                for dy in 0..self.p {
+                    let (oa, ob) = (a + dy * stride, b + dy * stride);
+                    acc += ssd(&pad[oa..oa + row], &pad[ob..ob + row]);
+                    if acc >= bound {
+                        return acc;
+                    }
+                }
+                acc
+            }
         }
     }
 
     /// The plain implementation of [`Ctx::dist`], for any patch and channel count.
+    #[cfg(test)]
     fn dist_reference(&self, pad: &[f32], t: usize, s: usize, bound: f32) -> f32 {
         let pw = self.w + 2 * self.r;
         let row = self.p * self.c;
@@ -375,6 +400,20 @@ impl Ctx<'_> {
             }
         }
         acc
+    }
+
+    /// Row and column of position `(y + dy, x + dx)`, wrapped or `None`
+    /// outside the image (the position of [`Ctx::offset`]).
+    #[inline]
+    fn offset_yx(&self, y: usize, x: usize, dy: isize, dx: isize) -> Option<(usize, usize)> {
+        let (ny, nx) = (y as isize + dy, x as isize + dx);
+        if self.toroidal {
+            Some((wrap(ny, self.h), wrap(nx, self.w)))
+        } else if ny < 0 || nx < 0 || ny >= self.h as isize || nx >= self.w as isize {
+            None
+        } else {
+            Some((ny as usize, nx as usize))
+        }
     }
 
     /// Position `(y + dy, x + dx)`, wrapped or `None` outside the image.
@@ -705,7 +744,127 @@ impl PatchMatchInpainter {
     }
 
     /// One PatchMatch pass (propagation + random search) over every target.
+    ///
+    /// The operations of `pm_pass_reference` in the same order (the same
+    /// candidates, random draws and distances, so the same field), with the
+    /// rows and columns of the best match and of each candidate carried along
+    /// instead of divided out of their positions at every use.
     fn pm_pass(
+        &self,
+        ctx: &Ctx,
+        pad: &[f32],
+        nnf: &mut [u32],
+        dist: &mut [f32],
+        key: u64,
+        reverse: bool,
+    ) {
+        let (h, w) = (ctx.h, ctx.w);
+        let snapshot = nnf.to_vec();
+        let band = self.band_rows.max(1) * w;
+        let max_radius = h.max(w) as isize;
+        let stride = (w + 2 * ctx.r) * ctx.c;
+        let (prefetch_rows, row_len) = (PREFETCH_ROWS.min(ctx.p), ctx.p * ctx.c);
+        nnf.par_chunks_mut(band)
+            .zip(dist.par_chunks_mut(band))
+            .enumerate()
+            .for_each(|(b, (nb, db))| {
+                let base = b * band;
+                let rows = nb.len() / w;
+                let mut rng = stream(key, &[b as u64]);
+                let step: isize = if reverse { 1 } else { -1 };
+                for yy in 0..rows {
+                    let y = if reverse { rows - 1 - yy } else { yy } + base / w;
+                    for xx in 0..w {
+                        let x = if reverse { w - 1 - xx } else { xx };
+                        let i = y * w + x;
+                        if !ctx.target[i] {
+                            continue;
+                        }
+                        let li = i - base;
+                        let a = ctx.pad_offset(y, x);
+                        let mut best = Match {
+                            s: nb[li] as usize,
+                            y: nb[li] as usize / w,
+                            x: nb[li] as usize % w,
+                            d: db[li],
+                        };
+                        let try_cand = |sy: usize, sx: usize, best: &mut Match| {
+                            let s = sy * w + sx;
+                            if s != i && s != best.s && ctx.valid[s] {
+                                let d = ctx.dist_at(pad, a, ctx.pad_offset(sy, sx), best.d);
+                                if d < best.d {
+                                    *best = Match { s, y: sy, x: sx, d };
+                                }
+                            }
+                        };
+                        // Propagation from the neighbours already visited.
+                        for (dy, dx) in [(0, step), (step, 0)] {
+                            let Some(j) = ctx.offset(y, x, dy, dx) else {
+                                continue;
+                            };
+                            let s = if (base..base + nb.len()).contains(&j) {
+                                nb[j - base]
+                            } else {
+                                snapshot[j]
+                            } as usize;
+                            if let Some((cy, cx)) = ctx.offset_yx(s / w, s % w, -dy, -dx) {
+                                try_cand(cy, cx, &mut best);
+                            }
+                        }
+                        // Random search in shrinking windows around the best.
+                        // The draws do not depend on the best match, so they
+                        // are made first (in the same order) and the
+                        // candidates around the current best are prefetched;
+                        // a candidate is then placed around the best at its
+                        // turn, as before.
+                        let mut offsets = [(0isize, 0isize); 64];
+                        let mut k = 0;
+                        let mut radius = max_radius;
+                        while radius >= 1 {
+                            let oy = rng.range(0, 2 * radius as usize) as isize - radius;
+                            let ox = rng.range(0, 2 * radius as usize) as isize - radius;
+                            offsets[k] = (oy, ox);
+                            k += 1;
+                            radius /= 2;
+                        }
+                        let place = |by: usize, bx: usize, (oy, ox): (isize, isize)| {
+                            let (sy, sx) = (by as isize + oy, bx as isize + ox);
+                            if ctx.toroidal {
+                                (wrap(sy, h), wrap(sx, w))
+                            } else {
+                                (
+                                    sy.clamp(ctx.src_rows.0 as isize, ctx.src_rows.1 as isize)
+                                        as usize,
+                                    sx.clamp(ctx.src_cols.0 as isize, ctx.src_cols.1 as isize)
+                                        as usize,
+                                )
+                            }
+                        };
+                        for &o in &offsets[..k] {
+                            let (sy, sx) = place(best.y, best.x, o);
+                            prefetch(ctx.valid, sy * w + sx);
+                            let b = ctx.pad_offset(sy, sx);
+                            for r in 0..prefetch_rows {
+                                prefetch(pad, b + r * stride);
+                                prefetch(pad, b + r * stride + row_len - 1);
+                            }
+                        }
+                        for &o in &offsets[..k] {
+                            let (sy, sx) = place(best.y, best.x, o);
+                            try_cand(sy, sx, &mut best);
+                        }
+                        nb[li] = best.s as u32;
+                        db[li] = best.d;
+                    }
+                }
+            });
+    }
+
+    /// The plain implementation of [`PatchMatchInpainter::pm_pass`] (a
+    /// division per coordinate, the distance from positions), kept to test
+    /// the fast one against.
+    #[cfg(test)]
+    fn pm_pass_reference(
         &self,
         ctx: &Ctx,
         pad: &[f32],
@@ -783,6 +942,32 @@ impl PatchMatchInpainter {
     }
 }
 
+/// Patch rows of each random-search candidate that [`PatchMatchInpainter::pm_pass`]
+/// prefetches (the early exit rarely reads further for a poor candidate).
+const PREFETCH_ROWS: usize = 3;
+
+/// Asks the processor to bring `v[i]`'s cache line in (a hint: never faults).
+#[inline(always)]
+fn prefetch<T>(v: &[T], i: usize) {
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: a prefetch never faults, whatever the address.
+    unsafe {
+        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+        _mm_prefetch::<_MM_HINT_T0>(v.as_ptr().wrapping_add(i) as *const i8);
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = (v, i);
+}
+
+/// The current match of a target in [`PatchMatchInpainter::pm_pass`]: the
+/// source position, its row and column, and the patch distance.
+struct Match {
+    s: usize,
+    y: usize,
+    x: usize,
+    d: f32,
+}
+
 /// Full patch distances of every target to its NNF entry.
 fn compute_distances(ctx: &Ctx, pad: &[f32], nnf: &[u32], dist: &mut [f32]) {
     let w = ctx.w;
@@ -849,6 +1034,14 @@ fn vote(ctx: &Ctx, img: &[f32], known: &[bool], nnf: &[u32], dist: &[f32]) -> (V
             .collect()
     };
     let (rows, cols) = (table(h), table(w));
+    // Row and column of every target's match, divided out once.
+    let mut src_yx = vec![(0u32, 0u32); h * w];
+    src_yx.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+        for (x, o) in row.iter_mut().enumerate() {
+            let s = nnf[y * w + x] as usize;
+            *o = ((s / w) as u32, (s % w) as u32);
+        }
+    });
     let mut out = img.to_vec();
     let change = out
         .par_chunks_mut(w * c)
@@ -881,9 +1074,9 @@ fn vote(ctx: &Ctx, img: &[f32], known: &[bool], nnf: &[u32], dist: &[f32]) -> (V
                         if wt <= 0.0 {
                             continue;
                         }
-                        let s = nnf[t] as usize;
-                        let sy = rows[((s / w) as isize + dy + r) as usize];
-                        let sx = cols[((s % w) as isize + dx + r) as usize];
+                        let (my, mx) = src_yx[t];
+                        let sy = rows[(my as isize + dy + r) as usize];
+                        let sx = cols[(mx as isize + dx + r) as usize];
                         if sy == NONE || sx == NONE {
                             continue;
                         }
@@ -1179,6 +1372,38 @@ mod tests {
                     let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
                     assert_eq!(bits(&a), bits(&b), "{h}x{w}x{c} p{p} toroidal {toroidal}");
                     assert_eq!(ca.to_bits(), cb.to_bits());
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn fast_pm_pass_matches_reference() {
+        let mut rng = Rng::new(44);
+        let pm = PatchMatchInpainter::default();
+        for (h, w, c, p) in shapes() {
+            for toroidal in [true, false] {
+                let mut case = Case::new(&mut rng, h, w, c, p, toroidal);
+                // Some inadmissible sources; non-toroidal sources inside the image.
+                let r = p / 2;
+                for (i, v) in case.valid.iter_mut().enumerate() {
+                    let (y, x) = (i / w, i % w);
+                    let inside = toroidal || (y >= r && y + r < h && x >= r && x + r < w);
+                    *v = inside && rng.f64() > 0.2;
+                }
+                let ctx = case.ctx();
+                let pad = ctx.pad(&case.img);
+                let mut dist = vec![0.0f32; h * w];
+                compute_distances(&ctx, &pad, &case.nnf, &mut dist);
+                let (mut na, mut da) = (case.nnf.clone(), dist.clone());
+                let (mut nb, mut db) = (case.nnf.clone(), dist);
+                for pass in 0..4u64 {
+                    let key = rng.next_u64();
+                    pm.pm_pass(&ctx, &pad, &mut na, &mut da, key, pass % 2 == 1);
+                    pm.pm_pass_reference(&ctx, &pad, &mut nb, &mut db, key, pass % 2 == 1);
+                    assert_eq!(na, nb, "{h}x{w}x{c} p{p} toroidal {toroidal} pass {pass}");
+                    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                    assert_eq!(bits(&da), bits(&db));
                 }
             }
         }
