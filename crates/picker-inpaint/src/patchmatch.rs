@@ -358,7 +358,7 @@ impl Ctx<'_> {
     /// Dispatches to a row-length specialised copy of [`Ctx::dist_reference`]
     /// for the usual patch × channel sizes (same operations in the same
     /// order, so the same bits; `tests::fast_distance_matches_reference`).
-    #[inline]
+    #[inline(always)]
     fn dist_at(&self, pad: &[f32], a: usize, b: usize, bound: f32) -> f32 {
         let stride = (self.w + 2 * self.r) * self.c;
         match (self.p, self.c) {
@@ -449,7 +449,7 @@ fn wrap(v: isize, n: usize) -> usize {
 /// [`Ctx::dist`] for `P` rows of `ROW = P·c` values, `stride` apart, starting
 /// at `a` and `b`: the operations of [`ssd`] in the same order, with the
 /// lengths known at compile time (no bounds checks inside a row).
-#[inline]
+#[inline(always)]
 fn dist_fixed<const P: usize, const ROW: usize>(
     pad: &[f32],
     a: usize,
@@ -764,99 +764,31 @@ impl PatchMatchInpainter {
         let max_radius = h.max(w) as isize;
         let stride = (w + 2 * ctx.r) * ctx.c;
         let (prefetch_rows, row_len) = (PREFETCH_ROWS.min(ctx.p), ctx.p * ctx.c);
+        let args = PassArgs {
+            ctx,
+            pad,
+            snapshot: &snapshot,
+            band,
+            max_radius,
+            stride,
+            prefetch_rows,
+            row_len,
+            key,
+            reverse,
+        };
+        let avx2 = has_avx2();
         nnf.par_chunks_mut(band)
             .zip(dist.par_chunks_mut(band))
             .enumerate()
             .for_each(|(b, (nb, db))| {
-                let base = b * band;
-                let rows = nb.len() / w;
-                let mut rng = stream(key, &[b as u64]);
-                let step: isize = if reverse { 1 } else { -1 };
-                for yy in 0..rows {
-                    let y = if reverse { rows - 1 - yy } else { yy } + base / w;
-                    for xx in 0..w {
-                        let x = if reverse { w - 1 - xx } else { xx };
-                        let i = y * w + x;
-                        if !ctx.target[i] {
-                            continue;
-                        }
-                        let li = i - base;
-                        let a = ctx.pad_offset(y, x);
-                        let mut best = Match {
-                            s: nb[li] as usize,
-                            y: nb[li] as usize / w,
-                            x: nb[li] as usize % w,
-                            d: db[li],
-                        };
-                        let try_cand = |sy: usize, sx: usize, best: &mut Match| {
-                            let s = sy * w + sx;
-                            if s != i && s != best.s && ctx.valid[s] {
-                                let d = ctx.dist_at(pad, a, ctx.pad_offset(sy, sx), best.d);
-                                if d < best.d {
-                                    *best = Match { s, y: sy, x: sx, d };
-                                }
-                            }
-                        };
-                        // Propagation from the neighbours already visited.
-                        for (dy, dx) in [(0, step), (step, 0)] {
-                            let Some(j) = ctx.offset(y, x, dy, dx) else {
-                                continue;
-                            };
-                            let s = if (base..base + nb.len()).contains(&j) {
-                                nb[j - base]
-                            } else {
-                                snapshot[j]
-                            } as usize;
-                            if let Some((cy, cx)) = ctx.offset_yx(s / w, s % w, -dy, -dx) {
-                                try_cand(cy, cx, &mut best);
-                            }
-                        }
-                        // Random search in shrinking windows around the best.
-                        // The draws do not depend on the best match, so they
-                        // are made first (in the same order) and the
-                        // candidates around the current best are prefetched;
-                        // a candidate is then placed around the best at its
-                        // turn, as before.
-                        let mut offsets = [(0isize, 0isize); 64];
-                        let mut k = 0;
-                        let mut radius = max_radius;
-                        while radius >= 1 {
-                            let oy = rng.range(0, 2 * radius as usize) as isize - radius;
-                            let ox = rng.range(0, 2 * radius as usize) as isize - radius;
-                            offsets[k] = (oy, ox);
-                            k += 1;
-                            radius /= 2;
-                        }
-                        let place = |by: usize, bx: usize, (oy, ox): (isize, isize)| {
-                            let (sy, sx) = (by as isize + oy, bx as isize + ox);
-                            if ctx.toroidal {
-                                (wrap(sy, h), wrap(sx, w))
-                            } else {
-                                (
-                                    sy.clamp(ctx.src_rows.0 as isize, ctx.src_rows.1 as isize)
-                                        as usize,
-                                    sx.clamp(ctx.src_cols.0 as isize, ctx.src_cols.1 as isize)
-                                        as usize,
-                                )
-                            }
-                        };
-                        for &o in &offsets[..k] {
-                            let (sy, sx) = place(best.y, best.x, o);
-                            prefetch(ctx.valid, sy * w + sx);
-                            let b = ctx.pad_offset(sy, sx);
-                            for r in 0..prefetch_rows {
-                                prefetch(pad, b + r * stride);
-                                prefetch(pad, b + r * stride + row_len - 1);
-                            }
-                        }
-                        for &o in &offsets[..k] {
-                            let (sy, sx) = place(best.y, best.x, o);
-                            try_cand(sy, sx, &mut best);
-                        }
-                        nb[li] = best.s as u32;
-                        db[li] = best.d;
-                    }
+                #[cfg(target_arch = "x86_64")]
+                if avx2 {
+                    // SAFETY: the CPU has AVX2 (checked above).
+                    unsafe { band_pass_avx2(&args, b, nb, db) };
+                    return;
                 }
+                let _ = avx2;
+                band_pass(&args, b, nb, db);
             });
     }
 
@@ -944,6 +876,167 @@ impl PatchMatchInpainter {
 
 /// Patch rows of each random-search candidate that [`PatchMatchInpainter::pm_pass`]
 /// prefetches (the early exit rarely reads further for a poor candidate).
+/// What one PatchMatch pass shares between its bands.
+struct PassArgs<'a> {
+    ctx: &'a Ctx<'a>,
+    pad: &'a [f32],
+    snapshot: &'a [u32],
+    band: usize,
+    max_radius: isize,
+    stride: usize,
+    prefetch_rows: usize,
+    row_len: usize,
+    key: u64,
+    reverse: bool,
+}
+
+/// True when the CPU has AVX2 (the pass then runs its AVX2-compiled copy:
+/// the same operations in the same order, so the same bits; Rust never
+/// contracts `a * b + c` into an FMA).
+fn has_avx2() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::arch::is_x86_feature_detected!("avx2")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+/// [`band_pass`] compiled for AVX2 (the patch distances' 8 lanes in one
+/// register instead of two).
+///
+/// # Safety
+/// The CPU has AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn band_pass_avx2(args: &PassArgs<'_>, b: usize, nb: &mut [u32], db: &mut [f32]) {
+    band_pass(args, b, nb, db)
+}
+
+/// One band (`b`, its matches `nb` and distances `db`) of
+/// [`PatchMatchInpainter::pm_pass`].
+#[inline(always)]
+fn band_pass(args: &PassArgs<'_>, b: usize, nb: &mut [u32], db: &mut [f32]) {
+    let PassArgs {
+        ctx,
+        pad,
+        snapshot,
+        band,
+        max_radius,
+        stride,
+        prefetch_rows,
+        row_len,
+        key,
+        reverse,
+    } = *args;
+    let w = ctx.w;
+    let base = b * band;
+    let rows = nb.len() / w;
+    let mut rng = stream(key, &[b as u64]);
+    let step: isize = if reverse { 1 } else { -1 };
+    for yy in 0..rows {
+        let y = if reverse { rows - 1 - yy } else { yy } + base / w;
+        for xx in 0..w {
+            let x = if reverse { w - 1 - xx } else { xx };
+            let i = y * w + x;
+            if !ctx.target[i] {
+                continue;
+            }
+            let li = i - base;
+            let a = ctx.pad_offset(y, x);
+            let mut best = Match {
+                s: nb[li] as usize,
+                y: nb[li] as usize / w,
+                x: nb[li] as usize % w,
+                d: db[li],
+            };
+            // Propagation from the neighbours already visited.
+            for (dy, dx) in [(0, step), (step, 0)] {
+                let Some(j) = ctx.offset(y, x, dy, dx) else {
+                    continue;
+                };
+                let s = if (base..base + nb.len()).contains(&j) {
+                    nb[j - base]
+                } else {
+                    snapshot[j]
+                } as usize;
+                if let Some((cy, cx)) = ctx.offset_yx(s / w, s % w, -dy, -dx) {
+                    try_candidate(ctx, pad, i, a, cy, cx, &mut best);
+                }
+            }
+            // Random search in shrinking windows around the best.
+            // The draws do not depend on the best match, so they
+            // are made first (in the same order) and the
+            // candidates around the current best are prefetched;
+            // a candidate is then placed around the best at its
+            // turn, as before.
+            let mut offsets = [(0isize, 0isize); 64];
+            let mut k = 0;
+            let mut radius = max_radius;
+            while radius >= 1 {
+                let oy = rng.range(0, 2 * radius as usize) as isize - radius;
+                let ox = rng.range(0, 2 * radius as usize) as isize - radius;
+                offsets[k] = (oy, ox);
+                k += 1;
+                radius /= 2;
+            }
+            for &o in &offsets[..k] {
+                let (sy, sx) = place(ctx, best.y, best.x, o);
+                prefetch(ctx.valid, sy * w + sx);
+                let b = ctx.pad_offset(sy, sx);
+                for r in 0..prefetch_rows {
+                    prefetch(pad, b + r * stride);
+                    prefetch(pad, b + r * stride + row_len - 1);
+                }
+            }
+            for &o in &offsets[..k] {
+                let (sy, sx) = place(ctx, best.y, best.x, o);
+                try_candidate(ctx, pad, i, a, sy, sx, &mut best);
+            }
+            nb[li] = best.s as u32;
+            db[li] = best.d;
+        }
+    }
+}
+
+/// Tries source `(sy, sx)` for target `i` (patch at `a` in `pad`): keeps it
+/// in `best` when it is a valid, different source with a smaller distance.
+#[inline(always)]
+fn try_candidate(
+    ctx: &Ctx<'_>,
+    pad: &[f32],
+    i: usize,
+    a: usize,
+    sy: usize,
+    sx: usize,
+    best: &mut Match,
+) {
+    let s = sy * ctx.w + sx;
+    if s != i && s != best.s && ctx.valid[s] {
+        let d = ctx.dist_at(pad, a, ctx.pad_offset(sy, sx), best.d);
+        if d < best.d {
+            *best = Match { s, y: sy, x: sx, d };
+        }
+    }
+}
+
+/// The random-search candidate at offset `(oy, ox)` from `(by, bx)`:
+/// wrapped on a torus, else clamped to the source rows and columns.
+#[inline(always)]
+fn place(ctx: &Ctx<'_>, by: usize, bx: usize, (oy, ox): (isize, isize)) -> (usize, usize) {
+    let (sy, sx) = (by as isize + oy, bx as isize + ox);
+    if ctx.toroidal {
+        (wrap(sy, ctx.h), wrap(sx, ctx.w))
+    } else {
+        (
+            sy.clamp(ctx.src_rows.0 as isize, ctx.src_rows.1 as isize) as usize,
+            sx.clamp(ctx.src_cols.0 as isize, ctx.src_cols.1 as isize) as usize,
+        )
+    }
+}
+
 const PREFETCH_ROWS: usize = 3;
 
 /// Asks the processor to bring `v[i]`'s cache line in (a hint: never faults).
