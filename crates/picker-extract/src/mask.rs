@@ -8,7 +8,7 @@
 //! spread of those pixels around the pick colour (1.4826·MAD) sets the
 //! tolerance: `τ = clamp(τ_min + 3σ, τ_min, τ_max)` unless given. A pixel
 //! belongs to the material when it has a surface and its segmentation colour
-//! is within `τ` (Euclidean, RGB in [0,1]) of the pick colour. Without
+//! is within `τ` (Euclidean, RGB in `[0, 1]`) of the pick colour. Without
 //! `connected`, every region of that colour counts (a floor split by a table
 //! is one material) and specks smaller than [`MIN_SPECK_FRACTION`] of the
 //! image are dropped; with `connected`, only the 8-connected region at the

@@ -22,7 +22,7 @@ pub struct MaterialParams {
     pub diffuse: [f32; 3],
     /// Specular albedo ρs (linear RGB), a robust statistic (median) over the mask.
     pub specular: [f32; 3],
-    /// Glossiness g ∈ [0,1] (median over the mask).
+    /// Glossiness g ∈ `[0, 1]` (median over the mask).
     pub glossiness: f32,
     /// Phong exponent n = `picker_nets::conventions::phong_exponent(g)`.
     pub exponent: f32,
@@ -46,7 +46,7 @@ pub struct TextureResult {
     pub texture: Image,
     /// The reprojected texture before inpainting (unknown texels 0), linear RGB.
     pub raw: Image,
-    /// Per-texel coverage/confidence in [0,1] (1 channel): 0 = never observed.
+    /// Per-texel coverage/confidence in `[0, 1]` (1 channel): 0 = never observed.
     pub coverage: Image,
     /// Fraction of texels observed (coverage > 0).
     pub coverage_fraction: f64,

@@ -76,7 +76,7 @@ pub enum UvChoice {
 /// Everything the extraction reads.
 #[derive(Clone, Debug)]
 pub struct Inputs {
-    /// The photo at full resolution: sRGB-encoded display values in [0,1], 3 channels.
+    /// The photo at full resolution: sRGB-encoded display values in `[0, 1]`, 3 channels.
     pub photo: Image,
     /// The render elements at the working resolution (UVs needed for textures).
     pub elements: ElementImages,

@@ -1,7 +1,7 @@
 //! f32 NCHW tensors and the CPU kernels of Material Picker's networks.
 //!
 //! Every op exists twice: a fast path (packed GEMM with per-ISA micro-kernels,
-//! implicit im2col, rayon) and a plain version in [`reference`] that the tests
+//! implicit im2col, rayon) and a plain version in [`reference`](mod@reference) that the tests
 //! hold the fast path to. The micro-kernel family is chosen once at runtime
 //! ([`Isa::best`]); layers can be built for a given family ([`Conv2d::with_isa`]).
 //!
