@@ -109,19 +109,12 @@ pub(crate) fn shifted_gemm(
         }
         return;
     }
-    let threads = rayon::current_num_threads().max(1);
-    let per_task = n_panels
-        .div_ceil(threads * TASKS_PER_THREAD)
-        .clamp(1, MAX_PANELS_PER_TASK);
-    let n_tasks = n_panels.div_ceil(per_task);
     let out_ptr = SharedPtr(out.as_mut_ptr());
     let out_ptr = &out_ptr;
-    let task = |t: usize| {
+    let task = |(p0, p1): (usize, usize)| {
         // One tile of partial sums per row panel, for the tiles that cannot be
         // accumulated in place.
         let mut tmps = vec![0.0f32; a.m_panels * mr * nr];
-        let p0 = t * per_task;
-        let p1 = (p0 + per_task).min(n_panels);
         for p in p0..p1 {
             let n0 = p * nr;
             let (y, x) = (n0 / b.wp, n0 % b.wp);
@@ -206,11 +199,7 @@ pub(crate) fn shifted_gemm(
             }
         }
     };
-    if threads == 1 {
-        (0..n_tasks).for_each(task);
-    } else {
-        (0..n_tasks).into_par_iter().for_each(task);
-    }
+    for_each_panel_range(n_panels, task);
 }
 
 /// `dst[j] = src[s·j]` (`src` holds at least `s·(len − 1) + 1` floats).
@@ -363,20 +352,13 @@ pub(crate) fn shifted_gemm_interleaved(
         );
     }
     let s = map.s;
-    let threads = rayon::current_num_threads().max(1);
-    let per_task = n_panels
-        .div_ceil(threads * TASKS_PER_THREAD)
-        .clamp(1, MAX_PANELS_PER_TASK);
-    let n_tasks = n_panels.div_ceil(per_task);
     let out_ptr = SharedPtr(out.as_mut_ptr());
     let out_ptr = &out_ptr;
     let tile = m_panels * mr * nr;
-    let task = |t: usize| {
+    let task = |(p0, p1): (usize, usize)| {
         // One tile per column phase and row panel; a phase without taps
         // keeps its zeros.
         let mut tmps = vec![0.0f32; s * tile];
-        let p0 = t * per_task;
-        let p1 = (p0 + per_task).min(n_panels);
         for p in p0..p1 {
             let n0 = p * nr;
             for (rx, part) in parts.iter().enumerate() {
@@ -424,11 +406,7 @@ pub(crate) fn shifted_gemm_interleaved(
             }
         }
     };
-    if threads == 1 {
-        (0..n_tasks).for_each(task);
-    } else {
-        (0..n_tasks).into_par_iter().for_each(task);
-    }
+    for_each_panel_range(n_panels, task);
 }
 
 /// `dst[j] = act(src(j % s)[j / s] + bias) [+ res[j]]`.
@@ -502,6 +480,24 @@ fn interleave_finish<'a>(
             Isa::Avx2Fma => interleave_avx2(s, &src, dst, bias, act, res),
             _ => interleave_portable(s, &src, dst, bias, act, res),
         }
+    }
+}
+
+/// Runs `task` on consecutive ranges `[p0, p1)` of `n_panels` column panels
+/// on the rayon pool: about [`TASKS_PER_THREAD`] ranges per thread (so work
+/// stealing can even out the load), at most [`MAX_PANELS_PER_TASK`] panels
+/// each; in order on the calling thread when the pool has one thread.
+fn for_each_panel_range(n_panels: usize, task: impl Fn((usize, usize)) + Sync + Send) {
+    let threads = rayon::current_num_threads().max(1);
+    let per_task = n_panels
+        .div_ceil(threads * TASKS_PER_THREAD)
+        .clamp(1, MAX_PANELS_PER_TASK);
+    let n_tasks = n_panels.div_ceil(per_task);
+    let range = |t: usize| (t * per_task, ((t + 1) * per_task).min(n_panels));
+    if threads == 1 {
+        (0..n_tasks).map(range).for_each(task);
+    } else {
+        (0..n_tasks).into_par_iter().map(range).for_each(task);
     }
 }
 
