@@ -72,31 +72,35 @@ pub fn bilinear(img: &Image, dw: usize, dh: usize) -> Image {
     per_plane(img, dw, dh, bilinear_plane)
 }
 
+/// For each of `dn` destination cells over `n` source cells, the source
+/// cells it overlaps and their share of it, `(index, weight)` (weights sum
+/// to 1).
+fn area_spans(n: usize, dn: usize) -> Vec<Vec<(usize, f32)>> {
+    (0..dn)
+        .map(|i| {
+            let a = i as f64 * n as f64 / dn as f64;
+            let b = (i + 1) as f64 * n as f64 / dn as f64;
+            let mut v = Vec::new();
+            let mut k = a.floor() as usize;
+            while (k as f64) < b && k < n {
+                let lo = a.max(k as f64);
+                let hi = b.min((k + 1) as f64);
+                if hi > lo {
+                    v.push((k, ((hi - lo) / (b - a)) as f32));
+                }
+                k += 1;
+            }
+            v
+        })
+        .collect()
+}
+
 /// Area (box) downsampling of one plane: each destination pixel is the
 /// coverage-weighted mean of the source pixels it overlaps. Works for any
 /// ratio (upsampling degenerates to nearest-like sampling).
 pub fn area_plane(src: &[f32], w: usize, h: usize, dw: usize, dh: usize) -> Vec<f32> {
     assert_eq!(src.len(), w * h, "plane length");
-    let spans = |n: usize, dn: usize| -> Vec<Vec<(usize, f32)>> {
-        (0..dn)
-            .map(|i| {
-                let a = i as f64 * n as f64 / dn as f64;
-                let b = (i + 1) as f64 * n as f64 / dn as f64;
-                let mut v = Vec::new();
-                let mut k = a.floor() as usize;
-                while (k as f64) < b && k < n {
-                    let lo = a.max(k as f64);
-                    let hi = b.min((k + 1) as f64);
-                    if hi > lo {
-                        v.push((k, ((hi - lo) / (b - a)) as f32));
-                    }
-                    k += 1;
-                }
-                v
-            })
-            .collect()
-    };
-    let (sx, sy) = (spans(w, dw), spans(h, dh));
+    let (sx, sy) = (area_spans(w, dw), area_spans(h, dh));
     let mut out = vec![0.0; dw * dh];
     // Rows in parallel (each value is one fixed-order sum: same bits).
     out.par_chunks_mut(dw.max(1))
@@ -415,26 +419,7 @@ mod tests {
         for &(w, h, dw, dh) in &[(1, 1, 1, 1), (7, 3, 2, 2), (40, 30, 7, 5), (5, 4, 9, 11)] {
             let src = rng.uniform_vec(w * h, -1.0, 1.0);
             let got = area_plane(&src, w, h, dw, dh);
-            let spans = |n: usize, dn: usize| -> Vec<Vec<(usize, f32)>> {
-                (0..dn)
-                    .map(|i| {
-                        let a = i as f64 * n as f64 / dn as f64;
-                        let b = (i + 1) as f64 * n as f64 / dn as f64;
-                        let mut v = Vec::new();
-                        let mut k = a.floor() as usize;
-                        while (k as f64) < b && k < n {
-                            let lo = a.max(k as f64);
-                            let hi = b.min((k + 1) as f64);
-                            if hi > lo {
-                                v.push((k, ((hi - lo) / (b - a)) as f32));
-                            }
-                            k += 1;
-                        }
-                        v
-                    })
-                    .collect()
-            };
-            let (sx, sy) = (spans(w, dw), spans(h, dh));
+            let (sx, sy) = (area_spans(w, dw), area_spans(h, dh));
             for (y, ry) in sy.iter().enumerate() {
                 for (x, rx) in sx.iter().enumerate() {
                     let mut s = 0.0f32;
