@@ -102,19 +102,23 @@ pub fn normal_spread_deg(normals: &Image, mask: &[bool], n: Vec3) -> f32 {
     median(&mut ang).unwrap_or(180.0)
 }
 
+/// The in-plane axes for normal `n`: `e1` is the photo's x axis projected
+/// onto the plane (its y axis when x is nearly along `n`), `e2 = n × e1`.
+fn plane_basis(n: Vec3) -> (Vec3, Vec3) {
+    let x = Vec3::X - Vec3::X.dot(n) * n;
+    let e1 = if x.length() > 1e-3 {
+        x.normalize()
+    } else {
+        (Vec3::Y - Vec3::Y.dot(n) * n).normalize()
+    };
+    (e1, n.cross(e1))
+}
+
 /// The rectified plane coordinates of the picked pixels of a `w×h` photo
 /// (focal `focal` in photo pixels), mapped into the texture square; pixels
 /// whose ray misses the plane's front get `NaN`.
 pub fn plane_coords(w: usize, h: usize, mask: &[bool], n: Vec3, focal: f32) -> Coords {
-    let e1 = {
-        let x = Vec3::X - Vec3::X.dot(n) * n;
-        if x.length() > 1e-3 {
-            x.normalize()
-        } else {
-            (Vec3::Y - Vec3::Y.dot(n) * n).normalize()
-        }
-    };
-    let e2 = n.cross(e1);
+    let (e1, e2) = plane_basis(n);
     let (cx, cy) = (w as f32 / 2.0, h as f32 / 2.0);
     let mut s = vec![f32::NAN; w * h];
     let mut t = vec![f32::NAN; w * h];
@@ -195,15 +199,7 @@ pub fn plane_coords(w: usize, h: usize, mask: &[bool], n: Vec3, focal: f32) -> C
 /// The plain, sequential implementation of [`plane_coords`] (the reference
 /// its parallel version is tested against).
 pub fn plane_coords_reference(w: usize, h: usize, mask: &[bool], n: Vec3, focal: f32) -> Coords {
-    let e1 = {
-        let x = Vec3::X - Vec3::X.dot(n) * n;
-        if x.length() > 1e-3 {
-            x.normalize()
-        } else {
-            (Vec3::Y - Vec3::Y.dot(n) * n).normalize()
-        }
-    };
-    let e2 = n.cross(e1);
+    let (e1, e2) = plane_basis(n);
     let (cx, cy) = (w as f32 / 2.0, h as f32 / 2.0);
     let mut s = vec![f32::NAN; w * h];
     let mut t = vec![f32::NAN; w * h];
