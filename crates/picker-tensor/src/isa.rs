@@ -85,3 +85,37 @@ impl std::fmt::Display for Isa {
         f.write_str(self.name())
     }
 }
+
+/// Defines `fn name(isa: Isa, args…)` that runs the `#[inline(always)]`
+/// function `body(args…)` compiled with the target features of `isa`'s
+/// family (AVX-512F, AVX2 + FMA, or the baseline), so plain loops vectorise
+/// for the widest registers. `isa` must be available on this CPU (the family
+/// a layer was built for, or [`Isa::best`]).
+macro_rules! per_isa {
+    ($(#[$m:meta])* $vis:vis fn $name:ident $(<$lt:lifetime>)? ($($a:ident: $t:ty),* $(,)?) => $body:ident) => {
+        $(#[$m])*
+        $vis fn $name $(<$lt>)? (isa: $crate::isa::Isa, $($a: $t),*) {
+            #[cfg(target_arch = "x86_64")]
+            #[target_feature(enable = "avx512f,avx2,fma")]
+            unsafe fn avx512 $(<$lt>)? ($($a: $t),*) {
+                $body($($a),*)
+            }
+            #[cfg(target_arch = "x86_64")]
+            #[target_feature(enable = "avx2,fma")]
+            unsafe fn avx2 $(<$lt>)? ($($a: $t),*) {
+                $body($($a),*)
+            }
+            debug_assert!(isa.is_available());
+            match isa {
+                // SAFETY: the CPU has the family's features (see the macro's contract).
+                #[cfg(target_arch = "x86_64")]
+                $crate::isa::Isa::Avx512 => unsafe { avx512($($a),*) },
+                // SAFETY: as above.
+                #[cfg(target_arch = "x86_64")]
+                $crate::isa::Isa::Avx2Fma => unsafe { avx2($($a),*) },
+                _ => $body($($a),*),
+            }
+        }
+    };
+}
+pub(crate) use per_isa;

@@ -225,34 +225,9 @@ fn strided_copy_body(src: &[f32], s: usize, dst: &mut [f32]) {
     }
 }
 
-macro_rules! strided_for {
-    ($name:ident, $($feat:literal)?) => {
-        $(#[target_feature(enable = $feat)])?
-        unsafe fn $name(src: &[f32], s: usize, dst: &mut [f32]) {
-            strided_copy_body(src, s, dst)
-        }
-    };
-}
-
-#[cfg(target_arch = "x86_64")]
-strided_for!(strided_avx512, "avx512f,avx2,fma");
-#[cfg(target_arch = "x86_64")]
-strided_for!(strided_avx2, "avx2,fma");
-strided_for!(strided_portable,);
-
-/// [`strided_copy_body`] compiled for the widest ISA this CPU has.
-fn strided_copy(isa: crate::isa::Isa, src: &[f32], s: usize, dst: &mut [f32]) {
-    use crate::isa::Isa;
-    // SAFETY: `isa` is `Isa::best()`, which this CPU has.
-    unsafe {
-        match isa {
-            #[cfg(target_arch = "x86_64")]
-            Isa::Avx512 => strided_avx512(src, s, dst),
-            #[cfg(target_arch = "x86_64")]
-            Isa::Avx2Fma => strided_avx2(src, s, dst),
-            _ => strided_portable(src, s, dst),
-        }
-    }
+crate::isa::per_isa! {
+    /// [`strided_copy_body`] compiled for `isa`.
+    fn strided_copy(src: &[f32], s: usize, dst: &mut [f32]) => strided_copy_body
 }
 
 /// One column phase of [`shifted_gemm_interleaved`]: the product `a · b`
@@ -438,49 +413,16 @@ fn interleave_finish_body<'a>(
     finish_run(dst, bias, act, res);
 }
 
-macro_rules! interleave_for {
-    ($name:ident, $($feat:literal)?) => {
-        $(#[target_feature(enable = $feat)])?
-        unsafe fn $name<'a>(
-            s: usize,
-            src: &dyn Fn(usize) -> &'a [f32],
-            dst: &mut [f32],
-            bias: f32,
-            act: Activation,
-            res: Option<&[f32]>,
-        ) {
-            interleave_finish_body(s, src, dst, bias, act, res)
-        }
-    };
-}
-
-#[cfg(target_arch = "x86_64")]
-interleave_for!(interleave_avx512, "avx512f,avx2,fma");
-#[cfg(target_arch = "x86_64")]
-interleave_for!(interleave_avx2, "avx2,fma");
-interleave_for!(interleave_portable,);
-
-/// [`interleave_finish_body`] compiled for the kernel family's ISA.
-fn interleave_finish<'a>(
-    isa: crate::isa::Isa,
-    s: usize,
-    src: impl Fn(usize) -> &'a [f32],
-    dst: &mut [f32],
-    bias: f32,
-    act: Activation,
-    res: Option<&[f32]>,
-) {
-    use crate::isa::Isa;
-    // SAFETY: the packed weights were made for `isa`, which this CPU has.
-    unsafe {
-        match isa {
-            #[cfg(target_arch = "x86_64")]
-            Isa::Avx512 => interleave_avx512(s, &src, dst, bias, act, res),
-            #[cfg(target_arch = "x86_64")]
-            Isa::Avx2Fma => interleave_avx2(s, &src, dst, bias, act, res),
-            _ => interleave_portable(s, &src, dst, bias, act, res),
-        }
-    }
+crate::isa::per_isa! {
+    /// [`interleave_finish_body`] compiled for `isa`.
+    fn interleave_finish<'a>(
+        s: usize,
+        src: impl Fn(usize) -> &'a [f32],
+        dst: &mut [f32],
+        bias: f32,
+        act: Activation,
+        res: Option<&[f32]>,
+    ) => interleave_finish_body
 }
 
 /// Runs `task` on consecutive ranges `[p0, p1)` of `n_panels` column panels
