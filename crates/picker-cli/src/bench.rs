@@ -156,6 +156,7 @@ pub fn run(a: Args) -> Result<()> {
             "peak_rss_after_load_mb": load_rss_mb,
             "peak_rss_scope": if rss_reset { "process, from weight loading on" } else { "process" },
             "isa": isa,
+            "precision": picker_tensor::precision().name(),
             "params": config.param_count(),
             "stages": stages
                 .iter()
@@ -167,13 +168,14 @@ pub fn run(a: Args) -> Result<()> {
         println!(
             "{kind} ({preset}, {} parameters) at {h}x{w}, batch {}: median {median_ms:.1} ms, \
              min {min_ms:.1} ms over {} runs ({} warm-up); {:.1} GFLOP/run, {gflops:.1} GFLOP/s; \
-             load {load_ms:.0} ms; peak RSS {}; {threads} threads; ISA {isa}",
+             load {load_ms:.0} ms; peak RSS {}; {threads} threads; ISA {isa}, {}",
             args::thousands(config.param_count()),
             a.batch,
             a.runs,
             a.warmup,
             flops / 1e9,
             peak_rss_mb.map_or("n/a".to_string(), |m| format!("{m:.0} MB")),
+            picker_tensor::precision(),
         );
         if !stages.is_empty() {
             let total: f64 = stages.iter().map(|(_, ms)| ms).sum();

@@ -164,6 +164,7 @@ impl Flags {
             "inpainter": self.inpainter,
             "sixteen_bit": self.sixteen_bit,
             "seed": self.seed,
+            "precision": picker_tensor::precision().name(),
         })
     }
 }

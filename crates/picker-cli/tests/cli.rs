@@ -247,6 +247,65 @@ fn low_memory_mode_gives_the_same_bytes() {
 }
 
 #[test]
+fn bf16_precision_is_close_to_f32_or_refused() {
+    let o = picker([
+        "--precision",
+        "f16",
+        "bench",
+        "--net",
+        "envmap",
+        "--preset",
+        "tiny",
+    ]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    let dir = tempfile::tempdir().unwrap();
+    let (a, b) = (dir.path().join("f32"), dir.path().join("bf16"));
+    let o = infer(&example_photo(), &b, &["--precision", "bf16"]);
+    #[cfg(target_arch = "x86_64")]
+    let has_bf16 = std::arch::is_x86_feature_detected!("avx512bf16")
+        && std::arch::is_x86_feature_detected!("avx512bw");
+    #[cfg(not(target_arch = "x86_64"))]
+    let has_bf16 = false;
+    if !has_bf16 {
+        eprintln!("SKIPPED: this CPU lacks AVX512_BF16; only the refusal is tested");
+        assert_eq!(o.status.code(), Some(1));
+        assert!(stderr(&o).contains("AVX512_BF16"), "{}", stderr(&o));
+        return;
+    }
+    assert_ok(&o);
+    assert_ok(&infer(&example_photo(), &a, &[]));
+    // The tiny nets' 16-channel residual blocks run in bf16: outputs move,
+    // but the ones decoded linearly from tanh, (y + 1)/2, stay within the
+    // bf16 error of f32 (normals, view vectors and the HDR envmap go through
+    // a normalisation or an exponential that magnifies small random outputs).
+    let mut moved = false;
+    for name in IRN_HEADS
+        .iter()
+        .map(|h| h.0)
+        .chain(["segmentation", "envmap"])
+    {
+        let (x, y) = (
+            read_exr(&a.join(format!("{name}.exr"))),
+            read_exr(&b.join(format!("{name}.exr"))),
+        );
+        assert_eq!(x.0, y.0, "{name}");
+        let mut worst = 0.0f32;
+        for ((_, p), (_, q)) in x.1.iter().zip(&y.1) {
+            for (u, v) in p.iter().zip(q) {
+                worst = worst.max((u - v).abs());
+            }
+        }
+        moved |= worst > 0.0;
+        let linear = matches!(
+            name,
+            "diffuse_albedo" | "specular_albedo" | "glossiness" | "segmentation"
+        );
+        assert!(!linear || worst < 0.05, "bf16 moved {name} by {worst}");
+    }
+    assert!(moved, "bf16 changed nothing: the flag was not applied");
+}
+
+#[test]
 fn infer_odd_size_rgb_png_upscales_to_work_size() {
     let dir = tempfile::tempdir().unwrap();
     let photo = dir.path().join("odd.png");

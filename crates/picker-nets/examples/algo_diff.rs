@@ -42,13 +42,40 @@ fn main() {
         std::env::set_var("PICKER_WINOGRAD_WEIGHTS", "lazy");
         let lazy = load(&bytes).forward(&x).expect("forward");
         std::env::remove_var("PICKER_WINOGRAD_WEIGHTS");
-        for (((name, a), (_, b)), (_, c)) in
-            gemm.tensors.iter().zip(&auto.tensors).zip(&lazy.tensors)
+        // bf16 products, where the CPU has them.
+        let bf16 = picker_tensor::Precision::Bf16.is_available().then(|| {
+            std::env::set_var("PICKER_PRECISION", "bf16");
+            let out = load(&bytes).forward(&x).expect("forward");
+            std::env::remove_var("PICKER_PRECISION");
+            out
+        });
+        for (i, (((name, a), (_, b)), (_, c))) in gemm
+            .tensors
+            .iter()
+            .zip(&auto.tensors)
+            .zip(&lazy.tensors)
+            .enumerate()
         {
             let d = a.max_abs_diff(b).expect("same shapes");
             let dl = a.max_abs_diff(c).expect("same shapes");
+            let bf = bf16
+                .as_ref()
+                .map_or("not run (no AVX512_BF16)".to_string(), |o| {
+                    let t = &o.tensors[i].1;
+                    let mean = a
+                        .data()
+                        .iter()
+                        .zip(t.data())
+                        .map(|(p, q)| f64::from((p - q).abs()))
+                        .sum::<f64>()
+                        / a.data().len() as f64;
+                    format!(
+                        "max {:.2e}, mean {mean:.2e}",
+                        a.max_abs_diff(t).expect("same shapes")
+                    )
+                });
             println!(
-                "{} {name}: max |default - gemm| = {d:.2e}, max |low-memory winograd - gemm| = {dl:.2e}",
+                "{} {name}: max |default - gemm| = {d:.2e}, max |low-memory winograd - gemm| = {dl:.2e}, |bf16 - gemm|: {bf}",
                 kind.as_str()
             );
         }

@@ -220,7 +220,8 @@ pub enum ConvAlgorithm {
     /// with ≤ 4 outputs and kernels wider than 1; Winograd for 3×3 stride-1 layers with
     /// ≥ 16 input and output channels (`PICKER_WINOGRAD_WEIGHTS=lazy` or
     /// [`crate::low_memory`] picks
-    /// [`ConvAlgorithm::WinogradLowMemory`]); the shifted GEMM for other
+    /// [`ConvAlgorithm::WinogradLowMemory`]; [`crate::precision`] bf16 the
+    /// bf16 variants); the shifted GEMM for other
     /// kernels larger than 1×1 or with padding; else (1×1) the packed GEMM.
     /// With the environment variable `PICKER_CONV=gemm` set when a layer is
     /// built, every layer takes the packed GEMM (for comparisons).
@@ -237,6 +238,15 @@ pub enum ConvAlgorithm {
     /// weights are made at every forward pass into a reused buffer (slower,
     /// for memory-bound use).
     WinogradLowMemory,
+    /// Winograd F(4×4, 3×3) with its products in bfloat16 (AVX512_BF16
+    /// `vdpbf16ps`; transformed weights and inputs rounded to bf16, sums in
+    /// f32), the transformed weights packed once (2× the memory of the 3×3
+    /// weights). Needs the AVX-512 family and AVX512_BF16
+    /// ([`ConvAlgorithm::runs_on`]); error about 1e-2 relative.
+    WinogradBf16,
+    /// [`ConvAlgorithm::WinogradBf16`] keeping only the 3×3 weights, as
+    /// [`ConvAlgorithm::WinogradLowMemory`] does.
+    WinogradBf16LowMemory,
     /// Packed-A GEMM that reads the B rows in place from a padded copy of
     /// the input (any kernel; stride `s > 1` through the `s × s` phase planes
     /// of the input): no im2col packing.
@@ -245,22 +255,40 @@ pub enum ConvAlgorithm {
 
 impl ConvAlgorithm {
     /// Every algorithm that can be asked for explicitly.
-    pub const EXPLICIT: [ConvAlgorithm; 5] = [
+    pub const EXPLICIT: [ConvAlgorithm; 7] = [
         ConvAlgorithm::Gemm,
         ConvAlgorithm::Direct,
         ConvAlgorithm::Winograd,
         ConvAlgorithm::WinogradLowMemory,
+        ConvAlgorithm::WinogradBf16,
+        ConvAlgorithm::WinogradBf16LowMemory,
         ConvAlgorithm::Shifted,
     ];
+
+    /// True when the algorithm computes in bf16.
+    pub fn is_bf16(self) -> bool {
+        matches!(
+            self,
+            ConvAlgorithm::WinogradBf16 | ConvAlgorithm::WinogradBf16LowMemory
+        )
+    }
+
+    /// True when this CPU can run the algorithm with the `isa` family: the
+    /// bf16 variants need [`Isa::Avx512`] and AVX512_BF16, the others any
+    /// family the CPU has.
+    pub fn runs_on(self, isa: Isa) -> bool {
+        isa.is_available() && (!self.is_bf16() || (isa == Isa::Avx512 && crate::bf16::available()))
+    }
 
     /// True when the algorithm can run a layer of this shape.
     pub fn applies(self, s: &ConvSpec) -> bool {
         match self {
             ConvAlgorithm::Auto | ConvAlgorithm::Gemm => true,
             ConvAlgorithm::Direct => s.stride == 1 && s.c_out <= direct::MAX_CO,
-            ConvAlgorithm::Winograd | ConvAlgorithm::WinogradLowMemory => {
-                s.kh == 3 && s.kw == 3 && s.stride == 1
-            }
+            ConvAlgorithm::Winograd
+            | ConvAlgorithm::WinogradLowMemory
+            | ConvAlgorithm::WinogradBf16
+            | ConvAlgorithm::WinogradBf16LowMemory => s.kh == 3 && s.kw == 3 && s.stride == 1,
             ConvAlgorithm::Shifted => true,
         }
     }
@@ -275,12 +303,13 @@ impl ConvAlgorithm {
             ConvAlgorithm::Auto
                 if ConvAlgorithm::Winograd.applies(s) && s.c_in >= 16 && s.c_out >= 16 =>
             {
-                if crate::low_memory()
-                    || std::env::var("PICKER_WINOGRAD_WEIGHTS").as_deref() == Ok("lazy")
-                {
-                    ConvAlgorithm::WinogradLowMemory
-                } else {
-                    ConvAlgorithm::Winograd
+                let lazy = crate::low_memory()
+                    || std::env::var("PICKER_WINOGRAD_WEIGHTS").as_deref() == Ok("lazy");
+                match (crate::precision(), lazy) {
+                    (crate::Precision::Bf16, true) => ConvAlgorithm::WinogradBf16LowMemory,
+                    (crate::Precision::Bf16, false) => ConvAlgorithm::WinogradBf16,
+                    (_, true) => ConvAlgorithm::WinogradLowMemory,
+                    (_, false) => ConvAlgorithm::Winograd,
                 }
             }
             ConvAlgorithm::Auto if s.kh > 1 || s.kw > 1 || s.pad > 0 => ConvAlgorithm::Shifted,
@@ -301,7 +330,7 @@ enum ConvPath {
     /// Direct convolution (stride 1, ≤ `direct::MAX_CO` outputs), weights as
     /// `direct::pack_weights` lays them out.
     Direct { isa: Isa, weight: Vec<f32> },
-    /// Winograd F(4×4, 3×3).
+    /// Winograd F(4×4, 3×3), f32 or bf16 products.
     Winograd { isa: Isa, wino: Winograd },
     /// Packed A, B rows read in place from a padded copy.
     /// `fold_kx`: the rows of A are `(co, kx)` and the columns `(ci, ky)`, so
@@ -478,23 +507,36 @@ impl Conv2d {
                 format!("algorithm {algorithm:?} cannot run {spec:?}"),
             ));
         }
-        let path = match algorithm.resolve(&spec) {
+        let resolved = algorithm.resolve(&spec);
+        if !resolved.runs_on(isa) {
+            return Err(invalid(
+                "conv2d",
+                format!(
+                    "{resolved:?} (precision {}) needs the avx512 kernels and AVX512_BF16; \
+                     this CPU or the chosen family ({isa}) lacks them",
+                    crate::Precision::Bf16
+                ),
+            ));
+        }
+        let path = match resolved {
             ConvAlgorithm::Direct => ConvPath::Direct {
                 isa,
                 weight: direct::pack_weights(weight, spec.c_out, spec.c_in, spec.kh * spec.kw),
             },
-            algo @ (ConvAlgorithm::Winograd | ConvAlgorithm::WinogradLowMemory) => {
-                ConvPath::Winograd {
-                    isa,
-                    wino: Winograd::new(
-                        kernel,
-                        spec.c_in,
-                        spec.c_out,
-                        weight,
-                        algo == ConvAlgorithm::Winograd,
-                    ),
-                }
-            }
+            algo @ (ConvAlgorithm::Winograd
+            | ConvAlgorithm::WinogradLowMemory
+            | ConvAlgorithm::WinogradBf16
+            | ConvAlgorithm::WinogradBf16LowMemory) => ConvPath::Winograd {
+                isa,
+                wino: Winograd::new(
+                    kernel,
+                    spec.c_in,
+                    spec.c_out,
+                    weight,
+                    matches!(algo, ConvAlgorithm::Winograd | ConvAlgorithm::WinogradBf16),
+                    algo.is_bf16(),
+                ),
+            },
             ConvAlgorithm::Shifted
                 if spec.stride == 1 && spec.c_out <= FOLD_MAX_CO && spec.kw > 1 =>
             {
@@ -563,8 +605,12 @@ impl Conv2d {
         match &self.path {
             ConvPath::Gemm { .. } => ConvAlgorithm::Gemm,
             ConvPath::Direct { .. } => ConvAlgorithm::Direct,
-            ConvPath::Winograd { wino, .. } if wino.is_packed() => ConvAlgorithm::Winograd,
-            ConvPath::Winograd { .. } => ConvAlgorithm::WinogradLowMemory,
+            ConvPath::Winograd { wino, .. } => match (wino.is_bf16(), wino.is_packed()) {
+                (false, true) => ConvAlgorithm::Winograd,
+                (false, false) => ConvAlgorithm::WinogradLowMemory,
+                (true, true) => ConvAlgorithm::WinogradBf16,
+                (true, false) => ConvAlgorithm::WinogradBf16LowMemory,
+            },
             ConvPath::Shifted { .. } => ConvAlgorithm::Shifted,
         }
     }

@@ -26,6 +26,10 @@ pub const MAX_NR: usize = 48;
 /// threads and should stay in L2/L3 while every output-channel chunk reads it.
 pub const WINO_PANELS_PER_BLOCK: usize = 1;
 
+/// Winograd in bf16: pair words (two input channels each) per depth block, so
+/// a block's `WINO_BF16_KC × NR` B panel (24 KiB) stays in L1.
+pub const WINO_BF16_KC: usize = 128;
+
 /// Winograd: output channels one task computes for a block (rounded to whole
 /// `MR` panels); its `36 × this × NR` products stay in L2 for the output transform.
 pub const WINO_CO_PER_TASK: usize = 32;

@@ -21,6 +21,31 @@ fn isas() -> Vec<Isa> {
         .collect()
 }
 
+/// The explicit algorithms that can run `spec` with `isa` on this CPU; a
+/// bf16 algorithm the CPU cannot run is reported as skipped.
+fn algorithms(isa: Isa, spec: &ConvSpec) -> Vec<ConvAlgorithm> {
+    ConvAlgorithm::EXPLICIT
+        .into_iter()
+        .filter(|a| a.applies(spec))
+        .filter(|a| {
+            let ok = a.runs_on(isa);
+            if !ok && isa == Isa::Avx512 {
+                eprintln!("SKIPPED: {a:?} needs AVX512_BF16, which this CPU lacks");
+            }
+            ok
+        })
+        .collect()
+}
+
+/// The tolerance of an algorithm against the f64 reference.
+fn tolerance(algo: ConvAlgorithm) -> Tolerance {
+    match algo {
+        ConvAlgorithm::Winograd | ConvAlgorithm::WinogradLowMemory => Tolerance::WINOGRAD_F32,
+        a if a.is_bf16() => Tolerance::WINOGRAD_BF16,
+        _ => Tolerance::KERNEL_F32,
+    }
+}
+
 fn check(what: &str, found: &Tensor, expected: &Tensor, tol: Tolerance) {
     assert_eq!(found.shape(), expected.shape(), "{what}: shape");
     if let Err(e) = tol.check(found.data(), expected.data()) {
@@ -54,10 +79,7 @@ impl ConvProblem {
         if self.residual {
             expected = reference::add(&expected, &r).unwrap();
         }
-        for algo in ConvAlgorithm::EXPLICIT
-            .into_iter()
-            .filter(|a| a.applies(&s))
-        {
+        for algo in algorithms(isa, &s) {
             let conv = Conv2d::with_algorithm(isa, algo, s, &wt, b.as_deref(), self.act).unwrap();
             assert_eq!(conv.algorithm(), algo);
             let found = if self.residual {
@@ -65,14 +87,7 @@ impl ConvProblem {
             } else {
                 conv.forward(&x).unwrap()
             };
-            let tol = if matches!(
-                algo,
-                ConvAlgorithm::Winograd | ConvAlgorithm::WinogradLowMemory
-            ) {
-                Tolerance::WINOGRAD_F32
-            } else {
-                Tolerance::KERNEL_F32
-            };
+            let tol = tolerance(algo);
             check(&format!("{isa} {algo:?} {self:?}"), &found, &expected, tol);
         }
     }
@@ -630,10 +645,7 @@ fn conv2d_reflect_forward() {
             if with_res {
                 expected = reference::add(&expected, &r).unwrap();
             }
-            for algo in ConvAlgorithm::EXPLICIT
-                .into_iter()
-                .filter(|a| a.applies(&spec))
-            {
+            for algo in algorithms(isa, &spec) {
                 let conv = Conv2d::with_algorithm(isa, algo, spec, &wt, Some(&b), Activation::Relu)
                     .unwrap();
                 let found = conv
@@ -643,7 +655,7 @@ fn conv2d_reflect_forward() {
                     &format!("{isa} {algo:?} reflect case {i}"),
                     &found,
                     &expected,
-                    Tolerance::WINOGRAD_F32,
+                    tolerance(algo),
                 );
             }
         }
@@ -672,4 +684,174 @@ fn conv2d_reflect_forward() {
     assert!(conv
         .forward_reflect(&rng.tensor([1, 16, 2, 5]), 2, None)
         .is_err());
+}
+
+/// bf16 rounding as the bf16 path does it: to nearest, ties to even, on the
+/// f32 value (no NaN or denormal in these tests).
+fn bf16_round(x: f32) -> f32 {
+    let b = x.to_bits();
+    f32::from_bits(b.wrapping_add(0x7fff + ((b >> 16) & 1)) & 0xffff_0000)
+}
+
+/// Winograd F(4×4, 3×3) in f64 with the bf16 path's two roundings: the
+/// transformed weights `U = G g Gᵀ` and inputs `V = Bᵀ d B` rounded (via
+/// f32) to bf16. One image, zero padding `spec.pad`.
+#[allow(clippy::needless_range_loop)] // index loops, to read like the formulas
+fn winograd_bf16_reference(
+    x: &Tensor,
+    wt: &[f32],
+    bias: &[f32],
+    spec: ConvSpec,
+    act: Activation,
+    residual: &Tensor,
+) -> Tensor {
+    const BT: [[f64; 6]; 6] = [
+        [4.0, 0.0, -5.0, 0.0, 1.0, 0.0],
+        [0.0, -4.0, -4.0, 1.0, 1.0, 0.0],
+        [0.0, 4.0, -4.0, -1.0, 1.0, 0.0],
+        [0.0, -2.0, -1.0, 2.0, 1.0, 0.0],
+        [0.0, 2.0, -1.0, -2.0, 1.0, 0.0],
+        [0.0, 4.0, 0.0, -5.0, 0.0, 1.0],
+    ];
+    const G: [[f64; 3]; 6] = [
+        [0.25, 0.0, 0.0],
+        [-1.0 / 6.0, -1.0 / 6.0, -1.0 / 6.0],
+        [-1.0 / 6.0, 1.0 / 6.0, -1.0 / 6.0],
+        [1.0 / 24.0, 1.0 / 12.0, 1.0 / 6.0],
+        [1.0 / 24.0, -1.0 / 12.0, 1.0 / 6.0],
+        [0.0, 0.0, 1.0],
+    ];
+    const AT: [[f64; 6]; 4] = [
+        [1.0, 1.0, 1.0, 1.0, 1.0, 0.0],
+        [0.0, 1.0, -1.0, 2.0, -2.0, 0.0],
+        [0.0, 1.0, 1.0, 4.0, 4.0, 0.0],
+        [0.0, 1.0, -1.0, 8.0, -8.0, 1.0],
+    ];
+    let round = |v: f64| f64::from(bf16_round(v as f32));
+    let (ci_n, co_n, h, w, p) = (spec.c_in, spec.c_out, x.h(), x.w(), spec.pad);
+    let (oh, ow) = spec.out_hw(h, w).unwrap();
+    let (th, tw) = (oh.div_ceil(4), ow.div_ceil(4));
+    let px = |c: usize, y: isize, xx: isize| -> f64 {
+        let (y, xx) = (y - p as isize, xx - p as isize);
+        if y < 0 || xx < 0 || y >= h as isize || xx >= w as isize {
+            0.0
+        } else {
+            f64::from(x.data()[(c * h + y as usize) * w + xx as usize])
+        }
+    };
+    // u[(co·c_in + ci)·36 + ξ]
+    let mut u = vec![0.0f64; co_n * ci_n * 36];
+    for co in 0..co_n {
+        for ci in 0..ci_n {
+            let g = |r: usize, c: usize| f64::from(wt[((co * ci_n + ci) * 3 + r) * 3 + c]);
+            for i in 0..6 {
+                for j in 0..6 {
+                    let mut acc = 0.0;
+                    for r in 0..3 {
+                        for c in 0..3 {
+                            acc += G[i][r] * g(r, c) * G[j][c];
+                        }
+                    }
+                    u[(co * ci_n + ci) * 36 + i * 6 + j] = round(acc);
+                }
+            }
+        }
+    }
+    let mut out = Tensor::zeros([1, co_n, oh, ow]);
+    let mut v = vec![0.0f64; ci_n * 36];
+    for ty in 0..th {
+        for tx in 0..tw {
+            for ci in 0..ci_n {
+                let d = |r: usize, c: usize| px(ci, (4 * ty + r) as isize, (4 * tx + c) as isize);
+                for i in 0..6 {
+                    for j in 0..6 {
+                        let mut acc = 0.0;
+                        for r in 0..6 {
+                            for c in 0..6 {
+                                acc += BT[i][r] * d(r, c) * BT[j][c];
+                            }
+                        }
+                        v[ci * 36 + i * 6 + j] = round(acc);
+                    }
+                }
+            }
+            for co in 0..co_n {
+                let mut m = [0.0f64; 36];
+                for ci in 0..ci_n {
+                    for (xi, mv) in m.iter_mut().enumerate() {
+                        *mv += u[(co * ci_n + ci) * 36 + xi] * v[ci * 36 + xi];
+                    }
+                }
+                for a in 0..4 {
+                    for b in 0..4 {
+                        let (oy, ox) = (4 * ty + a, 4 * tx + b);
+                        if oy >= oh || ox >= ow {
+                            continue;
+                        }
+                        let mut y = f64::from(bias[co]);
+                        for r in 0..6 {
+                            for c in 0..6 {
+                                y += AT[a][r] * m[r * 6 + c] * AT[b][c];
+                            }
+                        }
+                        let at = (co * oh + oy) * ow + ox;
+                        let y = act.apply_one(y as f32) + residual.data()[at];
+                        out.data_mut()[at] = y;
+                    }
+                }
+            }
+        }
+    }
+    out
+}
+
+/// The bf16 Winograd against a reference that rounds at the same two points
+/// (so this bound is 50× tighter than the one against the exact convolution):
+/// odd channel counts (a zero half pair), two depth blocks, output channels
+/// off the tile, several tile blocks, padding, ReLU and the residual add.
+#[test]
+fn winograd_bf16_matches_rounding_reference() {
+    if !ConvAlgorithm::WinogradBf16.runs_on(Isa::Avx512) {
+        eprintln!("SKIPPED: WinogradBf16 needs AVX512_BF16, which this CPU lacks");
+        return;
+    }
+    // (h, w, c_in, c_out, pad)
+    let cases = [
+        (6, 6, 16, 16, 0),
+        (9, 13, 17, 19, 1),
+        (30, 41, 33, 8, 1),
+        (14, 10, 301, 12, 0),
+        (7, 131, 20, 24, 1),
+    ];
+    for (i, &(h, w, ci, co, pad)) in cases.iter().enumerate() {
+        let mut rng = Rng::new(9100 + i as u64);
+        let spec = ConvSpec::square(ci, co, 3, 1, pad);
+        let x = rng.tensor([1, ci, h, w]);
+        let wt = rng.normal_vec(spec.weight_len(), (1.0 / (ci * 9) as f32).sqrt());
+        let b = rng.normal_vec(co, 0.5);
+        let (oh, ow) = spec.out_hw(h, w).unwrap();
+        let r = rng.tensor([1, co, oh, ow]);
+        let expected = winograd_bf16_reference(&x, &wt, &b, spec, Activation::Relu, &r);
+        for algo in [
+            ConvAlgorithm::WinogradBf16,
+            ConvAlgorithm::WinogradBf16LowMemory,
+        ] {
+            let conv =
+                Conv2d::with_algorithm(Isa::Avx512, algo, spec, &wt, Some(&b), Activation::Relu)
+                    .unwrap();
+            let found = conv.forward_add(&x, &r).unwrap();
+            check(
+                &format!("{algo:?} case {i}"),
+                &found,
+                &expected,
+                // Far below the bf16 error itself (~0.2 here): what is left
+                // is the rare V whose f32 and f64 values round to different
+                // bf16 neighbours.
+                Tolerance {
+                    abs: 5e-3,
+                    rel: 0.0,
+                },
+            );
+        }
+    }
 }

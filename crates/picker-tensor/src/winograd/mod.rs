@@ -30,9 +30,9 @@ use rayon::prelude::*;
 use crate::activation::Activation;
 use crate::aligned::AlignedBuf;
 use crate::isa::Isa;
-use crate::microkernel::MicroKernel;
+use crate::microkernel::{KernelFn, MicroKernel, NarrowKernelFn};
 use crate::pad::{padded_source, Fill};
-use crate::params::{KC, WINO_CO_PER_TASK, WINO_PANELS_PER_BLOCK};
+use crate::params::{KC, WINO_BF16_KC, WINO_CO_PER_TASK, WINO_PANELS_PER_BLOCK};
 
 /// Points of the transformed tile along one axis.
 const T: usize = 6;
@@ -135,9 +135,18 @@ pub(crate) struct Winograd {
     kernel: MicroKernel,
     c_in: usize,
     c_out: usize,
+    /// Products in bf16 ([`crate::bf16`]): `U` and `V` hold pair words, two
+    /// input channels per depth step.
+    bf16: bool,
+    /// Depth of the products: `c_in` floats, or `⌈c_in / 2⌉` pair words.
+    depth: usize,
+    /// The products' tile: the f32 kernel's, or the bf16 one.
+    run: KernelFn,
+    /// The products' narrow tiles for a partly filled last panel.
+    narrow: Option<(usize, NarrowKernelFn)>,
     /// `MR`-row panels of `U[ξ]`.
     m_panels: usize,
-    /// `(k0, kc, offset)` of each depth block inside one `U[ξ]`.
+    /// `(k0, kc, offset)` of each depth block inside one `U[ξ]` (in depth units).
     kblocks: Vec<(usize, usize, usize)>,
     /// `U[ξ]`, `c_out × c_in`, in the micro-kernel's A-panel layout.
     u: UStore,
@@ -504,20 +513,32 @@ enum UStore {
 
 impl Winograd {
     /// Builds the layer for `weight` (`[c_out, c_in, 3, 3]`) and `kernel`,
-    /// packing `U` once when `packed`, else at every forward pass.
+    /// packing `U` once when `packed`, else at every forward pass; with
+    /// `bf16` the products run in bf16 (the caller checks that the CPU has
+    /// AVX512_BF16 and `kernel` is the AVX-512 family).
     pub(crate) fn new(
         kernel: MicroKernel,
         c_in: usize,
         c_out: usize,
         weight: &[f32],
         packed: bool,
+        bf16: bool,
     ) -> Self {
         let mr = kernel.mr;
         let m_panels = c_out.div_ceil(mr);
+        let (depth, block, run, narrow) = if bf16 {
+            assert!(
+                kernel.isa == Isa::Avx512 && crate::bf16::available(),
+                "bf16 Winograd needs the AVX-512 kernels and AVX512_BF16"
+            );
+            bf16_products(c_in)
+        } else {
+            (c_in, KC, kernel.run, kernel.narrow)
+        };
         let mut kblocks = Vec::new();
         let mut k0 = 0;
-        while k0 < c_in {
-            let kc = KC.min(c_in - k0);
+        while k0 < depth {
+            let kc = block.min(depth - k0);
             kblocks.push((k0, kc, k0 * m_panels * mr));
             k0 += kc;
         }
@@ -535,6 +556,10 @@ impl Winograd {
             kernel,
             c_in,
             c_out,
+            bf16,
+            depth,
+            run,
+            narrow,
             m_panels,
             kblocks,
             u: UStore::Lazy(taps),
@@ -554,16 +579,21 @@ impl Winograd {
         matches!(self.u, UStore::Packed(_))
     }
 
-    /// Floats of one packed `U[ξ]`.
+    /// True when the products run in bf16.
+    pub(crate) fn is_bf16(&self) -> bool {
+        self.bf16
+    }
+
+    /// Floats (or pair words) of one packed `U[ξ]`.
     fn per_xi(&self) -> usize {
-        self.m_panels * self.kernel.mr * self.c_in
+        self.m_panels * self.kernel.mr * self.depth
     }
 
     /// Transforms `taps` (`[c_out, 9, c_in]`) and writes every `U[ξ]` into
     /// `dst` (`36 · per_xi` floats, `ξ`-major, each in the micro-kernel's
     /// A-panel layout), in parallel over row panels.
     fn pack_u(&self, taps: &[f32], dst: &mut [f32]) {
-        let (mr, c_in, per_xi) = (self.kernel.mr, self.c_in, self.per_xi());
+        let (mr, c_in, depth, per_xi) = (self.kernel.mr, self.c_in, self.depth, self.per_xi());
         let isa = self.kernel.isa;
         let ptr = SharedPtr(dst.as_mut_ptr());
         let ptr = &ptr;
@@ -571,8 +601,9 @@ impl Winograd {
         (0..self.m_panels)
             .into_par_iter()
             .for_each_init(Vec::new, |scratch: &mut Vec<f32>, mp| {
-                // ub[ξ][ci] for one output channel, then panel[ξ][ci][r].
-                scratch.resize(P * c_in * (mr + 1), 0.0);
+                // ub[ξ][ci] for one output channel, then panel[ξ][d][r]
+                // (d: a channel, or a pair of them in bf16).
+                scratch.resize(P * (c_in + depth * mr), 0.0);
                 let (ub, panel) = scratch.split_at_mut(P * c_in);
                 for r in 0..mr {
                     let co = mp * mr + r;
@@ -594,15 +625,21 @@ impl Winograd {
                     }
                     for xi in 0..P {
                         let src = &ub[xi * c_in..(xi + 1) * c_in];
-                        let dst = &mut panel[xi * c_in * mr..(xi + 1) * c_in * mr];
-                        for (d, &v) in dst.chunks_exact_mut(mr).zip(src) {
-                            d[r] = v;
+                        let dst = &mut panel[xi * depth * mr..(xi + 1) * depth * mr];
+                        if self.bf16 {
+                            for (d, v) in dst.chunks_exact_mut(mr).zip(src.chunks(2)) {
+                                d[r] = crate::bf16::pair(v[0], v.get(1).copied().unwrap_or(0.0));
+                            }
+                        } else {
+                            for (d, &v) in dst.chunks_exact_mut(mr).zip(src) {
+                                d[r] = v;
+                            }
                         }
                     }
                 }
                 for xi in 0..P {
                     for &(k0, kc, aoff) in &self.kblocks {
-                        let src = &panel[(xi * c_in + k0) * mr..(xi * c_in + k0 + kc) * mr];
+                        let src = &panel[(xi * depth + k0) * mr..(xi * depth + k0 + kc) * mr];
                         let at = xi * per_xi + aoff + mp * kc * mr;
                         // SAFETY: row panel `mp` owns these kc·mr floats of U[ξ]
                         // (below `P · per_xi`, checked above).
@@ -614,22 +651,103 @@ impl Winograd {
             });
     }
 
-    /// Where channel `ci`'s rows of every `V[ξ]` lie in a block buffer of
-    /// `tpb` tiles: `ξ`-major, then depth block `(k0, kc)`, then panel, then
-    /// the `kc` rows of that panel.
-    fn v_rows(&self, ci: usize, tpb: usize) -> VRows {
+    /// Where depth row `d`'s rows (channel `d`, or pair `d` in bf16) of
+    /// every `V[ξ]` lie in a block buffer of `tpb` tiles: `ξ`-major, then
+    /// depth block `(k0, kc)`, then panel, then the `kc` rows of that panel.
+    fn v_rows(&self, d: usize, tpb: usize) -> VRows {
         let (k0, kc, _) = self
             .kblocks
             .iter()
             .copied()
-            .find(|&(k0, kc, _)| ci < k0 + kc)
-            .expect("ci < c_in");
+            .find(|&(k0, kc, _)| d < k0 + kc)
+            .expect("d < depth");
         let nr = self.kernel.nr;
         VRows {
-            xi_stride: self.c_in * tpb,
-            base: k0 * tpb + (ci - k0) * nr,
+            xi_stride: self.depth * tpb,
+            base: k0 * tpb + (d - k0) * nr,
             panel_stride: kc * nr,
         }
+    }
+
+    /// The input transform of channel `ci` over tiles `[t0, t1)` into `v`
+    /// where `rows` says, with this layer's ISA.
+    #[allow(clippy::too_many_arguments)]
+    fn input(
+        &self,
+        g: &Geometry<'_>,
+        ci: usize,
+        t0: usize,
+        t1: usize,
+        rows: VRows,
+        v: *mut f32,
+        scratch: &mut Vec<f32>,
+    ) {
+        let nr = self.kernel.nr;
+        // SAFETY: the caller gives each channel its own rows of `v`; the CPU
+        // has the ISA of the kernel family (checked when built).
+        unsafe {
+            match self.kernel.isa {
+                #[cfg(target_arch = "x86_64")]
+                Isa::Avx512 => input_avx512(g, ci, t0, t1, nr, rows, v, scratch),
+                #[cfg(target_arch = "x86_64")]
+                Isa::Avx2Fma => input_avx2(g, ci, t0, t1, nr, rows, v, scratch),
+                _ => input_portable(g, ci, t0, t1, nr, rows, v, scratch),
+            }
+        }
+    }
+
+    /// The bf16 input transform of a block: in parallel over channel pairs,
+    /// each pair is transformed in f32 into a task buffer, then rounded and
+    /// interleaved into pair words at its rows of `v` (a missing odd channel
+    /// is zero).
+    fn input_bf16(&self, g: &Geometry<'_>, t0: usize, t1: usize, tpb: usize, v: &SharedPtr) {
+        let nr = self.kernel.nr;
+        let panels = (t1 - t0).div_ceil(nr);
+        // The task buffer holds [panel][ξ][channel of the pair][nr].
+        let local = |which: usize| VRows {
+            xi_stride: 2 * nr,
+            base: which * nr,
+            panel_stride: 2 * P * nr,
+        };
+        (0..self.depth)
+            .into_par_iter()
+            .with_min_len(4)
+            .for_each_init(
+                || (Vec::new(), Vec::new()),
+                |(scratch, pairbuf): &mut (Vec<f32>, Vec<f32>), d| {
+                    pairbuf.resize(2 * P * nr * panels, 0.0);
+                    for which in 0..2 {
+                        let ci = 2 * d + which;
+                        if ci < self.c_in {
+                            self.input(g, ci, t0, t1, local(which), pairbuf.as_mut_ptr(), scratch);
+                        } else {
+                            for p in 0..panels {
+                                for xi in 0..P {
+                                    let at = local(which).at(xi, p);
+                                    pairbuf[at..at + nr].fill(0.0);
+                                }
+                            }
+                        }
+                    }
+                    let rows = self.v_rows(d, tpb);
+                    for p in 0..panels {
+                        for xi in 0..P {
+                            let (lo, hi) = (local(0).at(xi, p), local(1).at(xi, p));
+                            // SAFETY: pair row `d` of `V[ξ]`, panel `p`, is
+                            // written by this task only and lies inside the
+                            // block buffer (see `VRows`).
+                            let dst = unsafe {
+                                std::slice::from_raw_parts_mut(v.0.add(rows.at(xi, p)), nr)
+                            };
+                            crate::bf16::pack_pairs(
+                                &pairbuf[lo..lo + nr],
+                                &pairbuf[hi..hi + nr],
+                                dst,
+                            );
+                        }
+                    }
+                },
+            );
     }
 
     /// One image: `x` is `[c_in, h, w]`, extended by `pad` on every side as
@@ -672,7 +790,7 @@ impl Winograd {
             .map(|&(k0, ..)| self.v_rows(k0, tpb))
             .collect();
         let block_rows = &block_rows;
-        let mut v = crate::pool::take(P * self.c_in * tpb);
+        let mut v = crate::pool::take(P * self.depth * tpb);
         let m_panels = self.m_panels;
         let per_xi = self.per_xi();
         let lazy_u = match &self.u {
@@ -698,26 +816,19 @@ impl Winograd {
             let t1 = (t0 + tpb).min(tiles);
             let panels = (t1 - t0).div_ceil(nr);
 
-            // 1. Input transform, parallel over channels.
+            // 1. Input transform, parallel over channels (pairs of them in bf16).
             let vp = SharedPtr(v.as_mut_ptr());
             let vp = &vp;
-            (0..self.c_in)
-                .into_par_iter()
-                .with_min_len(8)
-                .for_each_init(Vec::new, |scratch, ci| {
-                    let rows = self.v_rows(ci, tpb);
-                    // SAFETY: each channel writes only its own rows of `v`; the
-                    // CPU has the ISA of the kernel family (checked when built).
-                    unsafe {
-                        match isa {
-                            #[cfg(target_arch = "x86_64")]
-                            Isa::Avx512 => input_avx512(&g, ci, t0, t1, nr, rows, vp.0, scratch),
-                            #[cfg(target_arch = "x86_64")]
-                            Isa::Avx2Fma => input_avx2(&g, ci, t0, t1, nr, rows, vp.0, scratch),
-                            _ => input_portable(&g, ci, t0, t1, nr, rows, vp.0, scratch),
-                        }
-                    }
-                });
+            if self.bf16 {
+                self.input_bf16(&g, t0, t1, tpb, vp);
+            } else {
+                (0..self.c_in)
+                    .into_par_iter()
+                    .with_min_len(8)
+                    .for_each_init(Vec::new, |scratch, ci| {
+                        self.input(&g, ci, t0, t1, self.v_rows(ci, tpb), vp.0, scratch);
+                    });
+            }
 
             // 2. Products and output transform, parallel over output-channel chunks.
             let v_ref = &v;
@@ -750,7 +861,7 @@ impl Winograd {
                                         // panel kc·nr, and C mr rows of nr floats (ldc nr);
                                         // a narrow kernel touches only its first columns.
                                         unsafe {
-                                            match self.kernel.narrow {
+                                            match self.narrow {
                                                 Some((lanes, narrow)) if cols + lanes <= nr => {
                                                     let nv = cols.div_ceil(lanes);
                                                     narrow(
@@ -764,7 +875,7 @@ impl Winograd {
                                                         bi > 0,
                                                     )
                                                 }
-                                                _ => (self.kernel.run)(
+                                                _ => (self.run)(
                                                     kc,
                                                     ap,
                                                     bp,
@@ -818,5 +929,24 @@ impl Winograd {
         if let Some(buf) = lazy_u {
             crate::pool::give(buf);
         }
+    }
+}
+
+/// The bf16 products' depth, block depth and tiles for `c_in` input channels.
+fn bf16_products(c_in: usize) -> (usize, usize, KernelFn, Option<(usize, NarrowKernelFn)>) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use crate::microkernel::x86;
+        (
+            c_in.div_ceil(2),
+            WINO_BF16_KC,
+            x86::avx512bf16_gemm_8x48,
+            Some((16, x86::avx512bf16_gemm_narrow_8x16n as NarrowKernelFn)),
+        )
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        let _ = c_in;
+        unreachable!("bf16 products exist only on x86-64 (checked by the caller)")
     }
 }
