@@ -32,7 +32,9 @@ use crate::aligned::AlignedBuf;
 use crate::isa::Isa;
 use crate::microkernel::{KernelFn, MicroKernel, NarrowKernelFn};
 use crate::pad::{padded_source, Fill};
-use crate::params::{KC, WINO_BF16_KC, WINO_CO_PER_TASK, WINO_PANELS_PER_BLOCK};
+use crate::params::{
+    KC, WINO_BF16_KC, WINO_CO_PER_TASK, WINO_LAZY_V_BYTES, WINO_PANELS_PER_BLOCK,
+};
 
 /// Points of the transformed tile along one axis.
 const T: usize = 6;
@@ -221,8 +223,41 @@ unsafe impl Sync for SharedPtr {}
 unsafe impl Send for SharedPtr {}
 
 thread_local! {
-    /// Per-thread scratch: the block's products `M` for one output-channel chunk.
+    /// Per-thread scratch: one panel's products `M` for one output-channel
+    /// chunk, the output transform's rows and (lazy `U`) the chunk's `U`.
     static M_BUF: RefCell<AlignedBuf> = RefCell::new(AlignedBuf::default());
+    /// Per-thread scratch of the weight transform (lazy `U`).
+    static PACK_SCRATCH: RefCell<Vec<f32>> = const { RefCell::new(Vec::new()) };
+}
+
+/// Floats between consecutive `U[ξ]` of a chunk's own `U` holding `len`
+/// floats each: one cache line more when `len` is a multiple of 1 KiB, so
+/// the weight transform's 36 stores per lane block do not all fall into one
+/// L1 set.
+fn chunk_per_xi(len: usize) -> usize {
+    if len % 256 == 0 {
+        len + 16
+    } else {
+        len
+    }
+}
+
+/// Where the products read `U[ξ]`'s row panels: all of `U` (packed once), or
+/// the `panels` row panels from `mp_base` on that one chunk made (lazy).
+struct UView<'a> {
+    u: &'a [f32],
+    per_xi: usize,
+    panels: usize,
+    mp_base: usize,
+}
+
+impl UView<'_> {
+    /// Depth block `(k0, kc)` of row panel `mp` of `U[ξ]`: `kc · mr` floats.
+    #[inline(always)]
+    fn at(&self, xi: usize, mp: usize, k0: usize, kc: usize, mr: usize) -> &[f32] {
+        let at = xi * self.per_xi + k0 * self.panels * mr + (mp - self.mp_base) * kc * mr;
+        &self.u[at..at + kc * mr]
+    }
 }
 
 /// Input transform of one channel over one block of tiles `[t0, t1)`, written
@@ -456,7 +491,11 @@ fn transform_lanes(g: [&[f32]; 9], u: &mut [f32], stride: usize) {
         let n = L.min(len - l0);
         let mut x = [[0.0f32; L]; 9];
         for (k, xk) in x.iter_mut().enumerate() {
-            xk[..n].copy_from_slice(&g[k][l0..l0 + n]);
+            // A whole block as one fixed-size move (no memcpy call).
+            match <&[f32; L]>::try_from(&g[k][l0..l0 + n]) {
+                Ok(full) => *xk = *full,
+                Err(_) => xk[..n].copy_from_slice(&g[k][l0..l0 + n]),
+            }
         }
         let col = |a: usize, b: usize, c: usize| -> [[f32; L]; 6] {
             let mut o = [[0.0f32; L]; 6];
@@ -479,7 +518,10 @@ fn transform_lanes(g: [&[f32]; 9], u: &mut [f32], stride: usize) {
             }
             for (j, rj) in r.iter().enumerate() {
                 let at = (i * T + j) * stride + l0;
-                u[at..at + n].copy_from_slice(&rj[..n]);
+                match <&mut [f32; L]>::try_from(&mut u[at..at + n]) {
+                    Ok(full) => *full = *rj,
+                    Err(_) => u[at..at + n].copy_from_slice(&rj[..n]),
+                }
             }
         }
         l0 += n;
@@ -505,7 +547,7 @@ weight_transform_for!(weights_portable,);
 enum UStore {
     /// Packed once when the layer is built: 4× the memory of the 3×3 weights.
     Packed(AlignedBuf),
-    /// Only the 3×3 weights are kept (as `[c_out, 9, c_in]`); every forward
+    /// Only the 3×3 weights are kept (as `[m_panels][9][c_in][mr]`); every forward
     /// pass transforms and packs `U` into a pooled buffer, so a network holds
     /// its weights once (measured: about 15% slower on the 256-channel layers).
     Lazy(Vec<f32>),
@@ -542,13 +584,15 @@ impl Winograd {
             kblocks.push((k0, kc, k0 * m_panels * mr));
             k0 += kc;
         }
-        // [c_out, c_in, 9] → [c_out, 9, c_in]: the taps of one output channel
-        // are contiguous over input channels (the lanes of the transform).
-        let mut taps = vec![0.0f32; weight.len()];
+        // [c_out, c_in, 9] → [m_panels][9][c_in][mr] (output channels past
+        // c_out zero): one tap of one row panel is contiguous over (ci, r),
+        // the lanes of the transform and the order of the A panel.
+        let mut taps = vec![0.0f32; m_panels * 9 * c_in * mr];
         for co in 0..c_out {
+            let (mp, r) = (co / mr, co % mr);
             for ci in 0..c_in {
                 for k in 0..9 {
-                    taps[(co * 9 + k) * c_in + ci] = weight[(co * c_in + ci) * 9 + k];
+                    taps[((mp * 9 + k) * c_in + ci) * mr + r] = weight[(co * c_in + ci) * 9 + k];
                 }
             }
         }
@@ -589,58 +633,24 @@ impl Winograd {
         self.m_panels * self.kernel.mr * self.depth
     }
 
-    /// Transforms `taps` (`[c_out, 9, c_in]`) and writes every `U[ξ]` into
-    /// `dst` (`36 · per_xi` floats, `ξ`-major, each in the micro-kernel's
-    /// A-panel layout), in parallel over row panels.
+    /// Transforms `taps` (`[m_panels][9][c_in][mr]`) and writes every `U[ξ]`
+    /// into `dst` (`36 · per_xi` floats, `ξ`-major, each in the
+    /// micro-kernel's A-panel layout), in parallel over row panels.
     fn pack_u(&self, taps: &[f32], dst: &mut [f32]) {
-        let (mr, c_in, depth, per_xi) = (self.kernel.mr, self.c_in, self.depth, self.per_xi());
-        let isa = self.kernel.isa;
+        let (mr, depth, per_xi, m_panels) =
+            (self.kernel.mr, self.depth, self.per_xi(), self.m_panels);
         let ptr = SharedPtr(dst.as_mut_ptr());
         let ptr = &ptr;
         assert!(dst.len() >= P * per_xi);
-        (0..self.m_panels)
-            .into_par_iter()
-            .for_each_init(Vec::new, |scratch: &mut Vec<f32>, mp| {
-                // ub[ξ][ci] for one output channel, then panel[ξ][d][r]
-                // (d: a channel, or a pair of them in bf16).
-                scratch.resize(P * (c_in + depth * mr), 0.0);
-                let (ub, panel) = scratch.split_at_mut(P * c_in);
-                for r in 0..mr {
-                    let co = mp * mr + r;
-                    if co < self.c_out {
-                        let g: [&[f32]; 9] =
-                            std::array::from_fn(|k| &taps[(co * 9 + k) * c_in..][..c_in]);
-                        // SAFETY: the CPU has the kernel family's ISA.
-                        unsafe {
-                            match isa {
-                                #[cfg(target_arch = "x86_64")]
-                                Isa::Avx512 => weights_avx512(g, ub, c_in),
-                                #[cfg(target_arch = "x86_64")]
-                                Isa::Avx2Fma => weights_avx2(g, ub, c_in),
-                                _ => weights_portable(g, ub, c_in),
-                            }
-                        }
-                    } else {
-                        ub.fill(0.0);
-                    }
-                    for xi in 0..P {
-                        let src = &ub[xi * c_in..(xi + 1) * c_in];
-                        let dst = &mut panel[xi * depth * mr..(xi + 1) * depth * mr];
-                        if self.bf16 {
-                            for (d, v) in dst.chunks_exact_mut(mr).zip(src.chunks(2)) {
-                                d[r] = crate::bf16::pair(v[0], v.get(1).copied().unwrap_or(0.0));
-                            }
-                        } else {
-                            for (d, &v) in dst.chunks_exact_mut(mr).zip(src) {
-                                d[r] = v;
-                            }
-                        }
-                    }
-                }
+        (0..m_panels).into_par_iter().for_each_init(
+            || (Vec::new(), vec![0.0f32; P * depth * mr]),
+            |(scratch, staged), mp| {
+                // The panel as [ξ][d][r], then each depth block to its place.
+                self.pack_panel(taps, mp, scratch, staged, depth * mr, |k0, _| k0 * mr);
                 for xi in 0..P {
-                    for &(k0, kc, aoff) in &self.kblocks {
-                        let src = &panel[(xi * depth + k0) * mr..(xi * depth + k0 + kc) * mr];
-                        let at = xi * per_xi + aoff + mp * kc * mr;
+                    for &(k0, kc, _) in &self.kblocks {
+                        let src = &staged[(xi * depth + k0) * mr..][..kc * mr];
+                        let at = xi * per_xi + k0 * m_panels * mr + mp * kc * mr;
                         // SAFETY: row panel `mp` owns these kc·mr floats of U[ξ]
                         // (below `P · per_xi`, checked above).
                         unsafe {
@@ -648,7 +658,85 @@ impl Winograd {
                         };
                     }
                 }
+            },
+        );
+    }
+
+    /// Row panels `mp0..mp1` of every `U[ξ]` into `dst`, laid out as a `U`
+    /// of only those panels (see [`UView`]); one thread.
+    fn pack_u_chunk(
+        &self,
+        taps: &[f32],
+        mp0: usize,
+        mp1: usize,
+        dst: &mut [f32],
+        scratch: &mut Vec<f32>,
+    ) {
+        let (mr, n) = (self.kernel.mr, mp1 - mp0);
+        let per_xi = chunk_per_xi(n * mr * self.depth);
+        for mp in mp0..mp1 {
+            self.pack_panel(taps, mp, scratch, dst, per_xi, |k0, kc| {
+                k0 * n * mr + (mp - mp0) * kc * mr
             });
+        }
+    }
+
+    /// Transforms the weights of row panel `mp` (`MR` output channels):
+    /// depth block `(k0, kc)` of `U[ξ]` (`kc` groups of `MR` floats, or of
+    /// pair words in bf16) goes to `dst[ξ · xi_stride + at(k0, kc)..]`.
+    fn pack_panel(
+        &self,
+        taps: &[f32],
+        mp: usize,
+        scratch: &mut Vec<f32>,
+        dst: &mut [f32],
+        xi_stride: usize,
+        at: impl Fn(usize, usize) -> usize,
+    ) {
+        let (mr, c_in, isa) = (self.kernel.mr, self.c_in, self.kernel.isa);
+        let transform = |g: [&[f32]; 9], u: &mut [f32], stride: usize| {
+            // SAFETY: the CPU has the kernel family's ISA.
+            unsafe {
+                match isa {
+                    #[cfg(target_arch = "x86_64")]
+                    Isa::Avx512 => weights_avx512(g, u, stride),
+                    #[cfg(target_arch = "x86_64")]
+                    Isa::Avx2Fma => weights_avx2(g, u, stride),
+                    _ => weights_portable(g, u, stride),
+                }
+            }
+        };
+        for &(k0, kc, _) in &self.kblocks {
+            // Input channels of the block: kc, or up to 2·kc in bf16.
+            let (c0, c1) = if self.bf16 {
+                (2 * k0, (2 * (k0 + kc)).min(c_in))
+            } else {
+                (k0, k0 + kc)
+            };
+            let lanes = (c1 - c0) * mr;
+            let g: [&[f32]; 9] =
+                std::array::from_fn(|k| &taps[((mp * 9 + k) * c_in + c0) * mr..][..lanes]);
+            let base = at(k0, kc);
+            if !self.bf16 {
+                // The lanes (ci, r) are the A panel's order: straight in place.
+                let len = (P - 1) * xi_stride + lanes;
+                transform(g, &mut dst[base..base + len], xi_stride);
+                continue;
+            }
+            // bf16: the f32 points as [ξ][ci][r], then channel pairs to words.
+            let cpad = 2 * kc * mr;
+            scratch.resize(P * cpad, 0.0);
+            transform(g, scratch, cpad);
+            for xi in 0..P {
+                let st = &mut scratch[xi * cpad..(xi + 1) * cpad];
+                st[lanes..].fill(0.0);
+                let out = &mut dst[base + xi * xi_stride..][..kc * mr];
+                for (d, o) in out.chunks_exact_mut(mr).enumerate() {
+                    let (lo, hi) = st[2 * d * mr..(2 * d + 2) * mr].split_at(mr);
+                    crate::bf16::pack_pairs(lo, hi, o);
+                }
+            }
+        }
     }
 
     /// Where depth row `d`'s rows (channel `d`, or pair `d` in bf16) of
@@ -782,7 +870,17 @@ impl Winograd {
             pad,
             fill,
         };
-        let tpb = nr * WINO_PANELS_PER_BLOCK;
+        let lazy = matches!(self.u, UStore::Lazy(_));
+        // Packed U: blocks of WINO_PANELS_PER_BLOCK panels, all of U read per
+        // block. Lazy U: blocks as large as WINO_LAZY_V_BYTES of V allows, and
+        // each output-channel chunk makes its own part of U once per block.
+        let panels_per_block = if lazy {
+            let per_panel = P * self.depth * nr * std::mem::size_of::<f32>();
+            (WINO_LAZY_V_BYTES / per_panel).clamp(1, 32)
+        } else {
+            WINO_PANELS_PER_BLOCK
+        };
+        let tpb = nr * panels_per_block;
         // The first rows of each depth block, for the products.
         let block_rows: Vec<VRows> = self
             .kblocks
@@ -792,24 +890,13 @@ impl Winograd {
         let block_rows = &block_rows;
         let mut v = crate::pool::take(P * self.depth * tpb);
         let m_panels = self.m_panels;
-        let per_xi = self.per_xi();
-        let lazy_u = match &self.u {
-            UStore::Lazy(taps) => {
-                let mut buf = crate::pool::take(P * per_xi);
-                self.pack_u(taps, &mut buf);
-                Some(buf)
-            }
-            UStore::Packed(_) => None,
-        };
-        let u_all: &[f32] = match (&self.u, &lazy_u) {
-            (UStore::Packed(buf), _) => buf.as_slice(),
-            (UStore::Lazy(_), Some(buf)) => buf,
-            (UStore::Lazy(_), None) => unreachable!("lazy U is packed above"),
-        };
         let chunk_panels = WINO_CO_PER_TASK.div_ceil(mr).max(1);
         let chunk_rows = chunk_panels * mr;
         let isa = self.kernel.isa;
         let plane_len = oh * ow;
+        let stride = chunk_rows * nr;
+        let m_len = P * stride;
+        let u_chunk_len = P * chunk_per_xi(chunk_rows * self.depth);
 
         let mut t0 = 0;
         while t0 < tiles {
@@ -830,7 +917,8 @@ impl Winograd {
                     });
             }
 
-            // 2. Products and output transform, parallel over output-channel chunks.
+            // 2. Products and output transform, parallel over output-channel
+            // chunks, one panel of tiles at a time.
             let v_ref = &v;
             let g_ref = &g;
             out.par_chunks_mut(chunk_rows * plane_len)
@@ -840,23 +928,47 @@ impl Winograd {
                     let mp1 = (mp0 + chunk_panels).min(m_panels);
                     let co0 = chunk * chunk_rows;
                     let rows = dst.len() / plane_len;
-                    let stride = chunk_rows * nr;
                     M_BUF.with(|buf| {
                         let mut buf = buf.borrow_mut();
-                        let m_len = panels * P * stride;
-                        buf.ensure(m_len + (T * M + M * M) * nr);
-                        let (mbuf, scratch) = buf.as_mut_slice().split_at_mut(m_len);
-                        for xi in 0..P {
-                            let a = &u_all[xi * per_xi..(xi + 1) * per_xi];
-                            for mp in mp0..mp1 {
-                                for (bi, &(_, kc, aoff)) in self.kblocks.iter().enumerate() {
-                                    let ap = a[aoff + mp * kc * mr..].as_ptr();
-                                    for p in 0..panels {
+                        let lazy_len = if lazy { u_chunk_len } else { 0 };
+                        buf.ensure(m_len + (T * M + M * M) * nr + lazy_len);
+                        let (mbuf, rest) = buf.as_mut_slice().split_at_mut(m_len);
+                        let (scratch, u_chunk) = rest.split_at_mut((T * M + M * M) * nr);
+                        let u = match &self.u {
+                            UStore::Packed(all) => UView {
+                                u: all.as_slice(),
+                                per_xi: self.per_xi(),
+                                panels: m_panels,
+                                mp_base: 0,
+                            },
+                            UStore::Lazy(taps) => {
+                                PACK_SCRATCH.with(|ps| {
+                                    self.pack_u_chunk(
+                                        taps,
+                                        mp0,
+                                        mp1,
+                                        u_chunk,
+                                        &mut ps.borrow_mut(),
+                                    )
+                                });
+                                UView {
+                                    u: u_chunk,
+                                    per_xi: chunk_per_xi((mp1 - mp0) * mr * self.depth),
+                                    panels: mp1 - mp0,
+                                    mp_base: mp0,
+                                }
+                            }
+                        };
+                        let mut segs = Vec::with_capacity(4);
+                        for p in 0..panels {
+                            let cols = nr.min(t1 - t0 - p * nr);
+                            for xi in 0..P {
+                                for mp in mp0..mp1 {
+                                    for (bi, &(k0, kc, _)) in self.kblocks.iter().enumerate() {
+                                        let ap = u.at(xi, mp, k0, kc, mr).as_ptr();
                                         let bp = v_ref[block_rows[bi].at(xi, p)..].as_ptr();
-                                        let c = &mut mbuf
-                                            [(p * P + xi) * stride + (mp - mp0) * mr * nr..]
+                                        let c = &mut mbuf[xi * stride + (mp - mp0) * mr * nr..]
                                             [..mr * nr];
-                                        let cols = nr.min(t1 - t0 - p * nr);
                                         // SAFETY: the A panel holds kc·mr floats, the B
                                         // panel kc·nr, and C mr rows of nr floats (ldc nr);
                                         // a narrow kernel touches only its first columns.
@@ -888,14 +1000,11 @@ impl Winograd {
                                     }
                                 }
                             }
-                        }
-                        let mut segs = Vec::with_capacity(4);
-                        for p in 0..panels {
                             let pt0 = t0 + p * nr;
                             segments(pt0, (pt0 + nr).min(t1), g_ref.tw, &mut segs);
                             for r in 0..rows {
                                 let co = co0 + r;
-                                let m = &mbuf[p * P * stride + r * nr..];
+                                let m = &mbuf[r * nr..];
                                 let plane = &mut dst[r * plane_len..(r + 1) * plane_len];
                                 let b = bias.map_or(0.0, |b| b[co]);
                                 let res = residual.map(|rs| &rs[co * plane_len..][..plane_len]);
@@ -926,9 +1035,6 @@ impl Winograd {
         }
         debug_assert_eq!(out.len(), self.c_out * plane_len);
         crate::pool::give(v);
-        if let Some(buf) = lazy_u {
-            crate::pool::give(buf);
-        }
     }
 }
 
