@@ -29,7 +29,7 @@ pub const WINO_PANELS_PER_BLOCK: usize = 1;
 /// Winograd with lazy weights: bytes of transformed input one block may
 /// hold (shared by all threads in L3), so each output-channel chunk makes
 /// its part of `U` once per block rather than once per panel.
-pub const WINO_LAZY_V_BYTES: usize = 8 << 20;
+pub const WINO_LAZY_V_BYTES: usize = 16 << 20;
 
 /// Winograd in bf16: pair words (two input channels each) per depth block, so
 /// a block's `WINO_BF16_KC × NR` B panel (24 KiB) stays in L1.

@@ -241,6 +241,36 @@ fn auto_algorithm_choice() {
         ConvAlgorithm::Shifted
     );
     assert_eq!(pick(ConvSpec::square(64, 64, 1, 1, 0)), ConvAlgorithm::Gemm);
+    // AutoLowMemory: the same choices, with the Winograd weights made per pass.
+    let pick_low = |s: ConvSpec| {
+        let c = Conv2d::with_algorithm(
+            Isa::best(),
+            ConvAlgorithm::AutoLowMemory,
+            s,
+            &w[..s.weight_len()],
+            None,
+            Activation::None,
+        );
+        c.unwrap().algorithm()
+    };
+    if std::env::var_os("PICKER_WINOGRAD_WEIGHTS").is_none() {
+        assert_eq!(
+            pick_low(ConvSpec::square(256, 256, 3, 1, 0)),
+            ConvAlgorithm::WinogradLowMemory
+        );
+    }
+    assert_eq!(
+        pick_low(ConvSpec::square(64, 3, 7, 1, 0)),
+        ConvAlgorithm::Direct
+    );
+    assert_eq!(
+        pick_low(ConvSpec::square(64, 128, 3, 2, 1)),
+        ConvAlgorithm::Shifted
+    );
+    assert_eq!(
+        pick_low(ConvSpec::square(64, 64, 1, 1, 0)),
+        ConvAlgorithm::Gemm
+    );
     let s = ConvSpec::square(8, 8, 5, 1, 2);
     let w5 = &w[..s.weight_len()];
     let r = Conv2d::with_algorithm(
