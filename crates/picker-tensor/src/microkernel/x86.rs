@@ -41,6 +41,33 @@ unsafe fn avx512_tile<const NV: usize>(
         }
         a = a.add(MR);
     }
+    avx512_store(&acc, c, ldc, accumulate);
+}
+
+/// Calls the `NV` = 1, 2 or 3 (for `nv` ≥ 3) instance of a narrow kernel.
+macro_rules! by_width {
+    ($f:ident, $nv:expr, $($arg:expr),*) => {
+        match $nv {
+            1 => $f::<1>($($arg),*),
+            2 => $f::<2>($($arg),*),
+            _ => $f::<3>($($arg),*),
+        }
+    };
+}
+
+/// Writes (or, with `accumulate`, adds) an AVX-512 tile's accumulators to
+/// `C`, rows `ldc` floats apart.
+///
+/// # Safety
+/// `c` valid for `MR` rows of `16·NV` floats at stride `ldc`; only called
+/// from functions with AVX-512F enabled.
+#[inline(always)]
+unsafe fn avx512_store<const NV: usize>(
+    acc: &[[__m512; NV]; AVX512_MR],
+    c: *mut f32,
+    ldc: usize,
+    accumulate: bool,
+) {
     for (r, row) in acc.iter().enumerate() {
         let p = c.add(r * ldc);
         for (j, v) in row.iter().enumerate() {
@@ -200,11 +227,7 @@ pub(crate) unsafe fn avx512_sgemm_narrow_8x16n(
     ldc: usize,
     accumulate: bool,
 ) {
-    match nv {
-        1 => avx512_sgemm_8xnv::<1>(kc, a, b, ldb, c, ldc, accumulate),
-        2 => avx512_sgemm_8xnv::<2>(kc, a, b, ldb, c, ldc, accumulate),
-        _ => avx512_sgemm_8xnv::<3>(kc, a, b, ldb, c, ldc, accumulate),
-    }
+    by_width!(avx512_sgemm_8xnv, nv, kc, a, b, ldb, c, ldc, accumulate)
 }
 
 /// The bf16 tile `C[8 × 16·NV] (+)= A · B` with AVX512_BF16 `vdpbf16ps`: the
@@ -240,18 +263,7 @@ unsafe fn avx512bf16_tile<const NV: usize>(
         }
         a = a.add(MR);
     }
-    for (r, row) in acc.iter().enumerate() {
-        let p = c.add(r * ldc);
-        for (j, v) in row.iter().enumerate() {
-            let q = p.add(16 * j);
-            let v = if accumulate {
-                _mm512_add_ps(*v, _mm512_loadu_ps(q))
-            } else {
-                *v
-            };
-            _mm512_storeu_ps(q, v);
-        }
-    }
+    avx512_store(&acc, c, ldc, accumulate);
 }
 
 /// `C[8×48] (+)= A · B` over `kp` bf16 pair rows; see [`avx512bf16_tile`].
@@ -303,11 +315,7 @@ pub(crate) unsafe fn avx512bf16_gemm_narrow_8x16n(
     ldc: usize,
     accumulate: bool,
 ) {
-    match nv {
-        1 => avx512bf16_gemm_8xnv::<1>(kp, a, b, ldb, c, ldc, accumulate),
-        2 => avx512bf16_gemm_8xnv::<2>(kp, a, b, ldb, c, ldc, accumulate),
-        _ => avx512bf16_gemm_8xnv::<3>(kp, a, b, ldb, c, ldc, accumulate),
-    }
+    by_width!(avx512bf16_gemm_8xnv, nv, kp, a, b, ldb, c, ldc, accumulate)
 }
 
 #[cfg(test)]
