@@ -95,47 +95,6 @@ impl Tower {
         let y = self.blocks.forward_traced(x, tr, &join(path, "blocks"))?;
         self.dec.forward_traced(&y, tr, &join(path, "dec"))
     }
-
-    /// As `forward_traced` untraced, with the decoder (the tower's largest
-    /// activations: ×4 spatially) run inside `decoders`, so towers running
-    /// side by side never hold two decoders' activations at once.
-    fn forward_one_decoder(&self, x: &Tensor, decoders: &Exclusive) -> Result<Tensor> {
-        let y = self.blocks.forward(x)?;
-        decoders.run(|| self.dec.forward(&y))
-    }
-}
-
-/// A section that one thread at a time runs. A thread that finds it taken
-/// runs pending pool work meanwhile (the holder's kernel tasks, as both
-/// threads' layers split over the pool), so the wait costs little time.
-struct Exclusive(std::sync::atomic::AtomicBool);
-
-impl Exclusive {
-    fn new() -> Self {
-        Self(std::sync::atomic::AtomicBool::new(false))
-    }
-
-    fn run<T>(&self, f: impl FnOnce() -> T) -> T {
-        use std::sync::atomic::Ordering;
-        while self
-            .0
-            .compare_exchange_weak(false, true, Ordering::Acquire, Ordering::Relaxed)
-            .is_err()
-        {
-            if rayon::yield_now() != Some(rayon::Yield::Executed) {
-                std::thread::yield_now();
-            }
-        }
-        /// Frees the section when `f` returns or unwinds.
-        struct Leave<'a>(&'a std::sync::atomic::AtomicBool);
-        impl Drop for Leave<'_> {
-            fn drop(&mut self) {
-                self.0.store(false, Ordering::Release);
-            }
-        }
-        let _leave = Leave(&self.0);
-        f()
-    }
 }
 
 /// The IRN's outputs: each head's raw tanh values `[N, c, H, W]`, in config order.
@@ -236,13 +195,8 @@ impl Irn {
             // tower per thread holds its activations at a time. Results do
             // not depend on the schedule: every kernel's arithmetic is fixed
             // per element.
-            // At most one tower is in its decoder at a time (see
-            // `Tower::forward_one_decoder`): peak memory is then one decoder's
-            // activations plus the other towers' residual blocks.
             use rayon::prelude::*;
             let groups = rayon::current_num_threads().clamp(1, self.heads.len().max(1));
-            let decoders = Exclusive::new();
-            let decoders = &decoders;
             let ys: Vec<Vec<Result<Tensor>>> = (0..groups)
                 .into_par_iter()
                 .map(|g| {
@@ -250,7 +204,7 @@ impl Irn {
                         .iter()
                         .skip(g)
                         .step_by(groups)
-                        .map(|(_, tower)| tower.forward_one_decoder(&e, decoders))
+                        .map(|(_, tower)| tower.forward_traced(&e, &mut Tracer::new(None), ""))
                         .collect()
                 })
                 .collect();
