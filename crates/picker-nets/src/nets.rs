@@ -19,18 +19,10 @@ use crate::layers::{
 };
 use crate::weights::Weights;
 
-/// Networks with more parameters than this keep only their 3×3 weights and
-/// make the Winograd ones at every pass: packed, those are 4× the 3×3
-/// weights (the thesis IRN: 1.7 GB instead of 0.44 GB), for a few per cent
-/// of speed. 32 M parameters is 512 MiB of packed weights; MSN (11 M),
-/// EnvMap (5.5 M) and every `lite` net stay packed.
-pub const LAZY_WINOGRAD_ABOVE_PARAMS: u64 = 32 << 20;
-
 fn options(cfg: &NetConfig) -> LayerOptions {
     LayerOptions {
         conv_bias: cfg.conv_bias(),
         bn_eps: cfg.bn_eps() as f32,
-        lazy_winograd: cfg.param_count() > LAZY_WINOGRAD_ABOVE_PARAMS,
     }
 }
 
@@ -602,27 +594,5 @@ impl Net {
             Net::EnvMap(n) => n.forward_timed(x, timings)?.into(),
             Net::Inpaint(n) => n.forward_timed(x, timings)?.into(),
         })
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// Only the thesis IRN is large enough to keep its 3×3 weights only.
-    #[test]
-    fn lazy_winograd_weights_for_large_nets_only() {
-        for kind in [NetKind::Irn, NetKind::Msn, NetKind::EnvMap] {
-            for preset in ["thesis", "lite", "tiny"] {
-                let cfg = NetConfig::preset(kind, preset).expect("preset");
-                let lazy = options(&cfg).lazy_winograd;
-                assert_eq!(
-                    lazy,
-                    kind == NetKind::Irn && preset == "thesis",
-                    "{kind} {preset}: {} parameters",
-                    cfg.param_count()
-                );
-            }
-        }
     }
 }

@@ -226,11 +226,6 @@ pub enum ConvAlgorithm {
     /// With the environment variable `PICKER_CONV=gemm` set when a layer is
     /// built, every layer takes the packed GEMM (for comparisons).
     Auto,
-    /// As [`ConvAlgorithm::Auto`], with the Winograd weights made at every
-    /// pass ([`ConvAlgorithm::WinogradLowMemory`] or its bf16 twin) unless
-    /// `PICKER_WINOGRAD_WEIGHTS=packed`: for networks whose packed weights
-    /// (4× the 3×3 ones) would not be worth their memory.
-    AutoLowMemory,
     /// Packed GEMM over an implicit im2col (any shape).
     Gemm,
     /// Direct row-vectorised convolution (stride 1, ≤ 4 outputs; the
@@ -288,7 +283,7 @@ impl ConvAlgorithm {
     /// True when the algorithm can run a layer of this shape.
     pub fn applies(self, s: &ConvSpec) -> bool {
         match self {
-            ConvAlgorithm::Auto | ConvAlgorithm::AutoLowMemory | ConvAlgorithm::Gemm => true,
+            ConvAlgorithm::Auto | ConvAlgorithm::Gemm => true,
             ConvAlgorithm::Direct => s.stride == 1 && s.c_out <= direct::MAX_CO,
             ConvAlgorithm::Winograd
             | ConvAlgorithm::WinogradLowMemory
@@ -300,17 +295,16 @@ impl ConvAlgorithm {
 
     fn resolve(self, s: &ConvSpec) -> ConvAlgorithm {
         let force_gemm = std::env::var("PICKER_CONV").as_deref() == Ok("gemm");
-        let weights = std::env::var("PICKER_WINOGRAD_WEIGHTS");
-        let auto = matches!(self, ConvAlgorithm::Auto | ConvAlgorithm::AutoLowMemory);
         match self {
-            _ if auto && force_gemm => ConvAlgorithm::Gemm,
-            _ if auto && s.stride == 1 && s.c_out <= direct::MAX_CO && s.kw > 1 => {
+            ConvAlgorithm::Auto if force_gemm => ConvAlgorithm::Gemm,
+            ConvAlgorithm::Auto if s.stride == 1 && s.c_out <= direct::MAX_CO && s.kw > 1 => {
                 ConvAlgorithm::Direct
             }
-            _ if auto && ConvAlgorithm::Winograd.applies(s) && s.c_in >= 16 && s.c_out >= 16 => {
+            ConvAlgorithm::Auto
+                if ConvAlgorithm::Winograd.applies(s) && s.c_in >= 16 && s.c_out >= 16 =>
+            {
                 let lazy = crate::low_memory()
-                    || weights.as_deref() == Ok("lazy")
-                    || (self == ConvAlgorithm::AutoLowMemory && weights.as_deref() != Ok("packed"));
+                    || std::env::var("PICKER_WINOGRAD_WEIGHTS").as_deref() == Ok("lazy");
                 match (crate::precision(), lazy) {
                     (crate::Precision::Bf16, true) => ConvAlgorithm::WinogradBf16LowMemory,
                     (crate::Precision::Bf16, false) => ConvAlgorithm::WinogradBf16,
@@ -318,8 +312,8 @@ impl ConvAlgorithm {
                     (_, false) => ConvAlgorithm::Winograd,
                 }
             }
-            _ if auto && (s.kh > 1 || s.kw > 1 || s.pad > 0) => ConvAlgorithm::Shifted,
-            _ if auto => ConvAlgorithm::Gemm,
+            ConvAlgorithm::Auto if s.kh > 1 || s.kw > 1 || s.pad > 0 => ConvAlgorithm::Shifted,
+            ConvAlgorithm::Auto => ConvAlgorithm::Gemm,
             other => other,
         }
     }

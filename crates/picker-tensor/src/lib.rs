@@ -54,9 +54,8 @@ pub use activation::Activation;
 /// 3×3 weights and make the Winograd ones at every pass
 /// ([`ConvAlgorithm::WinogradLowMemory`]), and networks with several towers
 /// run them one after another, so that one tower's activations are live at a
-/// time. Slower (IRN at 240×320 on 2 cores: ~10%), for machines where memory
-/// is the limit. (Large networks make their Winograd weights per pass even
-/// without it: [`ConvAlgorithm::AutoLowMemory`].)
+/// time. Slower (IRN at 240×320 on 2 cores: ~10–15%), for machines where
+/// memory is the limit.
 pub fn low_memory() -> bool {
     std::env::var("PICKER_MEMORY").as_deref() == Ok("low")
 }
