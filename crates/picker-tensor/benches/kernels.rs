@@ -52,11 +52,17 @@ fn bench(c: &mut Criterion) {
         let wt = rng.normal_vec(s.weight_len(), 0.05);
         let bias = vec![0.1; s.c_out];
         // The default algorithm, and for the residual-block shapes the
-        // low-memory Winograd and the plain packed GEMM beside it.
+        // low-memory Winograd, the bf16 one (where the CPU has it) and the
+        // plain packed GEMM beside it.
         let mut algos = vec![ConvAlgorithm::Auto];
         if name.ends_with("res") {
-            algos.extend([ConvAlgorithm::WinogradLowMemory, ConvAlgorithm::Gemm]);
+            algos.extend([
+                ConvAlgorithm::WinogradLowMemory,
+                ConvAlgorithm::WinogradBf16,
+                ConvAlgorithm::Gemm,
+            ]);
         }
+        algos.retain(|a| a.runs_on(Isa::best()));
         let x = rng.tensor([1, s.c_in, h, w]);
         for algo in algos {
             let conv =
