@@ -47,7 +47,7 @@ mod weights_cmd;
 struct Cli {
     /// Arithmetic of the networks' 3×3 stride-1 layers (the residual blocks): `f32`
     /// (default) or `bf16` (AVX512_BF16 dot products: about 1.3–1.5× faster networks,
-    /// outputs within ~5e-2 of f32 on the tanh scale; needs a CPU with AVX512_BF16).
+    /// outputs within ~6e-2 of f32 on the tanh scale; needs a CPU with AVX512_BF16).
     /// Default: `PICKER_PRECISION`, else f32.
     #[arg(long, global = true, value_name = "f32|bf16", value_parser = parse_precision)]
     precision: Option<picker_tensor::Precision>,

@@ -242,7 +242,8 @@ pub enum ConvAlgorithm {
     /// `vdpbf16ps`; transformed weights and inputs rounded to bf16, sums in
     /// f32), the transformed weights packed once (2× the memory of the 3×3
     /// weights). Needs the AVX-512 family and AVX512_BF16
-    /// ([`ConvAlgorithm::runs_on`]); error about 1e-2 relative.
+    /// ([`ConvAlgorithm::runs_on`]). One layer is off by up to ~0.2 on
+    /// outputs of standard deviation 1 ([`crate::Tolerance::WINOGRAD_BF16`]).
     WinogradBf16,
     /// [`ConvAlgorithm::WinogradBf16`] keeping only the 3×3 weights, as
     /// [`ConvAlgorithm::WinogradLowMemory`] does.

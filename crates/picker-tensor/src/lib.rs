@@ -69,8 +69,9 @@ pub enum Precision {
     F32,
     /// The Winograd layers' products in bfloat16 (AVX512_BF16 `vdpbf16ps`:
     /// transformed weights and inputs rounded to bf16, sums in f32); every
-    /// other layer stays f32. About twice the product throughput, at an
-    /// error of about 1e-2 on the networks' outputs (see the crate README).
+    /// other layer stays f32. Twice the products' throughput; the thesis
+    /// networks' tanh outputs move by up to ~6e-2 (mean ~7e-3; see the crate
+    /// README).
     Bf16,
 }
 
