@@ -3,8 +3,8 @@
 //! load and its activation fused into the kernel epilogue.
 
 use picker_tensor::{
-    fold_batchnorm, Activation, BatchNorm, Conv2d, ConvSpec, ConvTranspose2d, ConvTransposeSpec,
-    Tensor, WeightLayout,
+    fold_batchnorm, Activation, BatchNorm, Conv2d, ConvAlgorithm, ConvSpec, ConvTranspose2d,
+    ConvTransposeSpec, Isa, Tensor, WeightLayout,
 };
 
 use crate::error::{Error, Result};
@@ -17,6 +17,9 @@ pub struct LayerOptions {
     pub conv_bias: bool,
     /// BatchNorm ε.
     pub bn_eps: f32,
+    /// Make the Winograd layers' transformed weights at every pass instead
+    /// of keeping them packed ([`ConvAlgorithm::AutoLowMemory`]).
+    pub lazy_winograd: bool,
 }
 
 impl Default for LayerOptions {
@@ -24,6 +27,7 @@ impl Default for LayerOptions {
         Self {
             conv_bias: false,
             bn_eps: 1e-5,
+            lazy_winograd: false,
         }
     }
 }
@@ -153,7 +157,19 @@ fn folded_conv(
     };
     let bn = load_bn(&w.pp(bn), spec.c_out, opts.bn_eps)?;
     let (fw, fb) = fold_batchnorm(&weight, bias.as_deref(), &bn, WeightLayout::Conv)?;
-    Ok(Conv2d::new(spec, &fw, Some(&fb), act)?)
+    let algorithm = if opts.lazy_winograd {
+        ConvAlgorithm::AutoLowMemory
+    } else {
+        ConvAlgorithm::Auto
+    };
+    Ok(Conv2d::with_algorithm(
+        Isa::best(),
+        algorithm,
+        spec,
+        &fw,
+        Some(&fb),
+        act,
+    )?)
 }
 
 fn conv_params(spec: ConvSpec) -> u64 {

@@ -226,6 +226,13 @@ pub enum ConvAlgorithm {
     /// With the environment variable `PICKER_CONV=gemm` set when a layer is
     /// built, every layer takes the packed GEMM (for comparisons).
     Auto,
+    /// As [`ConvAlgorithm::Auto`], with the Winograd weights made at every
+    /// pass ([`ConvAlgorithm::WinogradLowMemory`] or its bf16 twin) unless
+    /// `PICKER_WINOGRAD_WEIGHTS=packed`: for layers that see few tiles (the
+    /// EnvMap's residual blocks, at 1/8 of the input), where making each
+    /// chunk's weights from the 3×3 ones beats reading the packed ones (4×
+    /// the memory) from RAM.
+    AutoLowMemory,
     /// Packed GEMM over an implicit im2col (any shape).
     Gemm,
     /// Direct row-vectorised convolution (stride 1, ≤ 4 outputs; the
@@ -284,7 +291,7 @@ impl ConvAlgorithm {
     /// True when the algorithm can run a layer of this shape.
     pub fn applies(self, s: &ConvSpec) -> bool {
         match self {
-            ConvAlgorithm::Auto | ConvAlgorithm::Gemm => true,
+            ConvAlgorithm::Auto | ConvAlgorithm::AutoLowMemory | ConvAlgorithm::Gemm => true,
             ConvAlgorithm::Direct => s.stride == 1 && s.c_out <= direct::MAX_CO,
             ConvAlgorithm::Winograd
             | ConvAlgorithm::WinogradLowMemory
@@ -296,16 +303,17 @@ impl ConvAlgorithm {
 
     fn resolve(self, s: &ConvSpec) -> ConvAlgorithm {
         let force_gemm = std::env::var("PICKER_CONV").as_deref() == Ok("gemm");
+        let weights = std::env::var("PICKER_WINOGRAD_WEIGHTS");
+        let auto = matches!(self, ConvAlgorithm::Auto | ConvAlgorithm::AutoLowMemory);
         match self {
-            ConvAlgorithm::Auto if force_gemm => ConvAlgorithm::Gemm,
-            ConvAlgorithm::Auto if s.stride == 1 && s.c_out <= direct::MAX_CO && s.kw > 1 => {
+            _ if auto && force_gemm => ConvAlgorithm::Gemm,
+            _ if auto && s.stride == 1 && s.c_out <= direct::MAX_CO && s.kw > 1 => {
                 ConvAlgorithm::Direct
             }
-            ConvAlgorithm::Auto
-                if ConvAlgorithm::Winograd.applies(s) && s.c_in >= 16 && s.c_out >= 16 =>
-            {
+            _ if auto && ConvAlgorithm::Winograd.applies(s) && s.c_in >= 16 && s.c_out >= 16 => {
                 let lazy = crate::low_memory()
-                    || std::env::var("PICKER_WINOGRAD_WEIGHTS").as_deref() == Ok("lazy");
+                    || weights.as_deref() == Ok("lazy")
+                    || (self == ConvAlgorithm::AutoLowMemory && weights.as_deref() != Ok("packed"));
                 match (crate::precision(), lazy) {
                     (crate::Precision::Bf16, true) => ConvAlgorithm::WinogradBf16LowMemory,
                     (crate::Precision::Bf16, false) => ConvAlgorithm::WinogradBf16,
@@ -313,8 +321,8 @@ impl ConvAlgorithm {
                     (_, false) => ConvAlgorithm::Winograd,
                 }
             }
-            ConvAlgorithm::Auto if s.kh > 1 || s.kw > 1 || s.pad > 0 => ConvAlgorithm::Shifted,
-            ConvAlgorithm::Auto => ConvAlgorithm::Gemm,
+            _ if auto && (s.kh > 1 || s.kw > 1 || s.pad > 0) => ConvAlgorithm::Shifted,
+            _ if auto => ConvAlgorithm::Gemm,
             other => other,
         }
     }

@@ -219,32 +219,47 @@ fn conv2d_random_shapes() {
 #[test]
 fn auto_algorithm_choice() {
     let w = vec![0.01; 256 * 256 * 9];
-    let pick = |s: ConvSpec| {
-        Conv2d::new(s, &w[..s.weight_len()], None, Activation::None)
-            .unwrap()
-            .algorithm()
+    let pick_with = |algo: ConvAlgorithm, s: ConvSpec| {
+        Conv2d::with_algorithm(
+            Isa::best(),
+            algo,
+            s,
+            &w[..s.weight_len()],
+            None,
+            Activation::None,
+        )
+        .unwrap()
+        .algorithm()
     };
-    if std::env::var_os("PICKER_WINOGRAD_WEIGHTS").is_none()
-        && std::env::var_os("PICKER_MEMORY").is_none()
-    {
+    // AutoLowMemory: the same choices, with the Winograd weights made per pass.
+    for (auto, winograd) in [
+        (ConvAlgorithm::Auto, ConvAlgorithm::Winograd),
+        (
+            ConvAlgorithm::AutoLowMemory,
+            ConvAlgorithm::WinogradLowMemory,
+        ),
+    ] {
+        let pick = |s: ConvSpec| pick_with(auto, s);
+        if std::env::var_os("PICKER_WINOGRAD_WEIGHTS").is_none()
+            && std::env::var_os("PICKER_MEMORY").is_none()
+            && std::env::var_os("PICKER_PRECISION").is_none()
+        {
+            assert_eq!(pick(ConvSpec::square(256, 256, 3, 1, 0)), winograd);
+        }
         assert_eq!(
-            pick(ConvSpec::square(256, 256, 3, 1, 0)),
-            ConvAlgorithm::Winograd
+            pick(ConvSpec::square(64, 3, 7, 1, 0)),
+            ConvAlgorithm::Direct
         );
+        assert_eq!(
+            pick(ConvSpec::square(64, 128, 3, 2, 1)),
+            ConvAlgorithm::Shifted
+        );
+        assert_eq!(
+            pick(ConvSpec::square(3, 64, 7, 1, 0)),
+            ConvAlgorithm::Shifted
+        );
+        assert_eq!(pick(ConvSpec::square(64, 64, 1, 1, 0)), ConvAlgorithm::Gemm);
     }
-    assert_eq!(
-        pick(ConvSpec::square(64, 3, 7, 1, 0)),
-        ConvAlgorithm::Direct
-    );
-    assert_eq!(
-        pick(ConvSpec::square(64, 128, 3, 2, 1)),
-        ConvAlgorithm::Shifted
-    );
-    assert_eq!(
-        pick(ConvSpec::square(3, 64, 7, 1, 0)),
-        ConvAlgorithm::Shifted
-    );
-    assert_eq!(pick(ConvSpec::square(64, 64, 1, 1, 0)), ConvAlgorithm::Gemm);
     let s = ConvSpec::square(8, 8, 5, 1, 2);
     let w5 = &w[..s.weight_len()];
     let r = Conv2d::with_algorithm(
