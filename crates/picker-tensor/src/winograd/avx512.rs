@@ -23,7 +23,7 @@
 
 use std::arch::x86_64::*;
 
-use super::{segments, Geometry, VRows, M, P, T};
+use super::{segments, Geometry, OutPlane, VRows, M, P, T};
 use crate::activation::Activation;
 use crate::pad::padded_source;
 
@@ -263,20 +263,22 @@ pub(super) unsafe fn input(
 /// The CPU has AVX-512F; `nr` is a multiple of 16; `m` holds the 36 products
 /// at `ξ·stride` (`nr` floats each).
 #[target_feature(enable = "avx512f,avx2,fma")]
-#[allow(clippy::too_many_arguments)]
 pub(super) unsafe fn output(
     m: &[f32],
     stride: usize,
     nr: usize,
-    segs: &[(usize, usize, usize, usize)],
-    oh: usize,
-    ow: usize,
-    bias: f32,
-    act: Activation,
-    residual: Option<&[f32]>,
+    o: &OutPlane<'_>,
     plane: &mut [f32],
     scratch: &mut [f32],
 ) {
+    let OutPlane {
+        segs,
+        oh,
+        ow,
+        bias,
+        act,
+        residual,
+    } = *o;
     debug_assert!(nr.is_multiple_of(16) && scratch.len() >= M * M * nr + 16);
     debug_assert!(m.len() >= (P - 1) * stride + nr);
     let y = scratch.as_mut_ptr();

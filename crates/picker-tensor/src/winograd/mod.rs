@@ -337,24 +337,39 @@ fn input_channel_body(
     }
 }
 
+/// Where one output channel's panel of tiles goes, and what the output
+/// transform fuses: the runs of tiles (see [`segments`]), the output size,
+/// bias, activation and the residual plane to add.
+#[derive(Clone, Copy)]
+pub(super) struct OutPlane<'a> {
+    pub(super) segs: &'a [(usize, usize, usize, usize)],
+    pub(super) oh: usize,
+    pub(super) ow: usize,
+    pub(super) bias: f32,
+    pub(super) act: Activation,
+    pub(super) residual: Option<&'a [f32]>,
+}
+
 /// Output transform of one channel over one panel of tiles: `m` holds the 36
 /// products (`m[ξ·stride ..][..nr]`), written to `plane` with bias, activation
 /// and residual.
 #[inline(always)]
-#[allow(clippy::too_many_arguments)]
 fn output_panel_body(
     m: &[f32],
     stride: usize,
     nr: usize,
-    segs: &[(usize, usize, usize, usize)],
-    oh: usize,
-    ow: usize,
-    bias: f32,
-    act: Activation,
-    residual: Option<&[f32]>,
+    o: &OutPlane<'_>,
     plane: &mut [f32],
     scratch: &mut [f32],
 ) {
+    let OutPlane {
+        segs,
+        oh,
+        ow,
+        bias,
+        act,
+        residual,
+    } = *o;
     let (t1, y) = scratch.split_at_mut(T * M * nr);
     let y = &mut y[..M * M * nr];
     // t1[(c·4 + i)·nr] = Σ_r Aᵀ[i][r] M[ξ = 6r + c]
@@ -434,21 +449,15 @@ macro_rules! transforms_for {
         }
 
         $(#[target_feature(enable = $feat)])?
-        #[allow(clippy::too_many_arguments)]
         unsafe fn $output(
             m: &[f32],
             stride: usize,
             nr: usize,
-            segs: &[(usize, usize, usize, usize)],
-            oh: usize,
-            ow: usize,
-            bias: f32,
-            act: Activation,
-            residual: Option<&[f32]>,
+            o: &OutPlane<'_>,
             plane: &mut [f32],
             scratch: &mut [f32],
         ) {
-            output_panel_body(m, stride, nr, segs, oh, ow, bias, act, residual, plane, scratch)
+            output_panel_body(m, stride, nr, o, plane, scratch)
         }
     };
 }
@@ -785,6 +794,29 @@ impl Winograd {
         }
     }
 
+    /// The output transform of one channel's panel (`m`, the 36 products
+    /// `stride` apart) into `plane`, with this layer's ISA.
+    fn output(
+        &self,
+        m: &[f32],
+        stride: usize,
+        o: &OutPlane<'_>,
+        plane: &mut [f32],
+        scratch: &mut [f32],
+    ) {
+        let nr = self.kernel.nr;
+        // SAFETY: the CPU has the ISA of the kernel family (checked when built).
+        unsafe {
+            match self.kernel.isa {
+                #[cfg(target_arch = "x86_64")]
+                Isa::Avx512 => output_avx512(m, stride, nr, o, plane, scratch),
+                #[cfg(target_arch = "x86_64")]
+                Isa::Avx2Fma => output_avx2(m, stride, nr, o, plane, scratch),
+                _ => output_portable(m, stride, nr, o, plane, scratch),
+            }
+        }
+    }
+
     /// The bf16 input transform of a block: in parallel over channel pairs,
     /// each pair is transformed in f32 into a task buffer, then rounded and
     /// interleaved into pair words at its rows of `v` (a missing odd channel
@@ -893,7 +925,6 @@ impl Winograd {
         let m_panels = self.m_panels;
         let chunk_panels = WINO_CO_PER_TASK.div_ceil(mr).max(1);
         let chunk_rows = chunk_panels * mr;
-        let isa = self.kernel.isa;
         let plane_len = oh * ow;
         let stride = chunk_rows * nr;
         let m_len = P * stride;
@@ -1001,27 +1032,15 @@ impl Winograd {
                                 let co = co0 + r;
                                 let m = &mbuf[r * nr..];
                                 let plane = &mut dst[r * plane_len..(r + 1) * plane_len];
-                                let b = bias.map_or(0.0, |b| b[co]);
-                                let res = residual.map(|rs| &rs[co * plane_len..][..plane_len]);
-                                // SAFETY: the CPU has the kernel family's ISA.
-                                unsafe {
-                                    match isa {
-                                        #[cfg(target_arch = "x86_64")]
-                                        Isa::Avx512 => output_avx512(
-                                            m, stride, nr, &segs, oh, ow, b, act, res, plane,
-                                            scratch,
-                                        ),
-                                        #[cfg(target_arch = "x86_64")]
-                                        Isa::Avx2Fma => output_avx2(
-                                            m, stride, nr, &segs, oh, ow, b, act, res, plane,
-                                            scratch,
-                                        ),
-                                        _ => output_portable(
-                                            m, stride, nr, &segs, oh, ow, b, act, res, plane,
-                                            scratch,
-                                        ),
-                                    }
-                                }
+                                let o = OutPlane {
+                                    segs: &segs,
+                                    oh,
+                                    ow,
+                                    bias: bias.map_or(0.0, |b| b[co]),
+                                    act,
+                                    residual: residual.map(|rs| &rs[co * plane_len..][..plane_len]),
+                                };
+                                self.output(m, stride, &o, plane, scratch);
                             }
                         }
                     });
