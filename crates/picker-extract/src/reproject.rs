@@ -194,22 +194,35 @@ fn samples(
         let mut slots = row.iter_mut();
         let kept = (y * w..(y + 1) * w).filter_map(|i| keep(i).map(|c| (i, c)));
         for (i, c) in kept {
-            // Footprint: the side of the pixel's area in texels (½ a texel at least).
-            let side = coords
-                .pixel_area(mask, i)
-                .map(|a| a.sqrt() * size as f32)
-                .unwrap_or(1.0);
-            let radius = side.clamp(1.0, MAX_SPLAT_RADIUS);
-            *slots.next().expect("counted") = Sample {
-                u: coords.u[i],
-                v: coords.v[i],
-                colour: c,
-                weight: confidence[i] / (radius * radius),
-                radius,
-            };
+            *slots.next().expect("counted") = splat_sample(coords, mask, confidence, size, i, c);
         }
     });
     out
+}
+
+/// Pixel `i`'s sample of colour `c`: its splat radius is the side of the
+/// pixel's area in texels (clamped to `1..=MAX_SPLAT_RADIUS`), its weight the
+/// confidence spread over that footprint.
+fn splat_sample(
+    coords: &Coords,
+    mask: &[bool],
+    confidence: &[f32],
+    size: usize,
+    i: usize,
+    c: Vec3,
+) -> Sample {
+    let side = coords
+        .pixel_area(mask, i)
+        .map(|a| a.sqrt() * size as f32)
+        .unwrap_or(1.0);
+    let radius = side.clamp(1.0, MAX_SPLAT_RADIUS);
+    Sample {
+        u: coords.u[i],
+        v: coords.v[i],
+        colour: c,
+        weight: confidence[i] / (radius * radius),
+        radius,
+    }
 }
 
 /// The plain implementation of [`samples`] (a filter over the pixels).
@@ -231,18 +244,7 @@ fn samples_reference(
             if !u.is_finite() || !v.is_finite() || !c.is_finite() {
                 return None;
             }
-            let side = coords
-                .pixel_area(mask, i)
-                .map(|a| a.sqrt() * size as f32)
-                .unwrap_or(1.0);
-            let radius = side.clamp(1.0, MAX_SPLAT_RADIUS);
-            Some(Sample {
-                u,
-                v,
-                colour: c,
-                weight: confidence[i] / (radius * radius),
-                radius,
-            })
+            Some(splat_sample(coords, mask, confidence, size, i, c))
         })
         .collect()
 }
