@@ -119,3 +119,55 @@ macro_rules! per_isa {
     };
 }
 pub(crate) use per_isa;
+
+/// Bytes of the level-2 cache of one core, read once from Linux's sysfs
+/// (`/sys/devices/system/cpu/cpu0/cache/index*/`); 1 MiB where it cannot be
+/// read. Blocking choices that depend on it (the Winograd products' panel
+/// groups) never change results, only speed.
+pub(crate) fn l2_cache_bytes() -> usize {
+    static L2: OnceLock<usize> = OnceLock::new();
+    *L2.get_or_init(|| read_l2_bytes().unwrap_or(1 << 20))
+}
+
+/// The level-2 data or unified cache size from sysfs, if it is there.
+fn read_l2_bytes() -> Option<usize> {
+    let dir = std::path::Path::new("/sys/devices/system/cpu/cpu0/cache");
+    for entry in std::fs::read_dir(dir).ok()?.flatten() {
+        let read = |f: &str| std::fs::read_to_string(entry.path().join(f)).ok();
+        if read("level")?.trim() != "2" || read("type")?.trim() == "Instruction" {
+            continue;
+        }
+        return parse_cache_size(&read("size")?);
+    }
+    None
+}
+
+/// Parses sysfs cache sizes: `2048K`, `1M`, or plain bytes.
+fn parse_cache_size(s: &str) -> Option<usize> {
+    let s = s.trim();
+    let (num, mul) = match s.as_bytes().last()? {
+        b'K' | b'k' => (&s[..s.len() - 1], 1 << 10),
+        b'M' | b'm' => (&s[..s.len() - 1], 1 << 20),
+        _ => (s, 1),
+    };
+    num.parse::<usize>()
+        .ok()
+        .map(|n| n * mul)
+        .filter(|&b| b > 0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cache_sizes_parse() {
+        assert_eq!(parse_cache_size("2048K\n"), Some(2 << 20));
+        assert_eq!(parse_cache_size("1M"), Some(1 << 20));
+        assert_eq!(parse_cache_size("524288"), Some(1 << 19));
+        assert_eq!(parse_cache_size("0K"), None);
+        assert_eq!(parse_cache_size("big"), None);
+        assert_eq!(parse_cache_size(""), None);
+        assert!(l2_cache_bytes() > 0);
+    }
+}

@@ -18,23 +18,43 @@ pub const TASKS_PER_THREAD: usize = 4;
 /// Alignment in bytes of packed buffers (one cache line, one zmm register).
 pub const ALIGN: usize = 64;
 
+/// Buffers of at least this many bytes ask for transparent huge pages.
+pub const HUGE_PAGE_MIN_BYTES: usize = 2 << 20;
+
 /// Widest micro-kernel tile of any family (`NR` of the AVX-512 kernel).
 pub const MAX_NR: usize = 48;
 
 /// Winograd: input tiles per block, in `NR`-wide panels of the micro-kernel. A
 /// block's transformed input (`36 × c_in × NR × this` floats) is shared by all
 /// threads and should stay in L2/L3 while every output-channel chunk reads it.
-pub const WINO_PANELS_PER_BLOCK: usize = 1;
+pub const WINO_PANELS_PER_BLOCK: usize = 2;
 
 /// Winograd with lazy weights: bytes of transformed input one block may
 /// hold (shared by all threads in L3), so each output-channel chunk makes
 /// its part of `U` once per block rather than once per panel.
 pub const WINO_LAZY_V_BYTES: usize = 16 << 20;
 
+/// Winograd in f32: input channels per depth block of the products, so a
+/// block's `WINO_KC × NR` B panel stays in L1 while the chunk's row panels
+/// run over it.
+pub const WINO_KC: usize = 128;
+
 /// Winograd in bf16: pair words (two input channels each) per depth block, so
 /// a block's `WINO_BF16_KC × NR` B panel (24 KiB) stays in L1.
 pub const WINO_BF16_KC: usize = 128;
 
-/// Winograd: output channels one task computes for a block (rounded to whole
-/// `MR` panels); its `36 × this × NR` products stay in L2 for the output transform.
+/// Winograd: fewest output channels one product task computes for a block
+/// (rounded to whole `MR` panels; a task takes `c_out / threads` of them,
+/// within this and `WINO_CO_PER_TASK_MAX`).
 pub const WINO_CO_PER_TASK: usize = 32;
+
+/// Winograd: most output channels per product task. More channels read each
+/// B panel for more rows (measured on a 2-core AVX-512 Xeon at 60×80×256:
+/// 128 gave the products ~20% over 32); the task's `36 × this × NR`
+/// products per panel stay in L2 for the output transform.
+pub const WINO_CO_PER_TASK_MAX: usize = 128;
+
+/// Winograd: most tile panels whose products one task runs before their
+/// output transform, each `U` panel being read once for all of them (fewer
+/// where the L2 cannot hold their products).
+pub const WINO_PANELS_PER_GROUP: usize = 2;

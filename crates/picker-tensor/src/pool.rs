@@ -51,7 +51,7 @@ pub(crate) fn take(len: usize) -> Vec<f32> {
             return v;
         }
     }
-    vec![0.0; len]
+    crate::aligned::zeroed_vec(len)
 }
 
 /// Hands a buffer back (kept if large and the pool has room, else freed).

@@ -150,17 +150,18 @@ fn named_conv_problems() -> Vec<ConvProblem> {
         res(conv(1, 17, 23, 40, 36, 3, 1, 0)), // Winograd: partial tiles on both axes
         relu(conv(1, 2, 3, 16, 16, 3, 1, 1)), // Winograd: one partial tile
         res(conv(1, 34, 44, 256, 256, 3, 1, 0)), // the ResBlock convs at full width
-        tanh(conv(1, 11, 150, 6, 3, 7, 1, 0)), // direct path: full and partial row blocks
-        res(conv(2, 5, 70, 4, 4, 3, 1, 0)),   // direct path, 4 outputs, residual
-        conv(1, 4, 66, 3, 2, 1, 1, 0),        // direct path, 1x1
-        relu(conv(1, 9, 13, 6, 3, 7, 1, 2)),  // folded shifted GEMM with zero padding
-        conv(1, 8, 70, 5, 2, 5, 1, 0),        // folded, two outputs, rows across panels
-        tanh(conv(1, 7, 130, 9, 1, 7, 1, 3)), // direct: one output, zero pad, 3 column blocks
-        relu(conv(1, 1, 3, 2, 4, 3, 1, 1)),   // direct: one output row (half a row pair)
-        relu(conv(1, 19, 21, 3, 10, 7, 2, 3)), // shifted via phase planes, 7x7 stride 2
-        conv(1, 23, 17, 9, 11, 3, 3, 1),      // phase planes, stride 3
-        res(conv(1, 14, 28, 16, 16, 3, 1, 0)), // Winograd: 28 tiles, one narrow panel (2 zmm)
-        res(conv(1, 54, 34, 16, 24, 3, 1, 0)), // Winograd: 104 tiles, several blocks, narrow tail
+        res(conv(1, 50, 70, 40, 136, 3, 1, 0)), // Winograd: 5 panels (3 blocks, a narrow one), uneven chunks
+        tanh(conv(1, 11, 150, 6, 3, 7, 1, 0)),  // direct path: full and partial row blocks
+        res(conv(2, 5, 70, 4, 4, 3, 1, 0)),     // direct path, 4 outputs, residual
+        conv(1, 4, 66, 3, 2, 1, 1, 0),          // direct path, 1x1
+        relu(conv(1, 9, 13, 6, 3, 7, 1, 2)),    // folded shifted GEMM with zero padding
+        conv(1, 8, 70, 5, 2, 5, 1, 0),          // folded, two outputs, rows across panels
+        tanh(conv(1, 7, 130, 9, 1, 7, 1, 3)),   // direct: one output, zero pad, 3 column blocks
+        relu(conv(1, 1, 3, 2, 4, 3, 1, 1)),     // direct: one output row (half a row pair)
+        relu(conv(1, 19, 21, 3, 10, 7, 2, 3)),  // shifted via phase planes, 7x7 stride 2
+        conv(1, 23, 17, 9, 11, 3, 3, 1),        // phase planes, stride 3
+        res(conv(1, 14, 28, 16, 16, 3, 1, 0)),  // Winograd: 28 tiles, one narrow panel (2 zmm)
+        res(conv(1, 54, 34, 16, 24, 3, 1, 0)),  // Winograd: 104 tiles, several blocks, narrow tail
         // Winograd: tile rows of 33 tiles (three groups of 16 in the phase split,
         // runs across panel ends), tanh with bias and residual, zero padding.
         ConvProblem {

@@ -12,10 +12,14 @@
 //! 1. the block's input tiles are gathered (zero or reflection padding fused
 //!    into the gather) and transformed, in parallel over input channels,
 //!    straight into the micro-kernel's packed B layout: `V[ξ]` is `c_in × tiles`;
-//! 2. in parallel over chunks of output channels ([`WINO_CO_PER_TASK`]), the
-//!    36 products `M[ξ] = U[ξ] · V[ξ]` are run by the GEMM micro-kernel into a
-//!    per-thread buffer, which the output transform turns into output pixels
-//!    at once, fused with bias, activation and residual add.
+//! 2. in parallel over chunks of output channels (`c_out / threads`, within
+//!    [`WINO_CO_PER_TASK`]..[`WINO_CO_PER_TASK_MAX`]), the 36 products
+//!    `M[ξ] = U[ξ] · V[ξ]` are run by the GEMM micro-kernel into a per-thread
+//!    buffer, for a group of panels at a time (as many as the L2 holds, at
+//!    most [`WINO_PANELS_PER_GROUP`]: each `U` panel is read once per group,
+//!    and each depth block's B panel stays in L1 for all the chunk's row
+//!    panels); the output transform then turns them into output pixels at
+//!    once, fused with bias, activation and residual add.
 //!
 //! The tile transforms work on a panel of tiles at a time, with the tiles in
 //! the SIMD lanes; they are compiled once per ISA (`#[target_feature]`) and
@@ -32,7 +36,10 @@ use crate::aligned::AlignedBuf;
 use crate::isa::Isa;
 use crate::microkernel::{KernelFn, MicroKernel, NarrowKernelFn};
 use crate::pad::{padded_source, Fill};
-use crate::params::{KC, WINO_BF16_KC, WINO_CO_PER_TASK, WINO_LAZY_V_BYTES, WINO_PANELS_PER_BLOCK};
+use crate::params::{
+    WINO_BF16_KC, WINO_CO_PER_TASK, WINO_CO_PER_TASK_MAX, WINO_KC, WINO_LAZY_V_BYTES,
+    WINO_PANELS_PER_BLOCK, WINO_PANELS_PER_GROUP,
+};
 
 /// Points of the transformed tile along one axis.
 const T: usize = 6;
@@ -585,7 +592,7 @@ impl Winograd {
             );
             bf16_products(c_in)
         } else {
-            (c_in, KC, kernel.run, kernel.narrow)
+            (c_in, WINO_KC, kernel.run, kernel.narrow)
         };
         let mut kblocks = Vec::new();
         let mut k0 = 0;
@@ -923,11 +930,27 @@ impl Winograd {
         let block_rows = &block_rows;
         let mut v = crate::pool::take(P * self.depth * tpb);
         let m_panels = self.m_panels;
-        let chunk_panels = WINO_CO_PER_TASK.div_ceil(mr).max(1);
+        // Output-channel chunks: one per thread, within bounds (a larger
+        // chunk reads each B panel for more rows; the products' buffer is
+        // `group · 36 · chunk · NR` floats and should stay in L2).
+        let chunk_panels = m_panels
+            .div_ceil(rayon::current_num_threads().max(1))
+            .clamp(
+                WINO_CO_PER_TASK.div_ceil(mr),
+                WINO_CO_PER_TASK_MAX.div_ceil(mr),
+            )
+            .max(1);
         let chunk_rows = chunk_panels * mr;
         let plane_len = oh * ow;
         let stride = chunk_rows * nr;
         let m_len = P * stride;
+        // Panels whose products a task keeps at once: as many as the L2
+        // holds (each U panel is then read once for all of them), at most
+        // WINO_PANELS_PER_GROUP.
+        let m_panel_bytes = m_len * std::mem::size_of::<f32>();
+        let group = (crate::isa::l2_cache_bytes() / m_panel_bytes)
+            .clamp(1, WINO_PANELS_PER_GROUP)
+            .min(panels_per_block);
         let u_chunk_len = P * chunk_per_xi(chunk_rows * self.depth);
 
         let mut t0 = 0;
@@ -950,7 +973,7 @@ impl Winograd {
             }
 
             // 2. Products and output transform, parallel over output-channel
-            // chunks, one panel of tiles at a time.
+            // chunks, a group of tile panels at a time.
             let v_ref = &v;
             let g_ref = &g;
             out.par_chunks_mut(chunk_rows * plane_len)
@@ -963,8 +986,8 @@ impl Winograd {
                     M_BUF.with(|buf| {
                         let mut buf = buf.borrow_mut();
                         let lazy_len = if lazy { u_chunk_len } else { 0 };
-                        buf.ensure(m_len + (T * M + M * M) * nr + lazy_len);
-                        let (mbuf, rest) = buf.as_mut_slice().split_at_mut(m_len);
+                        buf.ensure(group * m_len + (T * M + M * M) * nr + lazy_len);
+                        let (mbuf, rest) = buf.as_mut_slice().split_at_mut(group * m_len);
                         let (scratch, u_chunk) = rest.split_at_mut((T * M + M * M) * nr);
                         let u = match &self.u {
                             UStore::Packed(all) => UView {
@@ -986,61 +1009,72 @@ impl Winograd {
                             }
                         };
                         let mut segs = Vec::with_capacity(4);
-                        for p in 0..panels {
-                            let cols = nr.min(t1 - t0 - p * nr);
+                        // Groups of `group` panels: each U panel is read
+                        // once per group, from L2, and each B sub-panel of
+                        // the depth block stays in L1 for the chunk's row
+                        // panels.
+                        for g0 in (0..panels).step_by(group) {
+                            let g1 = (g0 + group).min(panels);
                             for xi in 0..P {
-                                for mp in mp0..mp1 {
-                                    for (bi, &(k0, kc, _)) in self.kblocks.iter().enumerate() {
-                                        let ap = u.at(xi, mp, k0, kc, mr).as_ptr();
+                                for (bi, &(k0, kc, _)) in self.kblocks.iter().enumerate() {
+                                    for p in g0..g1 {
+                                        let cols = nr.min(t1 - t0 - p * nr);
                                         let bp = v_ref[block_rows[bi].at(xi, p)..].as_ptr();
-                                        let c = &mut mbuf[xi * stride + (mp - mp0) * mr * nr..]
-                                            [..mr * nr];
-                                        // SAFETY: the A panel holds kc·mr floats, the B
-                                        // panel kc·nr, and C mr rows of nr floats (ldc nr);
-                                        // a narrow kernel touches only its first columns.
-                                        unsafe {
-                                            match self.narrow {
-                                                Some((lanes, narrow)) if cols + lanes <= nr => {
-                                                    let nv = cols.div_ceil(lanes);
-                                                    narrow(
-                                                        nv,
+                                        for mp in mp0..mp1 {
+                                            let ap = u.at(xi, mp, k0, kc, mr).as_ptr();
+                                            let c = &mut mbuf[(p - g0) * m_len
+                                                + xi * stride
+                                                + (mp - mp0) * mr * nr..][..mr * nr];
+                                            // SAFETY: the A panel holds kc·mr floats, the B
+                                            // panel kc·nr, and C mr rows of nr floats (ldc nr);
+                                            // a narrow kernel touches only its first columns.
+                                            unsafe {
+                                                match self.narrow {
+                                                    Some((lanes, narrow)) if cols + lanes <= nr => {
+                                                        let nv = cols.div_ceil(lanes);
+                                                        narrow(
+                                                            nv,
+                                                            kc,
+                                                            ap,
+                                                            bp,
+                                                            nr,
+                                                            c.as_mut_ptr(),
+                                                            nr,
+                                                            bi > 0,
+                                                        )
+                                                    }
+                                                    _ => (self.run)(
                                                         kc,
                                                         ap,
                                                         bp,
-                                                        nr,
                                                         c.as_mut_ptr(),
                                                         nr,
                                                         bi > 0,
-                                                    )
+                                                    ),
                                                 }
-                                                _ => (self.run)(
-                                                    kc,
-                                                    ap,
-                                                    bp,
-                                                    c.as_mut_ptr(),
-                                                    nr,
-                                                    bi > 0,
-                                                ),
-                                            }
-                                        };
+                                            };
+                                        }
                                     }
                                 }
                             }
-                            let pt0 = t0 + p * nr;
-                            segments(pt0, (pt0 + nr).min(t1), g_ref.tw, &mut segs);
-                            for r in 0..rows {
-                                let co = co0 + r;
-                                let m = &mbuf[r * nr..];
-                                let plane = &mut dst[r * plane_len..(r + 1) * plane_len];
-                                let o = OutPlane {
-                                    segs: &segs,
-                                    oh,
-                                    ow,
-                                    bias: bias.map_or(0.0, |b| b[co]),
-                                    act,
-                                    residual: residual.map(|rs| &rs[co * plane_len..][..plane_len]),
-                                };
-                                self.output(m, stride, &o, plane, scratch);
+                            for p in g0..g1 {
+                                let pt0 = t0 + p * nr;
+                                segments(pt0, (pt0 + nr).min(t1), g_ref.tw, &mut segs);
+                                for r in 0..rows {
+                                    let co = co0 + r;
+                                    let m = &mbuf[(p - g0) * m_len + r * nr..];
+                                    let plane = &mut dst[r * plane_len..(r + 1) * plane_len];
+                                    let o = OutPlane {
+                                        segs: &segs,
+                                        oh,
+                                        ow,
+                                        bias: bias.map_or(0.0, |b| b[co]),
+                                        act,
+                                        residual: residual
+                                            .map(|rs| &rs[co * plane_len..][..plane_len]),
+                                    };
+                                    self.output(m, stride, &o, plane, scratch);
+                                }
                             }
                         }
                     });
