@@ -18,9 +18,6 @@ pub const TASKS_PER_THREAD: usize = 4;
 /// Alignment in bytes of packed buffers (one cache line, one zmm register).
 pub const ALIGN: usize = 64;
 
-/// Buffers of at least this many bytes ask for transparent huge pages.
-pub const HUGE_PAGE_MIN_BYTES: usize = 2 << 20;
-
 /// Widest micro-kernel tile of any family (`NR` of the AVX-512 kernel).
 pub const MAX_NR: usize = 48;
 

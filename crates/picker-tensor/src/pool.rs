@@ -51,7 +51,7 @@ pub(crate) fn take(len: usize) -> Vec<f32> {
             return v;
         }
     }
-    crate::aligned::zeroed_vec(len)
+    vec![0.0; len]
 }
 
 /// Hands a buffer back (kept if large and the pool has room, else freed).
