@@ -27,6 +27,7 @@
 
 mod activation;
 mod aligned;
+mod amx;
 mod bf16;
 mod bn;
 mod conv;

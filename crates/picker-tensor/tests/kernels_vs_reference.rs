@@ -842,6 +842,10 @@ fn winograd_bf16_matches_rounding_reference() {
         (30, 41, 33, 8, 1),
         (14, 10, 301, 12, 0),
         (7, 131, 20, 24, 1),
+        // Whole AMX tiles (depth pairs and outputs in 16s): on a CPU with
+        // AMX-BF16 these run on the tiles, the ones above on AVX512_BF16.
+        (12, 20, 64, 48, 1),
+        (50, 70, 320, 32, 1), // two depth blocks, 5 tile panels
     ];
     for (i, &(h, w, ci, co, pad)) in cases.iter().enumerate() {
         let mut rng = Rng::new(9100 + i as u64);
@@ -866,9 +870,10 @@ fn winograd_bf16_matches_rounding_reference() {
                 &expected,
                 // Far below the bf16 error itself (~0.2 here): what is left
                 // is the rare V whose f32 and f64 values round to different
-                // bf16 neighbours.
+                // bf16 neighbours (up to ~7e-3 with 64 input channels; the
+                // AMX and AVX512_BF16 kernels agree with each other to ~1e-6).
                 Tolerance {
-                    abs: 5e-3,
+                    abs: 1e-2,
                     rel: 0.0,
                 },
             );

@@ -33,6 +33,7 @@ use rayon::prelude::*;
 
 use crate::activation::Activation;
 use crate::aligned::AlignedBuf;
+use crate::amx;
 use crate::isa::Isa;
 use crate::microkernel::{KernelFn, MicroKernel, NarrowKernelFn};
 use crate::pad::{padded_source, Fill};
@@ -145,6 +146,9 @@ pub(crate) struct Winograd {
     /// Products in bf16 ([`crate::bf16`]): `U` and `V` hold pair words, two
     /// input channels per depth step.
     bf16: bool,
+    /// bf16 products on AMX tiles ([`crate::amx`]): the CPU has them, and
+    /// the depth pairs and output channels come in whole tiles of 16.
+    amx: bool,
     /// Depth of the products: `c_in` floats, or `⌈c_in / 2⌉` pair words.
     depth: usize,
     /// The products' tile: the f32 kernel's, or the bf16 one.
@@ -618,6 +622,11 @@ impl Winograd {
             c_in,
             c_out,
             bf16,
+            amx: bf16
+                && kernel.nr == 3 * amx::COLS
+                && crate::amx::available()
+                && depth.is_multiple_of(amx::COLS)
+                && c_out.is_multiple_of(amx::ROWS),
             depth,
             run,
             narrow,
@@ -756,16 +765,20 @@ impl Winograd {
         }
     }
 
+    /// The depth block `(k0, kc, offset)` holding depth row `d`.
+    fn kblock_of(&self, d: usize) -> (usize, usize, usize) {
+        self.kblocks
+            .iter()
+            .copied()
+            .find(|&(k0, kc, _)| d < k0 + kc)
+            .expect("d < depth")
+    }
+
     /// Where depth row `d`'s rows (channel `d`, or pair `d` in bf16) of
     /// every `V[ξ]` lie in a block buffer of `tpb` tiles: `ξ`-major, then
     /// depth block `(k0, kc)`, then panel, then the `kc` rows of that panel.
     fn v_rows(&self, d: usize, tpb: usize) -> VRows {
-        let (k0, kc, _) = self
-            .kblocks
-            .iter()
-            .copied()
-            .find(|&(k0, kc, _)| d < k0 + kc)
-            .expect("d < depth");
+        let (k0, kc, _) = self.kblock_of(d);
         let nr = self.kernel.nr;
         VRows {
             xi_stride: self.depth * tpb,
@@ -914,7 +927,7 @@ impl Winograd {
         // Packed U: blocks of WINO_PANELS_PER_BLOCK panels, all of U read per
         // block. Lazy U: blocks as large as WINO_LAZY_V_BYTES of V allows, and
         // each output-channel chunk makes its own part of U once per block.
-        let panels_per_block = if lazy {
+        let panels_per_block = if lazy || self.amx {
             let per_panel = P * self.depth * nr * std::mem::size_of::<f32>();
             (WINO_LAZY_V_BYTES / per_panel).clamp(1, 32)
         } else {
@@ -940,6 +953,12 @@ impl Winograd {
                 WINO_CO_PER_TASK_MAX.div_ceil(mr),
             )
             .max(1);
+        // AMX: whole tiles of 16 output channels per chunk.
+        let chunk_panels = if self.amx {
+            chunk_panels.next_multiple_of(amx::ROWS / mr)
+        } else {
+            chunk_panels
+        };
         let chunk_rows = chunk_panels * mr;
         let plane_len = oh * ow;
         let stride = chunk_rows * nr;
@@ -952,6 +971,12 @@ impl Winograd {
             .clamp(1, WINO_PANELS_PER_GROUP)
             .min(panels_per_block);
         let u_chunk_len = P * chunk_per_xi(chunk_rows * self.depth);
+        // AMX: the chunk's U as A tiles, [ξ][16-row block][16-pair block].
+        let amx_len = if self.amx {
+            P * chunk_rows * self.depth
+        } else {
+            0
+        };
 
         let mut t0 = 0;
         while t0 < tiles {
@@ -986,9 +1011,10 @@ impl Winograd {
                     M_BUF.with(|buf| {
                         let mut buf = buf.borrow_mut();
                         let lazy_len = if lazy { u_chunk_len } else { 0 };
-                        buf.ensure(group * m_len + (T * M + M * M) * nr + lazy_len);
+                        buf.ensure(group * m_len + (T * M + M * M) * nr + lazy_len + amx_len);
                         let (mbuf, rest) = buf.as_mut_slice().split_at_mut(group * m_len);
-                        let (scratch, u_chunk) = rest.split_at_mut((T * M + M * M) * nr);
+                        let (scratch, rest) = rest.split_at_mut((T * M + M * M) * nr);
+                        let (u_chunk, a_tiles) = rest.split_at_mut(lazy_len);
                         let u = match &self.u {
                             UStore::Packed(all) => UView {
                                 u: all.as_slice(),
@@ -1008,6 +1034,21 @@ impl Winograd {
                                 }
                             }
                         };
+                        let (nj, nkk) = (rows / amx::ROWS, self.depth / amx::COLS);
+                        let tiles = if self.amx {
+                            for xi in 0..P {
+                                let dst = &mut a_tiles[xi * nj * nkk * amx::TILE..];
+                                for &(k0, kc, _) in &self.kblocks {
+                                    for mp in mp0..mp1 {
+                                        let src = u.at(xi, mp, k0, kc, mr);
+                                        amx::pack_a_panel(src, mp * mr - co0, k0, nkk, mr, dst);
+                                    }
+                                }
+                            }
+                            amx::Tiles::new()
+                        } else {
+                            None
+                        };
                         let mut segs = Vec::with_capacity(4);
                         // Groups of `group` panels: each U panel is read
                         // once per group, from L2, and each B sub-panel of
@@ -1017,6 +1058,35 @@ impl Winograd {
                             let g1 = (g0 + group).min(panels);
                             for xi in 0..P {
                                 for (bi, &(k0, kc, _)) in self.kblocks.iter().enumerate() {
+                                    if let Some(tiles) = &tiles {
+                                        for p in g0..g1 {
+                                            let bp = v_ref[block_rows[bi].at(xi, p)..].as_ptr();
+                                            for j in 0..nj {
+                                                let a = &a_tiles[((xi * nj + j) * nkk
+                                                    + k0 / amx::COLS)
+                                                    * amx::TILE..];
+                                                let c = &mut mbuf[(p - g0) * m_len
+                                                    + xi * stride
+                                                    + j * amx::ROWS * nr..];
+                                                // SAFETY: `a` holds the block's kc/16 tiles,
+                                                // the panel's kc pair rows of nr = 48 words
+                                                // lie in the block buffer, and C is 16 rows of
+                                                // nr floats in this task's buffer.
+                                                unsafe {
+                                                    tiles.panel(
+                                                        kc / amx::COLS,
+                                                        a.as_ptr(),
+                                                        bp,
+                                                        nr,
+                                                        c.as_mut_ptr(),
+                                                        nr,
+                                                        bi > 0,
+                                                    )
+                                                };
+                                            }
+                                        }
+                                        continue;
+                                    }
                                     for p in g0..g1 {
                                         let cols = nr.min(t1 - t0 - p * nr);
                                         let bp = v_ref[block_rows[bi].at(xi, p)..].as_ptr();
