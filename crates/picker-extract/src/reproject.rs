@@ -7,7 +7,8 @@
 //! afar cover the texels between them), accumulating per-texel weights. The
 //! texel colour is the weighted mean; one reweighting pass downweights samples
 //! far from their texel's mean (Cauchy weights), which rejects misplaced UVs
-//! and highlights that survived de-lighting. Coverage is `W/(W + ½)` of the
+//! and highlights that survived de-lighting; [`BACK_PROJECTIONS`] rounds of
+//! damped iterative back-projection then take back part of the splat's blur. Coverage is `W/(W + ½)` of the
 //! accumulated weight `W` (0 never observed, → 1 well observed); texels with
 //! `W ≥` [`KNOWN_WEIGHT`] count as known for the inpainter (or, when no texel
 //! reaches it, those with at least half the largest weight).
@@ -347,11 +348,14 @@ fn band_members(samples: &[Sample], size: usize, wrap: bool) -> Vec<Vec<u32>> {
 
 /// Accumulates the tent-weighted samples (optionally Cauchy-reweighted
 /// against `reference` with `scale`) into per-texel sums and weights;
-/// `members` are the samples of every band ([`band_members`]).
+/// `members` are the samples of every band ([`band_members`]). With
+/// `values`, sample `k` adds `values[k]` instead of its colour (same weights:
+/// the back-projection of residuals).
 ///
 /// Parallel over bands of texture rows: each band adds the samples that
 /// touch it in sample order, so every texel receives its contributions in
 /// the same order as `splat_reference` (same bits, whatever the threads).
+#[allow(clippy::too_many_arguments)]
 fn splat(
     samples: &[Sample],
     members: &[Vec<u32>],
@@ -359,6 +363,7 @@ fn splat(
     wrap: bool,
     reference: Option<&[Vec3]>,
     scale: f32,
+    values: Option<&[Vec3]>,
 ) -> (Vec<Vec3>, Vec<f32>) {
     let mut sum = vec![Vec3::ZERO; size * size];
     let mut wsum = vec![0.0f32; size * size];
@@ -378,6 +383,7 @@ fn splat(
             );
             for &k in idx {
                 let s = &samples[k as usize];
+                let value = values.map_or(s.colour, |v| v[k as usize]);
                 let px = s.u * size as f32 - 0.5;
                 let py = s.v * size as f32 - 0.5;
                 let r = s.radius;
@@ -409,13 +415,105 @@ fn splat(
                             let d = (s.colour - mean[lt + lo as usize * size]).length() / scale;
                             w /= 1.0 + d * d;
                         }
-                        bsum[lt] += s.colour * w;
+                        bsum[lt] += value * w;
                         bw[lt] += w;
                     }
                 }
             }
         });
     (sum, wsum)
+}
+
+/// Rounds of iterative back-projection after the splat (see [`back_project`]).
+pub const BACK_PROJECTIONS: usize = 2;
+
+/// The fraction of the back-projected residual each round adds.
+pub const BACK_PROJECTION_STEP: f32 = 0.5;
+
+/// Sample `s` as the texture `tex` predicts it: the tent-weighted mean of the
+/// texels under its footprint (the splat's kernel, without the confidence and
+/// robust weights); `None` when no texel lies under it.
+fn predict(s: &Sample, tex: &[Vec3], size: usize, wrap: bool) -> Option<Vec3> {
+    let n = size as i64;
+    let px = s.u * size as f32 - 0.5;
+    let py = s.v * size as f32 - 0.5;
+    let r = s.radius;
+    let (x0, x1) = (ceil_i64(px - r), floor_i64(px + r));
+    let (y0, y1) = (ceil_i64(py - r), floor_i64(py + r));
+    let (mut acc, mut wsum) = (Vec3::ZERO, 0.0f32);
+    for ty in y0..=y1 {
+        let wy = 1.0 - (ty as f32 - py).abs() / r;
+        let yy = if wrap { wrap_i64(ty, n) } else { ty };
+        if wy <= 0.0 || yy < 0 || yy >= n {
+            continue;
+        }
+        for tx in x0..=x1 {
+            let wx = 1.0 - (tx as f32 - px).abs() / r;
+            let xx = if wrap { wrap_i64(tx, n) } else { tx };
+            if wx <= 0.0 || xx < 0 || xx >= n {
+                continue;
+            }
+            let w = wx * wy;
+            acc += tex[yy as usize * size + xx as usize] * w;
+            wsum += w;
+        }
+    }
+    (wsum > 0.0).then(|| acc / wsum)
+}
+
+/// `rounds` of iterative back-projection (Irani & Peleg 1991) of the
+/// splatted texture `tex`: the splat is a blurred estimate (each sample is
+/// spread over its tent, and the tents of neighbouring samples overlap), so
+/// each round predicts every sample from `tex` ([`predict`]), splats the
+/// residuals with the same weights as the texture (`wsum` their sums) and
+/// adds [`BACK_PROJECTION_STEP`] times their mean to each texel. Without the
+/// robust weights this is a damped Landweber iteration on `A·tex = colours`
+/// with `A` the tents: it undoes part of the splat's own blur and amplifies
+/// no frequency more than `1 + rounds · step` times (2 with the defaults), so
+/// noise in the de-lit colours is not blown up. Texels stay within
+/// `[0, the splat's largest value]` per channel, so ringing at hard edges
+/// cannot overshoot into negative colours. Samples in parallel, each texel's
+/// sum in the splat's fixed order: deterministic.
+#[allow(clippy::too_many_arguments)]
+fn back_project(
+    samples: &[Sample],
+    members: &[Vec<u32>],
+    size: usize,
+    wrap: bool,
+    mean: &[Vec3],
+    scale: f32,
+    wsum: &[f32],
+    tex: &mut [Vec3],
+    rounds: usize,
+) {
+    let hi = tex
+        .iter()
+        .zip(wsum)
+        .filter(|(_, &w)| w > 0.0)
+        .fold(Vec3::ZERO, |m, (c, _)| m.max(*c));
+    for _ in 0..rounds {
+        let t: &[Vec3] = tex;
+        let residual: Vec<Vec3> = samples
+            .par_iter()
+            .map(|s| predict(s, t, size, wrap).map_or(Vec3::ZERO, |p| s.colour - p))
+            .collect();
+        let (rsum, _) = splat(
+            samples,
+            members,
+            size,
+            wrap,
+            Some(mean),
+            scale,
+            Some(&residual),
+        );
+        tex.par_iter_mut()
+            .zip(rsum.par_iter().zip(wsum.par_iter()))
+            .for_each(|(c, (r, &w))| {
+                if w > 0.0 {
+                    *c = (*c + *r / w * BACK_PROJECTION_STEP).clamp(Vec3::ZERO, hi);
+                }
+            });
+    }
 }
 
 /// Splats the picked pixels (`mask`, colours `colour` (3 channels), per-pixel
@@ -427,12 +525,24 @@ pub fn reproject(
     confidence: &[f32],
     size: usize,
 ) -> Reprojected {
+    reproject_rounds(coords, mask, colour, confidence, size, BACK_PROJECTIONS)
+}
+
+/// [`reproject`] with `rounds` of back-projection.
+fn reproject_rounds(
+    coords: &Coords,
+    mask: &[bool],
+    colour: &Image,
+    confidence: &[f32],
+    size: usize,
+    rounds: usize,
+) -> Reprojected {
     let n = coords.width * coords.height;
     assert_eq!(mask.len(), n, "mask size");
     assert_eq!(colour.plane_len(), n, "colour size");
     let samples = samples(coords, mask, colour, confidence, size);
     let members = band_members(&samples, size, coords.wrap);
-    let (sum, wsum) = splat(&samples, &members, size, coords.wrap, None, 1.0);
+    let (sum, wsum) = splat(&samples, &members, size, coords.wrap, None, 1.0, None);
     let mean: Vec<Vec3> = sum
         .iter()
         .zip(&wsum)
@@ -453,7 +563,31 @@ pub fn reproject(
         None => 1.0,
         Some(m) => (2.0 * m[0]).max(0.02),
     };
-    let (sum, wsum) = splat(&samples, &members, size, coords.wrap, Some(&mean), scale);
+    let (sum, wsum) = splat(
+        &samples,
+        &members,
+        size,
+        coords.wrap,
+        Some(&mean),
+        scale,
+        None,
+    );
+    let mut tex: Vec<Vec3> = sum
+        .iter()
+        .zip(&wsum)
+        .map(|(s, &w)| if w > 0.0 { *s / w } else { Vec3::ZERO })
+        .collect();
+    back_project(
+        &samples,
+        &members,
+        size,
+        coords.wrap,
+        &mean,
+        scale,
+        &wsum,
+        &mut tex,
+        rounds,
+    );
     let mut texture = Image::zeros(3, size, size);
     let mut weight = Image::zeros(1, size, size);
     let mut coverage = Image::zeros(1, size, size);
@@ -469,7 +603,7 @@ pub fn reproject(
         coverage.data[t] = w / (w + 0.5);
         if w > 0.0 && w >= threshold {
             known[t] = true;
-            texture.set_rgb(t, sum[t] / w);
+            texture.set_rgb(t, tex[t]);
         }
     }
     Reprojected {
@@ -559,11 +693,13 @@ fn splat_reference(
     wrap: bool,
     reference: Option<&[Vec3]>,
     scale: f32,
+    values: Option<&[Vec3]>,
 ) -> (Vec<Vec3>, Vec<f32>) {
     let mut sum = vec![Vec3::ZERO; size * size];
     let mut wsum = vec![0.0f32; size * size];
     let n = size as i64;
-    for s in samples {
+    for (k, s) in samples.iter().enumerate() {
+        let value = values.map_or(s.colour, |v| v[k]);
         let px = s.u * size as f32 - 0.5;
         let py = s.v * size as f32 - 0.5;
         let r = s.radius;
@@ -593,7 +729,7 @@ fn splat_reference(
                     let d = (s.colour - mean[t]).length() / scale;
                     w /= 1.0 + d * d;
                 }
-                sum[t] += s.colour * w;
+                sum[t] += value * w;
                 wsum[t] += w;
             }
         }
@@ -674,6 +810,49 @@ mod tests {
     }
 
     #[test]
+    fn back_projection_sharpens_the_splat() {
+        // A smooth periodic texture seen frontally, a pixel every 0.6 texels:
+        // the tent splat blurs it, back-projection takes most of that back
+        // (here the error drops from 0.035 to 0.010).
+        let tex = |u: f32, v: f32| {
+            let t = std::f32::consts::TAU;
+            Vec3::splat(0.5 + 0.4 * (t * 4.0 * u).sin() * (t * 3.0 * v).cos())
+        };
+        let (coords, img) = frontal(120, 96, 40.0, tex);
+        let mask = vec![true; 120 * 96];
+        let conf = vec![1.0; 120 * 96];
+        let rmse = |r: &Reprojected| {
+            let mut e = 0.0f64;
+            for y in 0..24 {
+                for x in 0..24 {
+                    let t = tex((x as f32 + 0.5) / 24.0, (y as f32 + 0.5) / 24.0);
+                    e += f64::from((r.texture.rgb(y * 24 + x) - t).length_squared());
+                }
+            }
+            (e / (3.0 * 576.0)).sqrt()
+        };
+        let plain = reproject_rounds(&coords, &mask, &img, &conf, 24, 0);
+        let sharp = reproject(&coords, &mask, &img, &conf, 24);
+        let (a, b) = (rmse(&plain), rmse(&sharp));
+        assert!(a > 0.02, "the splat should blur this texture: {a}");
+        assert!(b < 0.6 * a, "back-projection {b} vs splat {a}");
+        // Same bits whatever the number of threads.
+        let one = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap();
+        let again = one.install(|| reproject(&coords, &mask, &img, &conf, 24));
+        let bits = |r: &Reprojected| {
+            r.texture
+                .data
+                .iter()
+                .map(|x| x.to_bits())
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(bits(&again), bits(&sharp));
+    }
+
+    #[test]
     fn scrambled_coordinates_are_inconsistent() {
         let tex = |u: f32, v: f32| Vec3::splat(((u * 8.0) as i32 + (v * 8.0) as i32) as f32 % 2.0);
         let (mut coords, img) = frontal(128, 128, 32.0, tex);
@@ -705,16 +884,21 @@ mod tests {
                     .collect();
                 for reference in [None, Some(mean.as_slice())] {
                     let members = band_members(&samples, size, wrap);
-                    let (a, aw) = splat(&samples, &members, size, wrap, reference, 0.2);
-                    let (b, bw) = splat_reference(&samples, size, wrap, reference, 0.2);
-                    let bits = |v: &[Vec3]| {
-                        v.iter()
-                            .flat_map(|c| c.to_array().map(f32::to_bits))
-                            .collect::<Vec<_>>()
-                    };
-                    assert_eq!(bits(&a), bits(&b), "size {size} wrap {wrap}");
-                    let wb = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
-                    assert_eq!(wb(&aw), wb(&bw));
+                    let values: Vec<Vec3> = (0..samples.len())
+                        .map(|_| Vec3::splat(rng.uniform(-1.0, 1.0)))
+                        .collect();
+                    for vals in [None, Some(values.as_slice())] {
+                        let (a, aw) = splat(&samples, &members, size, wrap, reference, 0.2, vals);
+                        let (b, bw) = splat_reference(&samples, size, wrap, reference, 0.2, vals);
+                        let bits = |v: &[Vec3]| {
+                            v.iter()
+                                .flat_map(|c| c.to_array().map(f32::to_bits))
+                                .collect::<Vec<_>>()
+                        };
+                        assert_eq!(bits(&a), bits(&b), "size {size} wrap {wrap}");
+                        let wb = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                        assert_eq!(wb(&aw), wb(&bw));
+                    }
                 }
             }
         }
