@@ -8,10 +8,11 @@
 //! texel colour is the weighted mean; one reweighting pass downweights samples
 //! far from their texel's mean (Cauchy weights), which rejects misplaced UVs
 //! and highlights that survived de-lighting; [`BACK_PROJECTIONS`] rounds of
-//! damped iterative back-projection then take back part of the splat's blur. Coverage is `W/(W + ½)` of the
-//! accumulated weight `W` (0 never observed, → 1 well observed); texels with
-//! `W ≥` [`KNOWN_WEIGHT`] count as known for the inpainter (or, when no texel
-//! reaches it, those with at least half the largest weight).
+//! damped iterative back-projection then take back part of the splat's blur.
+//! Coverage is `W/(W + ½)` of the accumulated weight `W` (0 never observed,
+//! → 1 well observed); texels with `W ≥` [`KNOWN_WEIGHT`] count as known for
+//! the inpainter (or, when no texel reaches it, those with at least half the
+//! largest weight).
 
 use glam::Vec3;
 use picker_render::io::Image;
@@ -425,6 +426,13 @@ fn splat(
 }
 
 /// Rounds of iterative back-projection after the splat (see [`back_project`]).
+///
+/// Measured with `picker eval` on ground-truth elements (two sets of 40
+/// synthetic scenes, seeds 4242 and 9191): rounds × step 2 × ½ raised the
+/// mean aligned texture PSNR by ~1.9 dB and cut the colour-statistics
+/// distance by ~18% on both; one full step, or more rounds, raised the mean
+/// too but sharpened more textures past their truth (more of them under
+/// 25 dB), as did a narrower, variance-matched prediction tent.
 pub const BACK_PROJECTIONS: usize = 2;
 
 /// The fraction of the back-projected residual each round adds.
@@ -540,6 +548,15 @@ fn reproject_rounds(
     let n = coords.width * coords.height;
     assert_eq!(mask.len(), n, "mask size");
     assert_eq!(colour.plane_len(), n, "colour size");
+    if size == 0 {
+        // No texel to splat into: an empty texture, nothing known.
+        return Reprojected {
+            texture: Image::zeros(3, 0, 0),
+            weight: Image::zeros(1, 0, 0),
+            coverage: Image::zeros(1, 0, 0),
+            known: Vec::new(),
+        };
+    }
     let samples = samples(coords, mask, colour, confidence, size);
     let members = band_members(&samples, size, coords.wrap);
     let (sum, wsum) = splat(&samples, &members, size, coords.wrap, None, 1.0, None);
@@ -784,6 +801,10 @@ mod tests {
         }
         // No usable pixel: nothing known.
         let r = reproject(&coords, &mask, &img, &vec![0.0; 64], 16);
+        assert_eq!(r.known_fraction(), 0.0);
+        // No texel at all: an empty texture.
+        let r = reproject(&coords, &mask, &img, &vec![1.0; 64], 0);
+        assert!(r.known.is_empty() && r.texture.width == 0);
         assert_eq!(r.known_fraction(), 0.0);
     }
 
