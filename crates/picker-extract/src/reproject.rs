@@ -527,6 +527,110 @@ fn back_project(
     }
 }
 
+/// The robust splat of one set of picked pixels, ready for back-projection.
+struct Fit {
+    samples: Vec<Sample>,
+    members: Vec<Vec<u32>>,
+    size: usize,
+    wrap: bool,
+    /// The first (plain) pass's texel means, which the robust weights compare with.
+    mean: Vec<Vec3>,
+    /// The robust weights' scale.
+    scale: f32,
+    /// Accumulated robust weight per texel.
+    wsum: Vec<f32>,
+    /// The texture (robust weighted means, then back-projected).
+    tex: Vec<Vec3>,
+}
+
+impl Fit {
+    /// Splats the pixels (`size > 0`), then reweights them robustly.
+    fn new(
+        coords: &Coords,
+        mask: &[bool],
+        colour: &Image,
+        confidence: &[f32],
+        size: usize,
+    ) -> Self {
+        let samples = samples(coords, mask, colour, confidence, size);
+        let members = band_members(&samples, size, coords.wrap);
+        let (sum, wsum) = splat(&samples, &members, size, coords.wrap, None, 1.0, None);
+        let mean: Vec<Vec3> = sum
+            .iter()
+            .zip(&wsum)
+            .map(|(s, &w)| if w > 0.0 { *s / w } else { Vec3::ZERO })
+            .collect();
+        // Robust pass: Cauchy weights on the distance to the first-pass texel mean,
+        // scale = 2 × the median deviation (at least 0.02).
+        // (The median found in parallel without collecting the deviations:
+        // `select::kth_smallest`.)
+        let n = size as i64;
+        let dev = |k: usize| {
+            let s = &samples[k];
+            let px = wrap_i64((s.u * size as f32) as i64, n) as usize;
+            let py = wrap_i64((s.v * size as f32) as i64, n) as usize;
+            Some((s.colour - mean[py * size + px]).length())
+        };
+        let scale = match crate::select::kth_smallest(samples.len(), dev, |len| Some(vec![len / 2]))
+        {
+            None => 1.0,
+            Some(m) => (2.0 * m[0]).max(0.02),
+        };
+        let (sum, wsum) = splat(
+            &samples,
+            &members,
+            size,
+            coords.wrap,
+            Some(&mean),
+            scale,
+            None,
+        );
+        let tex = sum
+            .iter()
+            .zip(&wsum)
+            .map(|(s, &w)| if w > 0.0 { *s / w } else { Vec3::ZERO })
+            .collect();
+        Fit {
+            samples,
+            members,
+            size,
+            wrap: coords.wrap,
+            mean,
+            scale,
+            wsum,
+            tex,
+        }
+    }
+
+    /// `rounds` more rounds of [`back_project`].
+    fn back_project(&mut self, rounds: usize) {
+        back_project(
+            &self.samples,
+            &self.members,
+            self.size,
+            self.wrap,
+            &self.mean,
+            self.scale,
+            &self.wsum,
+            &mut self.tex,
+            rounds,
+        );
+    }
+}
+
+/// Which of two halves pixel `i` of a `w`-wide image falls in (0 or 1): a
+/// hash of its 16×16-pixel block, so the split cannot alias with a texture
+/// period.
+fn block_half(w: usize, i: usize) -> usize {
+    let (bx, by) = ((i % w) / 16, (i / w) / 16);
+    let mut hsh = (bx as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+        ^ (by as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F);
+    hsh ^= hsh >> 29;
+    hsh = hsh.wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    hsh ^= hsh >> 32;
+    (hsh & 1) as usize
+}
+
 /// Splats the picked pixels (`mask`, colours `colour` (3 channels), per-pixel
 /// confidence `confidence`) through `coords` into a `size × size` texture.
 pub fn reproject(
@@ -560,54 +664,9 @@ fn reproject_rounds(
             known: Vec::new(),
         };
     }
-    let samples = samples(coords, mask, colour, confidence, size);
-    let members = band_members(&samples, size, coords.wrap);
-    let (sum, wsum) = splat(&samples, &members, size, coords.wrap, None, 1.0, None);
-    let mean: Vec<Vec3> = sum
-        .iter()
-        .zip(&wsum)
-        .map(|(s, &w)| if w > 0.0 { *s / w } else { Vec3::ZERO })
-        .collect();
-    // Robust pass: Cauchy weights on the distance to the first-pass texel mean,
-    // scale = 2 × the median deviation (at least 0.02).
-    // (The median found in parallel without collecting the deviations:
-    // `select::kth_smallest`.)
-    let n = size as i64;
-    let dev = |k: usize| {
-        let s = &samples[k];
-        let px = wrap_i64((s.u * size as f32) as i64, n) as usize;
-        let py = wrap_i64((s.v * size as f32) as i64, n) as usize;
-        Some((s.colour - mean[py * size + px]).length())
-    };
-    let scale = match crate::select::kth_smallest(samples.len(), dev, |len| Some(vec![len / 2])) {
-        None => 1.0,
-        Some(m) => (2.0 * m[0]).max(0.02),
-    };
-    let (sum, wsum) = splat(
-        &samples,
-        &members,
-        size,
-        coords.wrap,
-        Some(&mean),
-        scale,
-        None,
-    );
-    let mut tex: Vec<Vec3> = sum
-        .iter()
-        .zip(&wsum)
-        .map(|(s, &w)| if w > 0.0 { *s / w } else { Vec3::ZERO })
-        .collect();
-    back_project(
-        &samples,
-        &members,
-        size,
-        coords.wrap,
-        &mean,
-        scale,
-        &wsum,
-        &mut tex,
-        rounds,
-    );
+    let mut fit = Fit::new(coords, mask, colour, confidence, size);
+    fit.back_project(rounds);
+    let (tex, wsum) = (&fit.tex, &fit.wsum);
     let mut texture = Image::zeros(3, size, size);
     let mut weight = Image::zeros(1, size, size);
     let mut coverage = Image::zeros(1, size, size);
@@ -651,15 +710,7 @@ pub fn consistency(
     let half = |parity: usize| -> Vec<f32> {
         (0..mask.len())
             .into_par_iter()
-            .map(|i| {
-                let (bx, by) = ((i % w) / 16, (i / w) / 16);
-                let mut hsh = (bx as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
-                    ^ (by as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F);
-                hsh ^= hsh >> 29;
-                hsh = hsh.wrapping_mul(0xBF58_476D_1CE4_E5B9);
-                hsh ^= hsh >> 32;
-                ((hsh & 1) as usize == parity) as u8 as f32
-            })
+            .map(|i| (block_half(w, i) == parity) as u8 as f32)
             .collect()
     };
     let size = size.min(128);
