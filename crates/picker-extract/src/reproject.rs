@@ -502,12 +502,15 @@ fn back_project(
         .zip(wsum)
         .filter(|(_, &w)| w > 0.0)
         .fold(Vec3::ZERO, |m, (c, _)| m.max(*c));
+    // One residual buffer for all rounds (a fresh one per round costs its
+    // page faults again: 12 bytes per picked pixel).
+    let mut residual = vec![Vec3::ZERO; if rounds > 0 { samples.len() } else { 0 }];
     for _ in 0..rounds {
         let t: &[Vec3] = tex;
-        let residual: Vec<Vec3> = samples
-            .par_iter()
-            .map(|s| predict(s, t, size, wrap).map_or(Vec3::ZERO, |p| s.colour - p))
-            .collect();
+        residual
+            .par_iter_mut()
+            .zip(samples.par_iter())
+            .for_each(|(r, s)| *r = predict(s, t, size, wrap).map_or(Vec3::ZERO, |p| s.colour - p));
         let (rsum, _) = splat(
             samples,
             members,
