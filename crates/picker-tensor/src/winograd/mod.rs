@@ -837,6 +837,53 @@ impl Winograd {
         }
     }
 
+    /// One depth block `(k0, kc)` of the products `M[ξ] += U[ξ] · V[ξ]` for one
+    /// tile panel: row panels `mps` of the chunk's `U` (`u`) times the panel's
+    /// B sub-panel `b` (`kc` rows of `NR`, of which the first `cols` columns
+    /// hold tiles) into `c` (the chunk's rows of `M[ξ]` for this panel, `NR`
+    /// floats per row), accumulating onto `c` when `accumulate`. A partly
+    /// filled panel takes the narrow kernel when one exists.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn panel_products(
+        &self,
+        u: &UView<'_>,
+        xi: usize,
+        mps: std::ops::Range<usize>,
+        k0: usize,
+        kc: usize,
+        b: &[f32],
+        cols: usize,
+        c: &mut [f32],
+        accumulate: bool,
+    ) {
+        let (mr, nr) = (self.kernel.mr, self.kernel.nr);
+        assert!(b.len() >= kc * nr, "B sub-panel too short");
+        let mp0 = mps.start;
+        for mp in mps {
+            let ap = u.at(xi, mp, k0, kc, mr).as_ptr();
+            let c = &mut c[(mp - mp0) * mr * nr..][..mr * nr];
+            // SAFETY: the A panel holds kc·mr floats, the B panel kc·nr
+            // (checked above), and C mr rows of nr floats (ldc nr); a narrow
+            // kernel touches only its first columns.
+            unsafe {
+                match self.narrow {
+                    Some((lanes, narrow)) if cols + lanes <= nr => narrow(
+                        cols.div_ceil(lanes),
+                        kc,
+                        ap,
+                        b.as_ptr(),
+                        nr,
+                        c.as_mut_ptr(),
+                        nr,
+                        accumulate,
+                    ),
+                    _ => (self.run)(kc, ap, b.as_ptr(), c.as_mut_ptr(), nr, accumulate),
+                }
+            }
+        }
+    }
+
     /// The bf16 input transform of a block: in parallel over channel pairs,
     /// each pair is transformed in f32 into a task buffer, then rounded and
     /// interleaved into pair words at its rows of `v` (a missing odd channel
@@ -945,14 +992,14 @@ impl Winograd {
         let m_panels = self.m_panels;
         // Output-channel chunks: one per thread, within bounds (a larger
         // chunk reads each B panel for more rows; the products' buffer is
-        // `group · 36 · chunk · NR` floats and should stay in L2).
+        // `group · 36 · chunk · NR` floats and should stay in L2). At least
+        // one panel: `m_panels ≥ 1` (c_out > 0 is checked at build).
         let chunk_panels = m_panels
             .div_ceil(rayon::current_num_threads().max(1))
             .clamp(
                 WINO_CO_PER_TASK.div_ceil(mr),
                 WINO_CO_PER_TASK_MAX.div_ceil(mr),
-            )
-            .max(1);
+            );
         // AMX: whole tiles of 16 output channels per chunk.
         let chunk_panels = if self.amx {
             chunk_panels.next_multiple_of(amx::ROWS / mr)
@@ -1089,41 +1136,19 @@ impl Winograd {
                                     }
                                     for p in g0..g1 {
                                         let cols = nr.min(t1 - t0 - p * nr);
-                                        let bp = v_ref[block_rows[bi].at(xi, p)..].as_ptr();
-                                        for mp in mp0..mp1 {
-                                            let ap = u.at(xi, mp, k0, kc, mr).as_ptr();
-                                            let c = &mut mbuf[(p - g0) * m_len
-                                                + xi * stride
-                                                + (mp - mp0) * mr * nr..][..mr * nr];
-                                            // SAFETY: the A panel holds kc·mr floats, the B
-                                            // panel kc·nr, and C mr rows of nr floats (ldc nr);
-                                            // a narrow kernel touches only its first columns.
-                                            unsafe {
-                                                match self.narrow {
-                                                    Some((lanes, narrow)) if cols + lanes <= nr => {
-                                                        let nv = cols.div_ceil(lanes);
-                                                        narrow(
-                                                            nv,
-                                                            kc,
-                                                            ap,
-                                                            bp,
-                                                            nr,
-                                                            c.as_mut_ptr(),
-                                                            nr,
-                                                            bi > 0,
-                                                        )
-                                                    }
-                                                    _ => (self.run)(
-                                                        kc,
-                                                        ap,
-                                                        bp,
-                                                        c.as_mut_ptr(),
-                                                        nr,
-                                                        bi > 0,
-                                                    ),
-                                                }
-                                            };
-                                        }
+                                        let bp = &v_ref[block_rows[bi].at(xi, p)..];
+                                        let c = &mut mbuf[(p - g0) * m_len + xi * stride..];
+                                        self.panel_products(
+                                            &u,
+                                            xi,
+                                            mp0..mp1,
+                                            k0,
+                                            kc,
+                                            bp,
+                                            cols,
+                                            c,
+                                            bi > 0,
+                                        );
                                     }
                                 }
                             }
