@@ -472,62 +472,12 @@ fn predict(s: &Sample, tex: &[Vec3], size: usize, wrap: bool) -> Option<Vec3> {
     (wsum > 0.0).then(|| acc / wsum)
 }
 
-/// `rounds` of iterative back-projection (Irani & Peleg 1991) of the
-/// splatted texture `tex`: the splat is a blurred estimate (each sample is
-/// spread over its tent, and the tents of neighbouring samples overlap), so
-/// each round predicts every sample from `tex` ([`predict`]), splats the
-/// residuals with the same weights as the texture (`wsum` their sums) and
-/// adds [`BACK_PROJECTION_STEP`] times their mean to each texel. Without the
-/// robust weights this is a damped Landweber iteration on `A·tex = colours`
-/// with `A` the tents: it undoes part of the splat's own blur and amplifies
-/// no frequency more than `1 + rounds · step` times (2 with the defaults), so
-/// noise in the de-lit colours is not blown up. Texels stay within
-/// `[0, the splat's largest value]` per channel, so ringing at hard edges
-/// cannot overshoot into negative colours. Samples in parallel, each texel's
-/// sum in the splat's fixed order: deterministic.
-#[allow(clippy::too_many_arguments)]
-fn back_project(
-    samples: &[Sample],
-    members: &[Vec<u32>],
-    size: usize,
-    wrap: bool,
-    mean: &[Vec3],
-    scale: f32,
-    wsum: &[f32],
-    tex: &mut [Vec3],
-    rounds: usize,
-) {
-    let hi = tex
-        .iter()
+/// Weighted mean per texel (`sum / weight`; 0 where nothing was splatted).
+fn texel_means(sum: &[Vec3], wsum: &[f32]) -> Vec<Vec3> {
+    sum.iter()
         .zip(wsum)
-        .filter(|(_, &w)| w > 0.0)
-        .fold(Vec3::ZERO, |m, (c, _)| m.max(*c));
-    // One residual buffer for all rounds (a fresh one per round costs its
-    // page faults again: 12 bytes per picked pixel).
-    let mut residual = vec![Vec3::ZERO; if rounds > 0 { samples.len() } else { 0 }];
-    for _ in 0..rounds {
-        let t: &[Vec3] = tex;
-        residual
-            .par_iter_mut()
-            .zip(samples.par_iter())
-            .for_each(|(r, s)| *r = predict(s, t, size, wrap).map_or(Vec3::ZERO, |p| s.colour - p));
-        let (rsum, _) = splat(
-            samples,
-            members,
-            size,
-            wrap,
-            Some(mean),
-            scale,
-            Some(&residual),
-        );
-        tex.par_iter_mut()
-            .zip(rsum.par_iter().zip(wsum.par_iter()))
-            .for_each(|(c, (r, &w))| {
-                if w > 0.0 {
-                    *c = (*c + *r / w * BACK_PROJECTION_STEP).clamp(Vec3::ZERO, hi);
-                }
-            });
-    }
+        .map(|(s, &w)| if w > 0.0 { *s / w } else { Vec3::ZERO })
+        .collect()
 }
 
 /// The robust splat of one set of picked pixels, ready for back-projection.
@@ -558,11 +508,7 @@ impl Fit {
         let samples = samples(coords, mask, colour, confidence, size);
         let members = band_members(&samples, size, coords.wrap);
         let (sum, wsum) = splat(&samples, &members, size, coords.wrap, None, 1.0, None);
-        let mean: Vec<Vec3> = sum
-            .iter()
-            .zip(&wsum)
-            .map(|(s, &w)| if w > 0.0 { *s / w } else { Vec3::ZERO })
-            .collect();
+        let mean = texel_means(&sum, &wsum);
         // Robust pass: Cauchy weights on the distance to the first-pass texel mean,
         // scale = 2 × the median deviation (at least 0.02).
         // (The median found in parallel without collecting the deviations:
@@ -588,11 +534,7 @@ impl Fit {
             scale,
             None,
         );
-        let tex = sum
-            .iter()
-            .zip(&wsum)
-            .map(|(s, &w)| if w > 0.0 { *s / w } else { Vec3::ZERO })
-            .collect();
+        let tex = texel_means(&sum, &wsum);
         Fit {
             samples,
             members,
@@ -605,19 +547,56 @@ impl Fit {
         }
     }
 
-    /// `rounds` more rounds of [`back_project`].
+    /// `rounds` more rounds of iterative back-projection (Irani & Peleg 1991):
+    /// the splat is a blurred estimate (each sample is spread over its tent,
+    /// and the tents of neighbouring samples overlap), so each round predicts
+    /// every sample from the texture ([`predict`]), splats the residuals with
+    /// the texture's weights and adds [`BACK_PROJECTION_STEP`] times their
+    /// mean to each texel. Without the robust weights this is a damped
+    /// Landweber iteration on `A·tex = colours` with `A` the tents: it undoes
+    /// part of the splat's own blur and amplifies no frequency more than
+    /// `1 + rounds · step` times (2 with the defaults), so noise in the
+    /// de-lit colours is not blown up. Texels stay within `[0, the splat's
+    /// largest value]` per channel, so ringing at hard edges cannot overshoot
+    /// into negative colours. Samples in parallel, each texel's sum in the
+    /// splat's fixed order: deterministic.
     fn back_project(&mut self, rounds: usize) {
-        back_project(
-            &self.samples,
-            &self.members,
-            self.size,
-            self.wrap,
-            &self.mean,
-            self.scale,
-            &self.wsum,
-            &mut self.tex,
-            rounds,
-        );
+        let (samples, size, wrap) = (&self.samples, self.size, self.wrap);
+        let hi = self
+            .tex
+            .iter()
+            .zip(&self.wsum)
+            .filter(|(_, &w)| w > 0.0)
+            .fold(Vec3::ZERO, |m, (c, _)| m.max(*c));
+        // One residual buffer for all rounds (a fresh one per round costs its
+        // page faults again: 12 bytes per picked pixel).
+        let mut residual = vec![Vec3::ZERO; if rounds > 0 { samples.len() } else { 0 }];
+        for _ in 0..rounds {
+            let t: &[Vec3] = &self.tex;
+            residual
+                .par_iter_mut()
+                .zip(samples.par_iter())
+                .for_each(|(r, s)| {
+                    *r = predict(s, t, size, wrap).map_or(Vec3::ZERO, |p| s.colour - p)
+                });
+            let (rsum, _) = splat(
+                samples,
+                &self.members,
+                size,
+                wrap,
+                Some(&self.mean),
+                self.scale,
+                Some(&residual),
+            );
+            self.tex
+                .par_iter_mut()
+                .zip(rsum.par_iter().zip(self.wsum.par_iter()))
+                .for_each(|(c, (r, &w))| {
+                    if w > 0.0 {
+                        *c = (*c + *r / w * BACK_PROJECTION_STEP).clamp(Vec3::ZERO, hi);
+                    }
+                });
+        }
     }
 }
 
