@@ -55,3 +55,11 @@ pub const WINO_CO_PER_TASK_MAX: usize = 128;
 /// output transform, each `U` panel being read once for all of them (fewer
 /// where the L2 cannot hold their products).
 pub const WINO_PANELS_PER_GROUP: usize = 2;
+
+/// Winograd with lazy f32 weights: most tile panels (in all) for which each
+/// output-channel chunk makes its `U` one transform row (six `ξ`) and one
+/// depth block at a time, small enough to stay in L2, and runs the products
+/// of every panel with it at once, keeping all the panels' products. Above
+/// this, the chunk's whole `U` is made once per block of tiles and read from
+/// L3 for each group of panels.
+pub const WINO_ROW_BLOCK_PANELS: usize = 4;

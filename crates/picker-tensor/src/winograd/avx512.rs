@@ -376,3 +376,69 @@ pub(super) unsafe fn output(
         }
     }
 }
+
+/// `G x` for one column `(x0, x1, x2)` of taps, as [`super::g3`] (same
+/// operations in the same order, so the same bits).
+#[inline(always)]
+unsafe fn g3(x0: __m512, x1: __m512, x2: __m512) -> [__m512; 6] {
+    let k = |v: f32| _mm512_set1_ps(v);
+    let (a, b) = (_mm512_add_ps(x0, x2), x1);
+    let c = _mm512_add_ps(
+        _mm512_mul_ps(x0, k(1.0 / 24.0)),
+        _mm512_mul_ps(x2, k(1.0 / 6.0)),
+    );
+    // −(s)·(1/6) is s·(−1/6) bit for bit: rounding is symmetric in sign.
+    [
+        _mm512_mul_ps(x0, k(0.25)),
+        _mm512_mul_ps(_mm512_add_ps(a, b), k(-(1.0 / 6.0))),
+        _mm512_mul_ps(_mm512_sub_ps(a, b), k(-(1.0 / 6.0))),
+        _mm512_add_ps(c, _mm512_mul_ps(b, k(1.0 / 12.0))),
+        _mm512_sub_ps(c, _mm512_mul_ps(b, k(1.0 / 12.0))),
+        x2,
+    ]
+}
+
+/// Rows `R0..R1` of the weight transform `G g Gᵀ`, as
+/// [`super::transform_lanes`]: `g[k]` holds tap `k` of many kernels (all of
+/// one length), `u[((i − R0)·6 + j)·stride ..]` gets point `6i + j` of each,
+/// 16 lanes per register with a masked tail.
+///
+/// # Safety
+/// The CPU has AVX-512F; `u` holds `((R1 − R0)·6 − 1)·stride + len` floats.
+#[target_feature(enable = "avx512f,avx2,fma")]
+pub(super) unsafe fn weights<const R0: usize, const R1: usize>(
+    g: [&[f32]; 9],
+    u: &mut [f32],
+    stride: usize,
+) {
+    let len = g[0].len();
+    assert!(g.iter().all(|t| t.len() == len), "taps of unequal length");
+    assert!(
+        len == 0 || u.len() >= ((R1 - R0) * T - 1) * stride + len,
+        "weight transform output too short"
+    );
+    let up = u.as_mut_ptr();
+    let mut l0 = 0;
+    while l0 < len {
+        let n = (len - l0).min(16);
+        let mask: __mmask16 = if n == 16 { !0 } else { (1u16 << n) - 1 };
+        let x: [__m512; 9] =
+            std::array::from_fn(|k| _mm512_maskz_loadu_ps(mask, g[k].as_ptr().add(l0)));
+        // Columns: G along the kernel rows (taps c, c+3, c+6).
+        let cols = [
+            g3(x[0], x[3], x[6]),
+            g3(x[1], x[4], x[7]),
+            g3(x[2], x[5], x[8]),
+        ];
+        // `i` picks the same point of the three columns and places the row.
+        #[allow(clippy::needless_range_loop)]
+        for i in R0..R1 {
+            let r = g3(cols[0][i], cols[1][i], cols[2][i]);
+            for (j, rj) in r.iter().enumerate() {
+                // SAFETY: below `((R1 − R0)·6 − 1)·stride + len` (checked).
+                _mm512_mask_storeu_ps(up.add(((i - R0) * T + j) * stride + l0), mask, *rj);
+            }
+        }
+        l0 += n;
+    }
+}

@@ -19,7 +19,10 @@
 //!    most [`WINO_PANELS_PER_GROUP`]: each `U` panel is read once per group,
 //!    and each depth block's B panel stays in L1 for all the chunk's row
 //!    panels); the output transform then turns them into output pixels at
-//!    once, fused with bias, activation and residual add.
+//!    once, fused with bias, activation and residual add. With weights made
+//!    per pass (lazy `U`) over few panels, the chunk makes six `U[ξ]` of one
+//!    depth block at a time and runs them over every panel of the block
+//!    ([`WINO_ROW_BLOCK_PANELS`]).
 //!
 //! The tile transforms work on a panel of tiles at a time, with the tiles in
 //! the SIMD lanes; they are compiled once per ISA (`#[target_feature]`) and
@@ -39,7 +42,7 @@ use crate::microkernel::{KernelFn, MicroKernel, NarrowKernelFn};
 use crate::pad::{padded_source, Fill};
 use crate::params::{
     WINO_BF16_KC, WINO_CO_PER_TASK, WINO_CO_PER_TASK_MAX, WINO_KC, WINO_LAZY_V_BYTES,
-    WINO_PANELS_PER_BLOCK, WINO_PANELS_PER_GROUP,
+    WINO_PANELS_PER_BLOCK, WINO_PANELS_PER_GROUP, WINO_ROW_BLOCK_PANELS,
 };
 
 /// Points of the transformed tile along one axis.
@@ -497,11 +500,14 @@ fn g3(x0: f32, x1: f32, x2: f32) -> [f32; 6] {
     ]
 }
 
-/// `G g Gᵀ` lane-wise: `g[k]` holds tap `k` (row-major 3×3) of many kernels,
-/// `u[ξ·stride ..]` gets their 36 transformed points. Works on blocks of 16
-/// lanes held in fixed-size arrays, so the arithmetic is vectorised.
+/// Rows `R0..R1` of `G g Gᵀ` lane-wise: `g[k]` holds tap `k` (row-major 3×3)
+/// of many kernels, `u[((i − R0)·6 + j)·stride ..]` gets their transformed
+/// point `ξ = 6i + j`. All rows (`0..6`) give the 36 points in `ξ` order; one
+/// row gives six of them with the same operations (so the same bits). Works
+/// on blocks of 16 lanes held in fixed-size arrays, so the arithmetic is
+/// vectorised.
 #[inline(always)]
-fn transform_lanes(g: [&[f32]; 9], u: &mut [f32], stride: usize) {
+fn transform_lanes<const R0: usize, const R1: usize>(g: [&[f32]; 9], u: &mut [f32], stride: usize) {
     const L: usize = 16;
     let len = g[0].len();
     let mut l0 = 0;
@@ -519,14 +525,14 @@ fn transform_lanes(g: [&[f32]; 9], u: &mut [f32], stride: usize) {
             let mut o = [[0.0f32; L]; 6];
             for l in 0..L {
                 let r = g3(x[a][l], x[b][l], x[c][l]);
-                for i in 0..6 {
+                for i in R0..R1 {
                     o[i][l] = r[i];
                 }
             }
             o
         };
         let (c0, c1, c2) = (col(0, 3, 6), col(1, 4, 7), col(2, 5, 8));
-        for i in 0..T {
+        for i in R0..R1 {
             let mut r = [[0.0f32; L]; 6];
             for l in 0..L {
                 let v = g3(c0[i][l], c1[i][l], c2[i][l]);
@@ -535,7 +541,7 @@ fn transform_lanes(g: [&[f32]; 9], u: &mut [f32], stride: usize) {
                 }
             }
             for (j, rj) in r.iter().enumerate() {
-                let at = (i * T + j) * stride + l0;
+                let at = ((i - R0) * T + j) * stride + l0;
                 match <&mut [f32; L]>::try_from(&mut u[at..at + n]) {
                     Ok(full) => *full = *rj,
                     Err(_) => u[at..at + n].copy_from_slice(&rj[..n]),
@@ -548,14 +554,40 @@ fn transform_lanes(g: [&[f32]; 9], u: &mut [f32], stride: usize) {
 
 macro_rules! weight_transform_for {
     ($name:ident, $($feat:literal)?) => {
+        /// The weight transform of `g` into `u` (see [`transform_lanes`]): all
+        /// 36 points when `row` is `None`, else the six of row `row`.
         $(#[target_feature(enable = $feat)])?
-        unsafe fn $name(g: [&[f32]; 9], u: &mut [f32], stride: usize) {
-            transform_lanes(g, u, stride)
+        unsafe fn $name(g: [&[f32]; 9], u: &mut [f32], stride: usize, row: Option<usize>) {
+            match row {
+                None => transform_lanes::<0, 6>(g, u, stride),
+                Some(0) => transform_lanes::<0, 1>(g, u, stride),
+                Some(1) => transform_lanes::<1, 2>(g, u, stride),
+                Some(2) => transform_lanes::<2, 3>(g, u, stride),
+                Some(3) => transform_lanes::<3, 4>(g, u, stride),
+                Some(4) => transform_lanes::<4, 5>(g, u, stride),
+                Some(5) => transform_lanes::<5, 6>(g, u, stride),
+                Some(r) => panic!("transform row {r} of 6"),
+            }
         }
     };
 }
+/// The AVX-512 weight transform (see [`weight_transform_for`]'s functions).
+///
+/// # Safety
+/// The CPU has AVX-512F.
 #[cfg(target_arch = "x86_64")]
-weight_transform_for!(weights_avx512, "avx512f,avx2,fma");
+unsafe fn weights_avx512(g: [&[f32]; 9], u: &mut [f32], stride: usize, row: Option<usize>) {
+    match row {
+        None => avx512::weights::<0, 6>(g, u, stride),
+        Some(0) => avx512::weights::<0, 1>(g, u, stride),
+        Some(1) => avx512::weights::<1, 2>(g, u, stride),
+        Some(2) => avx512::weights::<2, 3>(g, u, stride),
+        Some(3) => avx512::weights::<3, 4>(g, u, stride),
+        Some(4) => avx512::weights::<4, 5>(g, u, stride),
+        Some(5) => avx512::weights::<5, 6>(g, u, stride),
+        Some(r) => panic!("transform row {r} of 6"),
+    }
+}
 #[cfg(target_arch = "x86_64")]
 weight_transform_for!(weights_avx2, "avx2,fma");
 weight_transform_for!(weights_portable,);
@@ -568,9 +600,13 @@ enum UStore {
     /// Only the 3×3 weights are kept (as `[m_panels][9][c_in][mr]`); each
     /// output-channel chunk makes its part of `U` in its own task, once per
     /// block of tiles (blocks of up to [`WINO_LAZY_V_BYTES`] of `V`), so a
-    /// network holds its weights once. The transform costs ~5% of a
-    /// 256-channel 60×80 layer on one thread (perf), against the packed
-    /// weights' 4× memory.
+    /// network holds its weights once. Over at most
+    /// [`WINO_ROW_BLOCK_PANELS`] tile panels (small images: the EnvMap's
+    /// 30×40 blocks) the chunk's `U` is made one transform row and depth
+    /// block at a time, into L2, and used at once by every panel: there the
+    /// whole chunk's `U` (4.7 MB at 128 × 256 channels) cost more to write to
+    /// L3 and read back than the products' own work (a 256-channel 30×40
+    /// layer, 2 threads, Zen 4: 4.4–4.6 ms, now 2.8–3.2 ms, as with packed U).
     Lazy(Vec<f32>),
 }
 
@@ -707,6 +743,47 @@ impl Winograd {
         }
     }
 
+    /// The weight transform for this layer's ISA (see [`transform_lanes`]).
+    fn transform(&self, g: [&[f32]; 9], u: &mut [f32], stride: usize, row: Option<usize>) {
+        // SAFETY: the CPU has the kernel family's ISA.
+        unsafe {
+            match self.kernel.isa {
+                #[cfg(target_arch = "x86_64")]
+                Isa::Avx512 => weights_avx512(g, u, stride, row),
+                #[cfg(target_arch = "x86_64")]
+                Isa::Avx2Fma => weights_avx2(g, u, stride, row),
+                _ => weights_portable(g, u, stride, row),
+            }
+        }
+    }
+
+    /// Row `row` of the transform (`U[ξ]` for `ξ = 6·row .. 6·row + 6`) of
+    /// depth block `(k0, kc)` of row panels `mp0..mp1` (f32 only), into `dst`
+    /// as six `U[ξ]` of `xi_stride` floats, each holding the panels' `kc·MR`
+    /// floats one after another (a [`UView`] with `k0 = 0`).
+    #[allow(clippy::too_many_arguments)]
+    fn pack_row_block(
+        &self,
+        taps: &[f32],
+        mps: std::ops::Range<usize>,
+        k0: usize,
+        kc: usize,
+        row: usize,
+        dst: &mut [f32],
+        xi_stride: usize,
+    ) {
+        debug_assert!(!self.bf16);
+        let (mr, c_in) = (self.kernel.mr, self.c_in);
+        let lanes = kc * mr;
+        for (i, mp) in mps.enumerate() {
+            let g: [&[f32]; 9] =
+                std::array::from_fn(|k| &taps[((mp * 9 + k) * c_in + k0) * mr..][..lanes]);
+            let base = i * lanes;
+            let len = (T - 1) * xi_stride + lanes;
+            self.transform(g, &mut dst[base..base + len], xi_stride, Some(row));
+        }
+    }
+
     /// Transforms the weights of row panel `mp` (`MR` output channels):
     /// depth block `(k0, kc)` of `U[ξ]` (`kc` groups of `MR` floats, or of
     /// pair words in bf16) goes to `dst[ξ · xi_stride + at(k0, kc)..]`.
@@ -719,19 +796,8 @@ impl Winograd {
         xi_stride: usize,
         at: impl Fn(usize, usize) -> usize,
     ) {
-        let (mr, c_in, isa) = (self.kernel.mr, self.c_in, self.kernel.isa);
-        let transform = |g: [&[f32]; 9], u: &mut [f32], stride: usize| {
-            // SAFETY: the CPU has the kernel family's ISA.
-            unsafe {
-                match isa {
-                    #[cfg(target_arch = "x86_64")]
-                    Isa::Avx512 => weights_avx512(g, u, stride),
-                    #[cfg(target_arch = "x86_64")]
-                    Isa::Avx2Fma => weights_avx2(g, u, stride),
-                    _ => weights_portable(g, u, stride),
-                }
-            }
-        };
+        let (mr, c_in) = (self.kernel.mr, self.c_in);
+        let transform = |g, u: &mut [f32], stride| self.transform(g, u, stride, None);
         for &(k0, kc, _) in &self.kblocks {
             // Input channels of the block: kc, or up to 2·kc in bf16.
             let (c0, c1) = if self.bf16 {
@@ -1017,7 +1083,25 @@ impl Winograd {
         let group = (crate::isa::l2_cache_bytes() / m_panel_bytes)
             .clamp(1, WINO_PANELS_PER_GROUP)
             .min(panels_per_block);
-        let u_chunk_len = P * chunk_per_xi(chunk_rows * self.depth);
+        // Lazy f32 U over few tile panels: the products are run one U row
+        // block at a time (see below), for all of a block's panels, whose
+        // products are kept together.
+        let row_blocks = lazy
+            && !self.bf16
+            && !self.amx
+            && tiles.div_ceil(nr) <= WINO_ROW_BLOCK_PANELS
+            && tiles.div_ceil(nr) <= panels_per_block;
+        let group = if row_blocks {
+            tiles.div_ceil(nr)
+        } else {
+            group
+        };
+        let u_chunk_len = if row_blocks {
+            let kc_max = self.kblocks.iter().map(|b| b.1).max().unwrap_or(0);
+            T * chunk_per_xi(chunk_rows * kc_max)
+        } else {
+            P * chunk_per_xi(chunk_rows * self.depth)
+        };
         // AMX: the chunk's U as A tiles, [ξ][16-row block][16-pair block].
         let amx_len = if self.amx {
             P * chunk_rows * self.depth
@@ -1062,6 +1146,79 @@ impl Winograd {
                         let (mbuf, rest) = buf.as_mut_slice().split_at_mut(group * m_len);
                         let (scratch, rest) = rest.split_at_mut((T * M + M * M) * nr);
                         let (u_chunk, a_tiles) = rest.split_at_mut(lazy_len);
+                        let mut segs = Vec::with_capacity(4);
+                        // The output transform of tile panel `p` from its
+                        // products `m` (the chunk's rows of every M[ξ]).
+                        let mut output_panel = |m: &[f32], p: usize, scratch: &mut [f32]| {
+                            let pt0 = t0 + p * nr;
+                            segments(pt0, (pt0 + nr).min(t1), g_ref.tw, &mut segs);
+                            for r in 0..rows {
+                                let co = co0 + r;
+                                let plane = &mut dst[r * plane_len..(r + 1) * plane_len];
+                                let o = OutPlane {
+                                    segs: &segs,
+                                    oh,
+                                    ow,
+                                    bias: bias.map_or(0.0, |b| b[co]),
+                                    act,
+                                    residual: residual.map(|rs| &rs[co * plane_len..][..plane_len]),
+                                };
+                                self.output(&m[r * nr..], stride, &o, plane, scratch);
+                            }
+                        };
+                        if row_blocks {
+                            // U one transform row (six ξ) and one depth
+                            // block at a time, into L2, each used at once by
+                            // every panel of the block; the products of all
+                            // the block's panels are kept.
+                            let UStore::Lazy(taps) = &self.u else {
+                                unreachable!("row blocks need lazy U")
+                            };
+                            let n = mp1 - mp0;
+                            for (bi, &(k0, kc, _)) in self.kblocks.iter().enumerate() {
+                                let per_xi = chunk_per_xi(n * mr * kc);
+                                for row in 0..T {
+                                    self.pack_row_block(
+                                        taps,
+                                        mp0..mp1,
+                                        k0,
+                                        kc,
+                                        row,
+                                        u_chunk,
+                                        per_xi,
+                                    );
+                                    let u = UView {
+                                        u: u_chunk,
+                                        per_xi,
+                                        panels: n,
+                                        mp_base: mp0,
+                                    };
+                                    for j in 0..T {
+                                        let xi = row * T + j;
+                                        for p in 0..panels {
+                                            let cols = nr.min(t1 - t0 - p * nr);
+                                            let bp = &v_ref[block_rows[bi].at(xi, p)..];
+                                            let c = &mut mbuf[p * m_len + xi * stride..];
+                                            self.panel_products(
+                                                &u,
+                                                j,
+                                                mp0..mp1,
+                                                0,
+                                                kc,
+                                                bp,
+                                                cols,
+                                                c,
+                                                bi > 0,
+                                            );
+                                        }
+                                    }
+                                }
+                            }
+                            for p in 0..panels {
+                                output_panel(&mbuf[p * m_len..], p, scratch);
+                            }
+                            return;
+                        }
                         let u = match &self.u {
                             UStore::Packed(all) => UView {
                                 u: all.as_slice(),
@@ -1096,7 +1253,6 @@ impl Winograd {
                         } else {
                             None
                         };
-                        let mut segs = Vec::with_capacity(4);
                         // Groups of `group` panels: each U panel is read
                         // once per group, from L2, and each B sub-panel of
                         // the depth block stays in L1 for the chunk's row
@@ -1153,23 +1309,7 @@ impl Winograd {
                                 }
                             }
                             for p in g0..g1 {
-                                let pt0 = t0 + p * nr;
-                                segments(pt0, (pt0 + nr).min(t1), g_ref.tw, &mut segs);
-                                for r in 0..rows {
-                                    let co = co0 + r;
-                                    let m = &mbuf[(p - g0) * m_len + r * nr..];
-                                    let plane = &mut dst[r * plane_len..(r + 1) * plane_len];
-                                    let o = OutPlane {
-                                        segs: &segs,
-                                        oh,
-                                        ow,
-                                        bias: bias.map_or(0.0, |b| b[co]),
-                                        act,
-                                        residual: residual
-                                            .map(|rs| &rs[co * plane_len..][..plane_len]),
-                                    };
-                                    self.output(m, stride, &o, plane, scratch);
-                                }
+                                output_panel(&mbuf[(p - g0) * m_len..], p, scratch);
                             }
                         }
                     });
@@ -1197,5 +1337,47 @@ fn bf16_products(c_in: usize) -> (usize, usize, KernelFn, Option<(usize, NarrowK
     {
         let _ = c_in;
         unreachable!("bf16 products exist only on x86-64 (checked by the caller)")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The AVX-512 weight transform gives the generic one's bits, for all
+    /// rows and each single row, with full and partial lane blocks.
+    #[test]
+    #[cfg(target_arch = "x86_64")]
+    fn avx512_weight_transform_matches_generic_bits() {
+        if !Isa::Avx512.is_available() {
+            eprintln!("SKIPPED: AVX-512 weight transform (the CPU lacks AVX-512)");
+            return;
+        }
+        let mut rng = crate::Rng::new(77);
+        for len in [1, 15, 16, 17, 40, 64] {
+            let taps: Vec<Vec<f32>> = (0..9).map(|_| rng.normal_vec(len, 1.0)).collect();
+            let g: [&[f32]; 9] = std::array::from_fn(|k| taps[k].as_slice());
+            let stride = len + 3;
+            let mut generic = vec![0.0f32; P * stride];
+            transform_lanes::<0, 6>(g, &mut generic, stride);
+            for row in [None, Some(0), Some(1), Some(2), Some(3), Some(4), Some(5)] {
+                let rows = if row.is_some() { 1 } else { T };
+                let mut fast = vec![f32::NAN; rows * T * stride];
+                // SAFETY: the CPU has AVX-512F (checked above).
+                unsafe { weights_avx512(g, &mut fast, stride, row) };
+                let first = row.unwrap_or(0) * T;
+                for k in 0..rows * T {
+                    let (a, b) = (
+                        &fast[k * stride..][..len],
+                        &generic[(first + k) * stride..][..len],
+                    );
+                    assert!(
+                        a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits()),
+                        "len {len}, row {row:?}, point {}",
+                        first + k
+                    );
+                }
+            }
+        }
     }
 }
