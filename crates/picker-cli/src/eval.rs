@@ -254,6 +254,7 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
         max_size: pipeline::DEFAULT_MAX_SIZE,
         fov_deg: None,
         tileable: true,
+        seamless: false,
         seed: 0,
         inpainter: &inpainter,
     };

@@ -74,6 +74,13 @@ pub struct Flags {
     /// Do not make the texture tileable (no toroidal inpainting).
     #[arg(long)]
     pub no_tile: bool,
+    /// Where the texture's wrap seams show (seam ratio above 1.25), replace it
+    /// by its periodic component (Moisan 2011): removes colour jumps across
+    /// the edges left by uneven lighting, at the cost of a smooth change of
+    /// colour near them; patterns cut at an edge stay cut. Off by default: on
+    /// synthetic scenes it cost 0.7-0.9 dB of texture PSNR.
+    #[arg(long, conflicts_with = "no_tile")]
+    pub seamless: bool,
     /// Inpainter: `patchmatch` (default), `diffusion`, or a learned inpainter's weights file.
     #[arg(long, default_value = "patchmatch", value_name = "NAME_OR_FILE")]
     pub inpainter: String,
@@ -124,6 +131,7 @@ impl Flags {
             max_size: self.max_size as usize,
             fov_deg: self.fov,
             tileable: !self.no_tile,
+            seamless: self.seamless,
             seed: self.seed,
             inpainter,
         }
@@ -161,6 +169,7 @@ impl Flags {
             "size": self.size,
             "max_size": self.max_size,
             "tileable": !self.no_tile,
+            "seamless": self.seamless,
             "inpainter": self.inpainter,
             "sixteen_bit": self.sixteen_bit,
             "seed": self.seed,

@@ -619,3 +619,46 @@ fn embedded_weights_find_the_wall_of_the_readme_example() {
         m["texture"]
     );
 }
+
+/// `--seamless` on the README example (whose inpainted texture shows its
+/// wrap seams, ratio ≈ 2): the texture is corrected and its seams fade;
+/// without the flag nothing is corrected.
+#[test]
+fn seamless_removes_the_visible_wrap_seams_of_the_readme_example() {
+    let photo = repo().join("fixtures/examples/room.png");
+    let tmp = tempfile::tempdir().unwrap();
+    let seam = |extra: &[&str]| {
+        let out = tmp.path().join(format!("out{}", extra.len()));
+        let mut args = vec![
+            "extract",
+            photo.to_str().unwrap(),
+            "--pick",
+            "200,150",
+            "--out",
+            out.to_str().unwrap(),
+            "--threads",
+            "2",
+        ];
+        args.extend_from_slice(extra);
+        ok(&args);
+        json_file(&out.join("material.json"))["texture"]["seam"].clone()
+    };
+    let plain = seam(&[]);
+    let fixed = seam(&["--seamless"]);
+    assert_eq!(plain["corrected"], false);
+    assert!(plain["ratio"].as_f64().unwrap() > 1.25, "{plain}");
+    assert_eq!(fixed["corrected"], true, "{fixed}");
+    assert!(fixed["ratio"].as_f64().unwrap() < 1.0, "{fixed}");
+    let bad = run(&[
+        "extract",
+        photo.to_str().unwrap(),
+        "--pick",
+        "200,150",
+        "--seamless",
+        "--no-tile",
+    ]);
+    assert!(
+        !bad.status.success(),
+        "--seamless with --no-tile must be refused"
+    );
+}

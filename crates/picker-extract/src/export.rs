@@ -281,6 +281,7 @@ pub fn material_json(m: &Material, extra: &Value, opts: &ExportOptions) -> Resul
                 "wrap": t.seam.wrap,
                 "interior": t.seam.interior,
                 "ratio": t.seam.ratio,
+                "corrected": t.seam_corrected,
             },
             "uv_mode": t.uv_mode,
             "inpainter": t.inpainter,
@@ -395,7 +396,7 @@ fn conventions() -> Value {
     );
     put(
         "texture.seam",
-        "wrap = mean |difference| across the wrap edges, interior = mean |difference| of neighbouring texels, ratio = wrap/interior (<= ~1: invisible seam)",
+        "wrap = mean |difference| across the wrap edges, interior = mean |difference| of neighbouring texels, ratio = wrap/interior (<= ~1: invisible seam), of the final texture; corrected = --seamless was given, the inpainted texture's ratio was above 1.25, and it was replaced by its periodic component (Moisan 2011: colour jumps across the wrap edges removed by a smooth correction)",
     );
     put(
         "texture.uv_mode",

@@ -54,6 +54,10 @@ pub struct TextureResult {
     pub uv_mode: UvMode,
     /// Seam score of the final texture (wrap-edge difference vs interior).
     pub seam: picker_inpaint::SeamScore,
+    /// Whether `seamless` was asked for, the inpainted texture's seams showed (seam ratio above
+    /// [`picker_inpaint::SEAMLESS_MIN_RATIO`]) and it was replaced by its
+    /// periodic component ([`picker_inpaint::make_seamless`]).
+    pub seam_corrected: bool,
     /// Name of the inpainter used.
     pub inpainter: String,
 }

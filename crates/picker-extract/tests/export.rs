@@ -52,6 +52,7 @@ fn textured() -> Material {
                 interior: 0.2,
                 ratio: 0.5,
             },
+            seam_corrected: false,
             inpainter: "patchmatch".into(),
         }),
         mask: mask(),

@@ -51,7 +51,7 @@ pub use learned::LearnedInpainter;
 pub use metrics::{colour_stats_distance, psnr};
 pub use patchmatch::PatchMatchInpainter;
 pub use picker_render::io::Image;
-pub use seam::{seam_score, SeamScore};
+pub use seam::{make_seamless, periodic_component, seam_score, SeamScore, SEAMLESS_MIN_RATIO};
 
 /// Options common to every [`Inpainter`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
