@@ -10,15 +10,18 @@
 //! and highlights that survived de-lighting; [`BACK_PROJECTIONS`] rounds of
 //! damped iterative back-projection then take back part of the splat's blur.
 //! Coverage is `W/(W + ½)` of the accumulated weight `W` (0 never observed,
-//! → 1 well observed); texels with `W ≥` [`KNOWN_WEIGHT`] count as known for
-//! the inpainter (or, when no texel reaches it, those with at least half the
-//! largest weight).
+//! → 1 well observed). A texel counts as known for the inpainter when its
+//! observation weight (the same tent weights without the pixels' confidence)
+//! reaches [`KNOWN_WEIGHT`] (or, when no texel reaches it, half the largest):
+//! low-confidence pixels still observe a texel, they only count less in its
+//! colour.
 
 use glam::Vec3;
 use picker_render::io::Image;
 use rayon::prelude::*;
 
-/// Accumulated weight from which a texel counts as observed.
+/// Observation weight (tent weights per unit of footprint, whatever the
+/// pixels' confidence) from which a texel counts as known.
 pub const KNOWN_WEIGHT: f32 = 0.05;
 /// Largest splat radius in texels (very distant pixels are blurred, not spread further).
 pub const MAX_SPLAT_RADIUS: f32 = 4.0;
@@ -138,7 +141,9 @@ pub struct Reprojected {
     pub weight: Image,
     /// Coverage `W/(W+½)` per texel (1 channel, [0,1)).
     pub coverage: Image,
-    /// Texels with `W ≥ KNOWN_WEIGHT` (or ≥ half the largest `W` when none reaches it).
+    /// Texels whose observation weight (tent weights per unit of footprint,
+    /// without the pixels' confidence) is `≥ KNOWN_WEIGHT` (or ≥ half the
+    /// largest when none reaches it).
     pub known: Vec<bool>,
 }
 
@@ -351,7 +356,10 @@ fn band_members(samples: &[Sample], size: usize, wrap: bool) -> Vec<Vec<u32>> {
 /// against `reference` with `scale`) into per-texel sums and weights;
 /// `members` are the samples of every band ([`band_members`]). With
 /// `values`, sample `k` adds `values[k]` instead of its colour (same weights:
-/// the back-projection of residuals).
+/// the back-projection of residuals). Also returns each texel's observation
+/// weight: the same tent weights per unit of footprint without the samples'
+/// confidence or robust weights (how well the texel was seen, whatever the
+/// quality of the pixels that saw it).
 ///
 /// Parallel over bands of texture rows: each band adds the samples that
 /// touch it in sample order, so every texel receives its contributions in
@@ -365,19 +373,21 @@ fn splat(
     reference: Option<&[Vec3]>,
     scale: f32,
     values: Option<&[Vec3]>,
-) -> (Vec<Vec3>, Vec<f32>) {
+) -> (Vec<Vec3>, Vec<f32>, Vec<f32>) {
     let mut sum = vec![Vec3::ZERO; size * size];
     let mut wsum = vec![0.0f32; size * size];
+    let mut seen = vec![0.0f32; size * size];
     if size == 0 {
-        return (sum, wsum);
+        return (sum, wsum, seen);
     }
     let n = size as i64;
     let band_len = SPLAT_BAND_ROWS * size;
     sum.par_chunks_mut(band_len)
         .zip(wsum.par_chunks_mut(band_len))
+        .zip(seen.par_chunks_mut(band_len))
         .zip(members.par_iter())
         .enumerate()
-        .for_each(|(b, ((bsum, bw), idx))| {
+        .for_each(|(b, (((bsum, bw), bseen), idx))| {
             let (lo, hi) = (
                 (b * SPLAT_BAND_ROWS) as i64,
                 ((b + 1) * SPLAT_BAND_ROWS).min(size) as i64,
@@ -388,6 +398,7 @@ fn splat(
                 let px = s.u * size as f32 - 0.5;
                 let py = s.v * size as f32 - 0.5;
                 let r = s.radius;
+                let per_area = 1.0 / (r * r);
                 let (x0, x1) = (ceil_i64(px - r), floor_i64(px + r));
                 let (y0, y1) = (ceil_i64(py - r), floor_i64(py + r));
                 for ty in y0..=y1 {
@@ -418,11 +429,12 @@ fn splat(
                         }
                         bsum[lt] += value * w;
                         bw[lt] += w;
+                        bseen[lt] += per_area * wx * wy;
                     }
                 }
             }
         });
-    (sum, wsum)
+    (sum, wsum, seen)
 }
 
 /// Rounds of damped iterative back-projection (Irani & Peleg 1991) after the
@@ -492,6 +504,9 @@ struct Fit {
     scale: f32,
     /// Accumulated robust weight per texel.
     wsum: Vec<f32>,
+    /// Observation weight per texel (tent weights per unit of footprint,
+    /// whatever the samples' confidence): whether the texel was seen.
+    seen: Vec<f32>,
     /// The texture (robust weighted means, then back-projected).
     tex: Vec<Vec3>,
 }
@@ -507,7 +522,7 @@ impl Fit {
     ) -> Self {
         let samples = samples(coords, mask, colour, confidence, size);
         let members = band_members(&samples, size, coords.wrap);
-        let (sum, wsum) = splat(&samples, &members, size, coords.wrap, None, 1.0, None);
+        let (sum, wsum, seen) = splat(&samples, &members, size, coords.wrap, None, 1.0, None);
         let mean = texel_means(&sum, &wsum);
         // Robust pass: Cauchy weights on the distance to the first-pass texel mean,
         // scale = 2 × the median deviation (at least 0.02).
@@ -525,7 +540,7 @@ impl Fit {
             None => 1.0,
             Some(m) => (2.0 * m[0]).max(0.02),
         };
-        let (sum, wsum) = splat(
+        let (sum, wsum, _) = splat(
             &samples,
             &members,
             size,
@@ -543,6 +558,7 @@ impl Fit {
             mean,
             scale,
             wsum,
+            seen,
             tex,
         }
     }
@@ -579,7 +595,7 @@ impl Fit {
                 .for_each(|(r, s)| {
                     *r = predict(s, t, size, wrap).map_or(Vec3::ZERO, |p| s.colour - p)
                 });
-            let (rsum, _) = splat(
+            let (rsum, _, _) = splat(
                 samples,
                 &self.members,
                 size,
@@ -648,21 +664,25 @@ fn reproject_rounds(
     }
     let mut fit = Fit::new(coords, mask, colour, confidence, size);
     fit.back_project(rounds);
-    let (tex, wsum) = (&fit.tex, &fit.wsum);
+    let (tex, wsum, seen) = (&fit.tex, &fit.wsum, &fit.seen);
     let mut texture = Image::zeros(3, size, size);
     let mut weight = Image::zeros(1, size, size);
     let mut coverage = Image::zeros(1, size, size);
     let mut known = vec![false; size * size];
-    // A material seen only through low-confidence pixels (clipped highlights,
-    // mask edges) still gets its best-observed texels: the threshold drops to
-    // half the largest accumulated weight.
-    let max_w = wsum.iter().copied().fold(0.0f32, f32::max);
-    let threshold = KNOWN_WEIGHT.min(0.5 * max_w);
+    // Whether a texel is known goes by how well it was seen, not by the
+    // confidence of the pixels that saw it: a texel seen only through
+    // low-confidence pixels (a white grout line clipped in the photo, a mask
+    // edge) keeps their colour rather than being inpainted from other
+    // texels; where better pixels saw it too, they dominate its mean. When
+    // no texel reaches the threshold (a material seen from very far), it
+    // drops to half the largest observation weight.
+    let max_seen = seen.iter().copied().fold(0.0f32, f32::max);
+    let threshold = KNOWN_WEIGHT.min(0.5 * max_seen);
     for t in 0..size * size {
         let w = wsum[t];
         weight.data[t] = w;
         coverage.data[t] = w / (w + 0.5);
-        if w > 0.0 && w >= threshold {
+        if w > 0.0 && seen[t] >= threshold {
             known[t] = true;
             texture.set_rgb(t, tex[t]);
         }
@@ -747,9 +767,10 @@ fn splat_reference(
     reference: Option<&[Vec3]>,
     scale: f32,
     values: Option<&[Vec3]>,
-) -> (Vec<Vec3>, Vec<f32>) {
+) -> (Vec<Vec3>, Vec<f32>, Vec<f32>) {
     let mut sum = vec![Vec3::ZERO; size * size];
     let mut wsum = vec![0.0f32; size * size];
+    let mut seen = vec![0.0f32; size * size];
     let n = size as i64;
     for (k, s) in samples.iter().enumerate() {
         let value = values.map_or(s.colour, |v| v[k]);
@@ -784,10 +805,11 @@ fn splat_reference(
                 }
                 sum[t] += value * w;
                 wsum[t] += w;
+                seen[t] += 1.0 / (r * r) * wx * wy;
             }
         }
     }
-    (sum, wsum)
+    (sum, wsum, seen)
 }
 
 #[cfg(test)]
@@ -842,6 +864,39 @@ mod tests {
         let r = reproject(&coords, &mask, &img, &vec![1.0; 64], 0);
         assert!(r.known.is_empty() && r.texture.width == 0);
         assert_eq!(r.known_fraction(), 0.0);
+    }
+
+    /// A bright line seen only through clipped pixels on the mask's edge
+    /// (confidence 0.25 · 0.05, as the pipeline gives them) is known and
+    /// keeps its colour: it is not left to the inpainter to fill from the
+    /// dark texels around it.
+    #[test]
+    fn texels_seen_only_by_low_confidence_pixels_are_known() {
+        // 32×32 pixels, one period: one pixel per texel of a 32-texel
+        // texture; rows 8..10 are a white line.
+        let line = |v: f32| (8.0 / 32.0..10.0 / 32.0).contains(&v);
+        let tex = |_u: f32, v: f32| {
+            if line(v) {
+                Vec3::splat(0.9)
+            } else {
+                Vec3::splat(0.1)
+            }
+        };
+        let (coords, img) = frontal(32, 32, 32.0, tex);
+        let mask = vec![true; 32 * 32];
+        let confidence: Vec<f32> = (0..32 * 32)
+            .map(|i| if line(coords.v[i]) { 0.0125 } else { 1.0 })
+            .collect();
+        let r = reproject(&coords, &mask, &img, &confidence, 32);
+        for ty in 8..10 {
+            for tx in 0..32 {
+                let t = ty * 32 + tx;
+                assert!(r.known[t], "line texel ({tx}, {ty}) not known");
+                let c = r.texture.rgb(t);
+                assert!(c.x > 0.5, "line texel ({tx}, {ty}) = {c}");
+            }
+        }
+        assert_eq!(r.known_fraction(), 1.0);
     }
 
     #[test]
@@ -946,8 +1001,10 @@ mod tests {
                         .map(|_| Vec3::splat(rng.uniform(-1.0, 1.0)))
                         .collect();
                     for vals in [None, Some(values.as_slice())] {
-                        let (a, aw) = splat(&samples, &members, size, wrap, reference, 0.2, vals);
-                        let (b, bw) = splat_reference(&samples, size, wrap, reference, 0.2, vals);
+                        let (a, aw, aseen) =
+                            splat(&samples, &members, size, wrap, reference, 0.2, vals);
+                        let (b, bw, bseen) =
+                            splat_reference(&samples, size, wrap, reference, 0.2, vals);
                         let bits = |v: &[Vec3]| {
                             v.iter()
                                 .flat_map(|c| c.to_array().map(f32::to_bits))
@@ -956,6 +1013,7 @@ mod tests {
                         assert_eq!(bits(&a), bits(&b), "size {size} wrap {wrap}");
                         let wb = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
                         assert_eq!(wb(&aw), wb(&bw));
+                        assert_eq!(wb(&aseen), wb(&bseen));
                     }
                 }
             }
