@@ -11,6 +11,7 @@ use rayon::prelude::*;
 use crate::microkernel::MicroKernel;
 use crate::pad::{reflect_pad, Fill};
 use crate::params::{MAX_NR, SHIFTED_KC};
+use crate::pixtile::{self, PixelTiles};
 use crate::shifted::{
     padded_copy, phase_copy, shifted_gemm, shifted_gemm_interleaved, OutMap, PhasePart,
     RowPhaseMap, ShiftedB,
@@ -221,8 +222,10 @@ pub enum ConvAlgorithm {
     /// ≥ 16 input and output channels (`PICKER_WINOGRAD_WEIGHTS=lazy` or
     /// [`crate::low_memory`] picks
     /// [`ConvAlgorithm::WinogradLowMemory`]; [`crate::precision`] bf16 the
-    /// bf16 variants); the shifted GEMM for other
-    /// kernels larger than 1×1 or with padding; else (1×1) the packed GEMM.
+    /// bf16 variants); on the AVX-512 family, the pixel tiles
+    /// ([`ConvAlgorithm::PixelTiles`]) for strided layers with ≥ 32 outputs;
+    /// the shifted GEMM for other kernels larger than 1×1 or with padding;
+    /// else (1×1) the packed GEMM.
     /// With the environment variable `PICKER_CONV=gemm` set when a layer is
     /// built, every layer takes the packed GEMM (for comparisons).
     Auto,
@@ -259,11 +262,18 @@ pub enum ConvAlgorithm {
     /// the input (any kernel; stride `s > 1` through the `s × s` phase planes
     /// of the input): no im2col packing.
     Shifted,
+    /// Output channels in the SIMD lanes: tiles of 6 output pixels × 64
+    /// output channels, the input values broadcast where they lie (any
+    /// kernel, stride 1–4; no phase planes, no padded copy but for the
+    /// tiles on the border). Needs the AVX-512 family
+    /// ([`ConvAlgorithm::runs_on`]). [`ConvAlgorithm::Auto`] takes it for
+    /// strided layers with at least 32 outputs on AVX-512.
+    PixelTiles,
 }
 
 impl ConvAlgorithm {
     /// Every algorithm that can be asked for explicitly.
-    pub const EXPLICIT: [ConvAlgorithm; 7] = [
+    pub const EXPLICIT: [ConvAlgorithm; 8] = [
         ConvAlgorithm::Gemm,
         ConvAlgorithm::Direct,
         ConvAlgorithm::Winograd,
@@ -271,6 +281,7 @@ impl ConvAlgorithm {
         ConvAlgorithm::WinogradBf16,
         ConvAlgorithm::WinogradBf16LowMemory,
         ConvAlgorithm::Shifted,
+        ConvAlgorithm::PixelTiles,
     ];
 
     /// True when the algorithm computes in bf16.
@@ -285,7 +296,9 @@ impl ConvAlgorithm {
     /// bf16 variants need [`Isa::Avx512`] and AVX512_BF16, the others any
     /// family the CPU has.
     pub fn runs_on(self, isa: Isa) -> bool {
-        isa.is_available() && (!self.is_bf16() || (isa == Isa::Avx512 && crate::bf16::available()))
+        isa.is_available()
+            && (!self.is_bf16() || (isa == Isa::Avx512 && crate::bf16::available()))
+            && (self != ConvAlgorithm::PixelTiles || isa == Isa::Avx512)
     }
 
     /// True when the algorithm can run a layer of this shape.
@@ -298,10 +311,11 @@ impl ConvAlgorithm {
             | ConvAlgorithm::WinogradBf16
             | ConvAlgorithm::WinogradBf16LowMemory => s.kh == 3 && s.kw == 3 && s.stride == 1,
             ConvAlgorithm::Shifted => true,
+            ConvAlgorithm::PixelTiles => s.stride <= pixtile::MAX_STRIDE,
         }
     }
 
-    fn resolve(self, s: &ConvSpec) -> ConvAlgorithm {
+    fn resolve(self, s: &ConvSpec, isa: Isa) -> ConvAlgorithm {
         let force_gemm = std::env::var("PICKER_CONV").as_deref() == Ok("gemm");
         let weights = std::env::var("PICKER_WINOGRAD_WEIGHTS");
         let auto = matches!(self, ConvAlgorithm::Auto | ConvAlgorithm::AutoLowMemory);
@@ -320,6 +334,14 @@ impl ConvAlgorithm {
                     (_, true) => ConvAlgorithm::WinogradLowMemory,
                     (_, false) => ConvAlgorithm::Winograd,
                 }
+            }
+            _ if auto
+                && isa == Isa::Avx512
+                && s.stride > 1
+                && s.c_out >= 32
+                && ConvAlgorithm::PixelTiles.applies(s) =>
+            {
+                ConvAlgorithm::PixelTiles
             }
             _ if auto && (s.kh > 1 || s.kw > 1 || s.pad > 0) => ConvAlgorithm::Shifted,
             _ if auto => ConvAlgorithm::Gemm,
@@ -346,6 +368,8 @@ enum ConvPath {
     /// a layer with few outputs still fills the micro-kernel's rows; the `kw`
     /// partial sums of an output are added, shifted, afterwards.
     Shifted { packed: PackedA, fold_kx: bool },
+    /// Output channels in the lanes (AVX-512).
+    PixelTiles { tiles: PixelTiles },
 }
 
 /// Layers with at most this many outputs fold the kernel's columns into the
@@ -516,7 +540,7 @@ impl Conv2d {
                 format!("algorithm {algorithm:?} cannot run {spec:?}"),
             ));
         }
-        let resolved = algorithm.resolve(&spec);
+        let resolved = algorithm.resolve(&spec, isa);
         if !resolved.runs_on(isa) {
             return Err(invalid(
                 "conv2d",
@@ -528,6 +552,16 @@ impl Conv2d {
             ));
         }
         let path = match resolved {
+            ConvAlgorithm::PixelTiles => ConvPath::PixelTiles {
+                tiles: PixelTiles::new(
+                    weight,
+                    spec.c_in,
+                    spec.c_out,
+                    spec.kh,
+                    spec.kw,
+                    spec.stride,
+                ),
+            },
             ConvAlgorithm::Direct => ConvPath::Direct {
                 isa,
                 weight: direct::pack_weights(weight, spec.c_out, spec.c_in, spec.kh * spec.kw),
@@ -606,6 +640,7 @@ impl Conv2d {
         match &self.path {
             ConvPath::Gemm { packed, .. } | ConvPath::Shifted { packed, .. } => packed.kernel.isa,
             ConvPath::Direct { isa, .. } | ConvPath::Winograd { isa, .. } => *isa,
+            ConvPath::PixelTiles { .. } => Isa::Avx512,
         }
     }
 
@@ -621,6 +656,7 @@ impl Conv2d {
                 (true, false) => ConvAlgorithm::WinogradBf16LowMemory,
             },
             ConvPath::Shifted { .. } => ConvAlgorithm::Shifted,
+            ConvPath::PixelTiles { .. } => ConvAlgorithm::PixelTiles,
         }
     }
 
@@ -669,7 +705,10 @@ impl Conv2d {
         if reflect > 0
             && !matches!(
                 self.path,
-                ConvPath::Winograd { .. } | ConvPath::Shifted { .. } | ConvPath::Direct { .. }
+                ConvPath::Winograd { .. }
+                    | ConvPath::Shifted { .. }
+                    | ConvPath::Direct { .. }
+                    | ConvPath::PixelTiles { .. }
             )
         {
             let padded = reflect_pad(x, [reflect; 4])?;
@@ -696,6 +735,24 @@ impl Conv2d {
             let c = &mut out.data_mut()[b * per_out..(b + 1) * per_out];
             let residual = residual.map(|r| r.image(b));
             match &self.path {
+                ConvPath::PixelTiles { tiles } => {
+                    let (pad, fill) = if reflect > 0 {
+                        (reflect, Fill::Reflect)
+                    } else {
+                        (s.pad, Fill::Zero)
+                    };
+                    tiles.forward_image(
+                        img,
+                        x.h(),
+                        x.w(),
+                        pad,
+                        fill,
+                        self.bias.as_deref(),
+                        self.act,
+                        residual,
+                        c,
+                    );
+                }
                 ConvPath::Direct { isa, weight } => {
                     let (pad, fill) = if reflect > 0 {
                         (reflect, Fill::Reflect)

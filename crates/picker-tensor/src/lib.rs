@@ -39,6 +39,7 @@ mod isa;
 mod microkernel;
 mod pad;
 pub mod params;
+mod pixtile;
 mod pool;
 pub mod reference;
 mod resize;

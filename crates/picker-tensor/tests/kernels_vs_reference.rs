@@ -138,7 +138,11 @@ fn named_conv_problems() -> Vec<ConvProblem> {
         relu(conv(1, 13, 11, 5, 17, 3, 2, 1)), // stride 2 on odd sizes, channels off the SIMD width
         relu(conv(2, 9, 14, 16, 12, 3, 2, 1)), // batch 2
         conv(1, 6, 7, 33, 9, 1, 2, 0),         // 1x1 stride 2
-        conv(1, 10, 12, 20, 24, 1, 1, 0),      // 1x1 as plain GEMM
+        // Pixel tiles: two output-channel panels (one partial), several
+        // depth blocks, border tiles on every side and a partial last tile.
+        res(relu(conv(1, 17, 29, 40, 80, 3, 2, 1))),
+        relu(conv(1, 9, 40, 3, 64, 7, 2, 3)), // EnvMap input conv, stride 2
+        conv(1, 10, 12, 20, 24, 1, 1, 0),     // 1x1 as plain GEMM
         res(conv(1, 12, 10, 24, 24, 3, 1, 0)), // ResBlock conv after reflect pad
         res(conv(2, 7, 5, 9, 9, 3, 1, 1)),
         tanh(conv(1, 14, 18, 8, 3, 7, 1, 0)), // decoder output conv
@@ -251,8 +255,16 @@ fn auto_algorithm_choice() {
             pick(ConvSpec::square(64, 3, 7, 1, 0)),
             ConvAlgorithm::Direct
         );
+        // Strided layers: output channels in the lanes on AVX-512, else the
+        // shifted GEMM over phase planes (also for few outputs).
+        let strided = if Isa::best() == Isa::Avx512 {
+            ConvAlgorithm::PixelTiles
+        } else {
+            ConvAlgorithm::Shifted
+        };
+        assert_eq!(pick(ConvSpec::square(64, 128, 3, 2, 1)), strided);
         assert_eq!(
-            pick(ConvSpec::square(64, 128, 3, 2, 1)),
+            pick(ConvSpec::square(128, 3, 3, 2, 1)),
             ConvAlgorithm::Shifted
         );
         assert_eq!(
