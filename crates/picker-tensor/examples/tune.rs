@@ -80,12 +80,13 @@ fn main() {
         }
     };
     let wt = rng.normal_vec(s.weight_len(), 0.05);
-    // TUNE_ALGO=gemm|direct|winograd|shifted forces an algorithm.
+    // TUNE_ALGO=gemm|direct|winograd|shifted|pixtile forces an algorithm.
     let algo = match std::env::var("TUNE_ALGO").as_deref() {
         Ok("gemm") => ConvAlgorithm::Gemm,
         Ok("direct") => ConvAlgorithm::Direct,
         Ok("winograd") => ConvAlgorithm::Winograd,
         Ok("shifted") => ConvAlgorithm::Shifted,
+        Ok("pixtile") => ConvAlgorithm::PixelTiles,
         _ => ConvAlgorithm::Auto,
     };
     let conv =
