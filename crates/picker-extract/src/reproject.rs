@@ -356,10 +356,11 @@ fn band_members(samples: &[Sample], size: usize, wrap: bool) -> Vec<Vec<u32>> {
 /// against `reference` with `scale`) into per-texel sums and weights;
 /// `members` are the samples of every band ([`band_members`]). With
 /// `values`, sample `k` adds `values[k]` instead of its colour (same weights:
-/// the back-projection of residuals). Also returns each texel's observation
-/// weight: the same tent weights per unit of footprint without the samples'
-/// confidence or robust weights (how well the texel was seen, whatever the
-/// quality of the pixels that saw it).
+/// the back-projection of residuals). With `track_seen`, also returns each
+/// texel's observation weight: the same tent weights per unit of footprint
+/// without the samples' confidence or robust weights (how well the texel was
+/// seen, whatever the quality of the pixels that saw it); else that vector
+/// is empty.
 ///
 /// Parallel over bands of texture rows: each band adds the samples that
 /// touch it in sample order, so every texel receives its contributions in
@@ -373,18 +374,27 @@ fn splat(
     reference: Option<&[Vec3]>,
     scale: f32,
     values: Option<&[Vec3]>,
+    track_seen: bool,
 ) -> (Vec<Vec3>, Vec<f32>, Vec<f32>) {
     let mut sum = vec![Vec3::ZERO; size * size];
     let mut wsum = vec![0.0f32; size * size];
-    let mut seen = vec![0.0f32; size * size];
+    let mut seen = vec![0.0f32; if track_seen { size * size } else { 0 }];
     if size == 0 {
         return (sum, wsum, seen);
     }
     let n = size as i64;
     let band_len = SPLAT_BAND_ROWS * size;
+    // One (possibly empty) slice of `seen` per band.
+    let seen_bands: Vec<&mut [f32]> = if track_seen {
+        seen.chunks_mut(band_len).collect()
+    } else {
+        (0..size.div_ceil(SPLAT_BAND_ROWS))
+            .map(|_| Default::default())
+            .collect()
+    };
     sum.par_chunks_mut(band_len)
         .zip(wsum.par_chunks_mut(band_len))
-        .zip(seen.par_chunks_mut(band_len))
+        .zip(seen_bands.into_par_iter())
         .zip(members.par_iter())
         .enumerate()
         .for_each(|(b, (((bsum, bw), bseen), idx))| {
@@ -429,7 +439,9 @@ fn splat(
                         }
                         bsum[lt] += value * w;
                         bw[lt] += w;
-                        bseen[lt] += per_area * wx * wy;
+                        if track_seen {
+                            bseen[lt] += per_area * wx * wy;
+                        }
                     }
                 }
             }
@@ -522,7 +534,7 @@ impl Fit {
     ) -> Self {
         let samples = samples(coords, mask, colour, confidence, size);
         let members = band_members(&samples, size, coords.wrap);
-        let (sum, wsum, seen) = splat(&samples, &members, size, coords.wrap, None, 1.0, None);
+        let (sum, wsum, seen) = splat(&samples, &members, size, coords.wrap, None, 1.0, None, true);
         let mean = texel_means(&sum, &wsum);
         // Robust pass: Cauchy weights on the distance to the first-pass texel mean,
         // scale = 2 × the median deviation (at least 0.02).
@@ -548,6 +560,7 @@ impl Fit {
             Some(&mean),
             scale,
             None,
+            false,
         );
         let tex = texel_means(&sum, &wsum);
         Fit {
@@ -603,6 +616,7 @@ impl Fit {
                 Some(&self.mean),
                 self.scale,
                 Some(&residual),
+                false,
             );
             self.tex
                 .par_iter_mut()
@@ -1002,7 +1016,7 @@ mod tests {
                         .collect();
                     for vals in [None, Some(values.as_slice())] {
                         let (a, aw, aseen) =
-                            splat(&samples, &members, size, wrap, reference, 0.2, vals);
+                            splat(&samples, &members, size, wrap, reference, 0.2, vals, true);
                         let (b, bw, bseen) =
                             splat_reference(&samples, size, wrap, reference, 0.2, vals);
                         let bits = |v: &[Vec3]| {
@@ -1014,6 +1028,12 @@ mod tests {
                         let wb = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
                         assert_eq!(wb(&aw), wb(&bw));
                         assert_eq!(wb(&aseen), wb(&bseen));
+                        // Not tracked: the same sums, no observation weights.
+                        let (c, cw, cseen) =
+                            splat(&samples, &members, size, wrap, reference, 0.2, vals, false);
+                        assert_eq!(bits(&c), bits(&a));
+                        assert_eq!(wb(&cw), wb(&aw));
+                        assert!(cseen.is_empty());
                     }
                 }
             }
