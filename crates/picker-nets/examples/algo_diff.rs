@@ -1,6 +1,7 @@
 //! Largest output difference between the default algorithms (Winograd for the
 //! residual blocks, the direct kernel for the ≤ 4-output convolutions, the
-//! shifted GEMM for the others), the
+//! pixel tiles for the strided ones on AVX-512, the shifted GEMM for the
+//! others), the
 //! low-memory Winograd, and the plain packed GEMM for every layer, on random
 //! thesis-size networks:
 //! `cargo run --release -p picker-nets --example algo_diff -- [HxW]`.
