@@ -12,7 +12,7 @@
 
 use rayon::prelude::*;
 
-/// Indices per rayon job (the histograms are 256 KiB each, so few are made).
+/// Fewest indices per histogram range (each range fills its own 512 KiB histogram).
 const MIN_JOB: usize = 1 << 16;
 
 /// The order-preserving key of `x` under [`f32::total_cmp`] (the same bit
@@ -33,20 +33,26 @@ fn value_of(k: u32) -> f32 {
 }
 
 /// A 65 536-bucket histogram of `bucket(i)` over the indices `0..n` whose
-/// bucket is `Some`, in parallel.
+/// bucket is `Some`, in parallel: one histogram per contiguous range of at
+/// least [`MIN_JOB`] indices, at most two ranges per thread, so only a few
+/// 512 KiB histograms are made (a fold would make one per rayon job, and
+/// each is a fresh, page-faulting allocation).
 fn histogram(n: usize, bucket: impl Fn(usize) -> Option<u16> + Sync) -> Vec<u64> {
-    (0..n)
+    let ranges = n
+        .div_ceil(MIN_JOB)
+        .clamp(1, 2 * rayon::current_num_threads().max(1));
+    let per = n.div_ceil(ranges).max(1);
+    (0..ranges)
         .into_par_iter()
-        .with_min_len(MIN_JOB)
-        .fold(
-            || vec![0u64; 1 << 16],
-            |mut h, i| {
+        .map(|r| {
+            let mut h = vec![0u64; 1 << 16];
+            for i in r * per..((r + 1) * per).min(n) {
                 if let Some(b) = bucket(i) {
                     h[b as usize] += 1;
                 }
-                h
-            },
-        )
+            }
+            h
+        })
         .reduce(
             || vec![0u64; 1 << 16],
             |mut a, b| {
