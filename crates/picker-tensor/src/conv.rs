@@ -730,17 +730,18 @@ impl Conv2d {
         }
         let mut out = Tensor::for_overwrite(shape);
         let per_out = s.c_out * oh * ow;
+        // The padding the paths that pad themselves apply.
+        let (pad, fill) = if reflect > 0 {
+            (reflect, Fill::Reflect)
+        } else {
+            (s.pad, Fill::Zero)
+        };
         for b in 0..x.n() {
             let img = x.image(b);
             let c = &mut out.data_mut()[b * per_out..(b + 1) * per_out];
             let residual = residual.map(|r| r.image(b));
             match &self.path {
                 ConvPath::PixelTiles { tiles } => {
-                    let (pad, fill) = if reflect > 0 {
-                        (reflect, Fill::Reflect)
-                    } else {
-                        (s.pad, Fill::Zero)
-                    };
                     tiles.forward_image(
                         img,
                         x.h(),
@@ -754,11 +755,6 @@ impl Conv2d {
                     );
                 }
                 ConvPath::Direct { isa, weight } => {
-                    let (pad, fill) = if reflect > 0 {
-                        (reflect, Fill::Reflect)
-                    } else {
-                        (s.pad, Fill::Zero)
-                    };
                     let p = DirectProblem {
                         x: img,
                         c_in: s.c_in,
@@ -783,17 +779,12 @@ impl Conv2d {
                     );
                 }
                 ConvPath::Winograd { wino, .. } => {
-                    let (pad, border) = if reflect > 0 {
-                        (reflect, Fill::Reflect)
-                    } else {
-                        (s.pad, Fill::Zero)
-                    };
                     wino.forward_image(
                         img,
                         x.h(),
                         x.w(),
                         pad,
-                        border,
+                        fill,
                         self.bias.as_deref(),
                         self.act,
                         residual,
@@ -801,11 +792,6 @@ impl Conv2d {
                     );
                 }
                 ConvPath::Shifted { packed, fold_kx } => {
-                    let (pad, fill) = if reflect > 0 {
-                        (reflect, Fill::Reflect)
-                    } else {
-                        (s.pad, Fill::Zero)
-                    };
                     let slack = packed.kernel.nr + s.kw + s.stride;
                     let epi = Epilogue {
                         bias: self.bias.as_deref(),
