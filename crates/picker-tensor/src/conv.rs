@@ -739,20 +739,14 @@ impl Conv2d {
         for b in 0..x.n() {
             let img = x.image(b);
             let c = &mut out.data_mut()[b * per_out..(b + 1) * per_out];
-            let residual = residual.map(|r| r.image(b));
+            let epi = Epilogue {
+                bias: self.bias.as_deref(),
+                act: self.act,
+                residual: residual.map(|r| r.image(b)),
+            };
             match &self.path {
                 ConvPath::PixelTiles { tiles } => {
-                    tiles.forward_image(
-                        img,
-                        x.h(),
-                        x.w(),
-                        pad,
-                        fill,
-                        self.bias.as_deref(),
-                        self.act,
-                        residual,
-                        c,
-                    );
+                    tiles.forward_image(img, x.h(), x.w(), pad, fill, &epi, c);
                 }
                 ConvPath::Direct { isa, weight } => {
                     let p = DirectProblem {
@@ -772,32 +766,17 @@ impl Conv2d {
                         &p,
                         s.c_out,
                         weight,
-                        self.bias.as_deref(),
-                        self.act,
-                        residual,
+                        epi.bias,
+                        epi.act,
+                        epi.residual,
                         c,
                     );
                 }
                 ConvPath::Winograd { wino, .. } => {
-                    wino.forward_image(
-                        img,
-                        x.h(),
-                        x.w(),
-                        pad,
-                        fill,
-                        self.bias.as_deref(),
-                        self.act,
-                        residual,
-                        c,
-                    );
+                    wino.forward_image(img, x.h(), x.w(), pad, fill, &epi, c);
                 }
                 ConvPath::Shifted { packed, fold_kx } => {
                     let slack = packed.kernel.nr + s.kw + s.stride;
-                    let epi = Epilogue {
-                        bias: self.bias.as_deref(),
-                        act: self.act,
-                        residual,
-                    };
                     let map = OutMap {
                         base: 0,
                         cs: oh * ow,
@@ -852,11 +831,6 @@ impl Conv2d {
                     crate::pool::give(src);
                 }
                 ConvPath::Gemm { packed, taps } => {
-                    let epi = Epilogue {
-                        bias: self.bias.as_deref(),
-                        act: self.act,
-                        residual,
-                    };
                     if s.kh == 1 && s.kw == 1 && s.stride == 1 && s.pad == 0 {
                         let src = DenseB {
                             data: img,

@@ -23,6 +23,7 @@
 use rayon::prelude::*;
 
 use crate::activation::Activation;
+use crate::gemm::Epilogue;
 use crate::pad::{padded_source, Fill};
 
 /// Output pixels per tile (one row).
@@ -86,7 +87,7 @@ impl PixelTiles {
 
     /// One image: `x` is `[c_in, h, w]`, extended by `pad` on every side as
     /// `fill` says; `out` is `[c_out, oh, ow]` with `(oh, ow)` the layer's
-    /// output size, `residual` (if any) shaped like `out`.
+    /// output size, then `epi` (its residual, if any, shaped like `out`).
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn forward_image(
         &self,
@@ -95,11 +96,10 @@ impl PixelTiles {
         w: usize,
         pad: usize,
         fill: Fill,
-        bias: Option<&[f32]>,
-        act: Activation,
-        residual: Option<&[f32]>,
+        epi: &Epilogue<'_>,
         out: &mut [f32],
     ) {
+        let (bias, act, residual) = (epi.bias, epi.act, epi.residual);
         let (c_in, kh, kw, s) = (self.c_in, self.kh, self.kw, self.stride);
         let (hp, wp) = (h + 2 * pad, w + 2 * pad);
         assert!(hp >= kh && wp >= kw, "input smaller than the kernel");

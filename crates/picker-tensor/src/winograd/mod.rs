@@ -37,6 +37,7 @@ use rayon::prelude::*;
 use crate::activation::Activation;
 use crate::aligned::AlignedBuf;
 use crate::amx;
+use crate::gemm::Epilogue;
 use crate::isa::Isa;
 use crate::microkernel::{KernelFn, MicroKernel, NarrowKernelFn};
 use crate::pad::{padded_source, Fill};
@@ -1005,7 +1006,8 @@ impl Winograd {
     }
 
     /// One image: `x` is `[c_in, h, w]`, extended by `pad` on every side as
-    /// `fill` says; `out` is `[c_out, h + 2·pad − 2, w + 2·pad − 2]`.
+    /// `fill` says; `out` is `[c_out, h + 2·pad − 2, w + 2·pad − 2]`, then
+    /// `epi` (its residual, if any, shaped like `out`).
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn forward_image(
         &self,
@@ -1014,11 +1016,10 @@ impl Winograd {
         w: usize,
         pad: usize,
         fill: Fill,
-        bias: Option<&[f32]>,
-        act: Activation,
-        residual: Option<&[f32]>,
+        epi: &Epilogue<'_>,
         out: &mut [f32],
     ) {
+        let (bias, act, residual) = (epi.bias, epi.act, epi.residual);
         let (oh, ow) = (h + 2 * pad - 2, w + 2 * pad - 2);
         let (th, tw) = (oh.div_ceil(M), ow.div_ceil(M));
         let tiles = th * tw;
