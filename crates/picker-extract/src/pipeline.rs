@@ -687,7 +687,7 @@ pub fn extract(
         // request, remove the colour jumps across the wrap edges when they
         // show. Colours stay non-negative.
         let (final_tex, seam_corrected) = if opts.tileable && opts.seamless {
-            let (mut t, corrected) = make_seamless(&final_tex);
+            let (mut t, corrected) = make_seamless(final_tex);
             if corrected {
                 t.data.iter_mut().for_each(|v| *v = v.max(0.0));
             }

@@ -154,18 +154,18 @@ pub const SEAMLESS_MIN_RATIO: f64 = 1.25;
 
 /// `img` made to tile without visible seams: its [`periodic_component`] when
 /// the seam ratio is above [`SEAMLESS_MIN_RATIO`] and the component's ratio
-/// is lower, else `img` itself. Returns the texture and whether it was
-/// replaced.
-pub fn make_seamless(img: &Image) -> (Image, bool) {
-    let before = seam_score(img);
-    if before.ratio.is_nan() || before.ratio <= SEAMLESS_MIN_RATIO {
-        return (img.clone(), false);
+/// is lower, else `img` itself (not copied). Returns the texture and whether
+/// it was replaced.
+pub fn make_seamless(img: Image) -> (Image, bool) {
+    let before = seam_score(&img);
+    if before.ratio <= SEAMLESS_MIN_RATIO {
+        return (img, false);
     }
-    let p = periodic_component(img);
+    let p = periodic_component(&img);
     if seam_score(&p).ratio < before.ratio {
         (p, true)
     } else {
-        (img.clone(), false)
+        (img, false)
     }
 }
 
@@ -238,13 +238,13 @@ mod tests {
                     + 0.05 * (TAU * x as f32 / w as f32 + 0.3).sin()
                     + 0.05 * (TAU * 2.0 * y as f32 / h as f32 + c as f32).cos()
             });
-            let (p, replaced) = make_seamless(&u);
+            let (p, replaced) = make_seamless(u.clone());
             assert!(!replaced, "{h}x{w}: {:?}", seam_score(&u));
             assert_eq!(p.data, u.data);
         }
         let empty = Image::new(3, 0, 4, Vec::new()).unwrap();
         assert_eq!(periodic_component(&empty).data.len(), 0);
-        assert!(!make_seamless(&empty).1);
+        assert!(!make_seamless(empty).1);
     }
 
     /// A pattern on a colour ramp has a visible seam; in its periodic
@@ -262,7 +262,7 @@ mod tests {
             0.2 + 0.5 * x as f32 / w as f32 + 0.3 * y as f32 / h as f32 + checks + 0.05 * c as f32
         });
         let before = seam_score(&u);
-        let (p, replaced) = make_seamless(&u);
+        let (p, replaced) = make_seamless(u);
         let after = seam_score(&p);
         assert!(replaced);
         assert!(before.ratio > 3.0, "the ramp should show: {before:?}");
