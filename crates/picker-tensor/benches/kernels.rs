@@ -52,12 +52,14 @@ fn bench(c: &mut Criterion) {
         let wt = rng.normal_vec(s.weight_len(), 0.05);
         let bias = vec![0.1; s.c_out];
         // The default algorithm, and for the residual-block shapes the
-        // low-memory Winograd, the bf16 one (where the CPU has it) and the
-        // plain packed GEMM beside it.
+        // low-memory Winograd, both F(6×6) ones, the bf16 one (where the CPU
+        // has it) and the plain packed GEMM beside it.
         let mut algos = vec![ConvAlgorithm::Auto];
         if name.ends_with("res") {
             algos.extend([
                 ConvAlgorithm::WinogradLowMemory,
+                ConvAlgorithm::Winograd6,
+                ConvAlgorithm::Winograd6LowMemory,
                 ConvAlgorithm::WinogradBf16,
                 ConvAlgorithm::Gemm,
             ]);

@@ -80,11 +80,15 @@ fn main() {
         }
     };
     let wt = rng.normal_vec(s.weight_len(), 0.05);
-    // TUNE_ALGO=gemm|direct|winograd|shifted|pixtile forces an algorithm.
+    // TUNE_ALGO=gemm|direct|winograd|winograd-lazy|winograd6|winograd6-lazy|shifted|pixtile
+    // forces an algorithm.
     let algo = match std::env::var("TUNE_ALGO").as_deref() {
         Ok("gemm") => ConvAlgorithm::Gemm,
         Ok("direct") => ConvAlgorithm::Direct,
         Ok("winograd") => ConvAlgorithm::Winograd,
+        Ok("winograd-lazy") => ConvAlgorithm::WinogradLowMemory,
+        Ok("winograd6") => ConvAlgorithm::Winograd6,
+        Ok("winograd6-lazy") => ConvAlgorithm::Winograd6LowMemory,
         Ok("shifted") => ConvAlgorithm::Shifted,
         Ok("pixtile") => ConvAlgorithm::PixelTiles,
         _ => ConvAlgorithm::Auto,

@@ -40,7 +40,10 @@ fn algorithms(isa: Isa, spec: &ConvSpec) -> Vec<ConvAlgorithm> {
 /// The tolerance of an algorithm against the f64 reference.
 fn tolerance(algo: ConvAlgorithm) -> Tolerance {
     match algo {
-        ConvAlgorithm::Winograd | ConvAlgorithm::WinogradLowMemory => Tolerance::WINOGRAD_F32,
+        ConvAlgorithm::Winograd
+        | ConvAlgorithm::WinogradLowMemory
+        | ConvAlgorithm::Winograd6
+        | ConvAlgorithm::Winograd6LowMemory => Tolerance::WINOGRAD_F32,
         a if a.is_bf16() => Tolerance::WINOGRAD_BF16,
         _ => Tolerance::KERNEL_F32,
     }
@@ -721,50 +724,58 @@ fn conv2d_reflect_forward() {
 /// Winograd weights made per pass (`WinogradLowMemory`: one transform row at
 /// a time over few tile panels, or the chunk's whole `U` per block of tiles
 /// over many) give the same bits as the weights packed once, and both match
-/// the reference.
+/// the reference, with either tile size.
 #[test]
 fn winograd_lazy_weights_match_packed_bit_for_bit() {
     // (h, w, c_in, c_out): one panel; three panels and two depth blocks; five
     // and more panels (the whole-U path on AVX-512) with a partial depth
-    // block and a partial row panel; a single channel.
+    // block and a partial row panel; a single channel. In F(6×6) tiles: one,
+    // two, three, four (row blocks) and seven panels (whole U).
     let cases = [
         (14, 18, 20, 13),
         (34, 49, 136, 24),
         (60, 58, 160, 19),
         (90, 70, 24, 72),
         (9, 9, 1, 1),
+        (100, 110, 24, 40),
+    ];
+    let pairs = [
+        (ConvAlgorithm::Winograd, ConvAlgorithm::WinogradLowMemory),
+        (ConvAlgorithm::Winograd6, ConvAlgorithm::Winograd6LowMemory),
     ];
     for isa in isas() {
-        for (i, &(h, w, ci, co)) in cases.iter().enumerate() {
-            let mut rng = Rng::new(9100 + i as u64);
-            let spec = ConvSpec::square(ci, co, 3, 1, 1);
-            let x = rng.tensor([1, ci, h, w]);
-            let wt = rng.normal_vec(spec.weight_len(), (1.0 / (ci * 9) as f32).sqrt());
-            let b = rng.normal_vec(co, 0.5);
-            let r = rng.tensor([1, co, h, w]);
-            let run = |algo| {
-                Conv2d::with_algorithm(isa, algo, spec, &wt, Some(&b), Activation::Relu)
-                    .unwrap()
-                    .forward_add(&x, &r)
-                    .unwrap()
-            };
-            let packed = run(ConvAlgorithm::Winograd);
-            let lazy = run(ConvAlgorithm::WinogradLowMemory);
-            let what = format!("{isa} case {i} {h}x{w} {ci}->{co}");
-            let differ = packed
-                .data()
-                .iter()
-                .zip(lazy.data())
-                .filter(|(a, b)| a.to_bits() != b.to_bits())
-                .count();
-            assert_eq!(
-                differ, 0,
-                "{what}: lazy differs from packed in {differ} values"
-            );
-            let mut expected = reference::conv2d(&x, &wt, Some(&b), spec).unwrap();
-            expected = reference::activate(&expected, Activation::Relu);
-            expected = reference::add(&expected, &r).unwrap();
-            check(&what, &lazy, &expected, Tolerance::WINOGRAD_F32);
+        for (packed_algo, lazy_algo) in pairs {
+            for (i, &(h, w, ci, co)) in cases.iter().enumerate() {
+                let mut rng = Rng::new(9100 + i as u64);
+                let spec = ConvSpec::square(ci, co, 3, 1, 1);
+                let x = rng.tensor([1, ci, h, w]);
+                let wt = rng.normal_vec(spec.weight_len(), (1.0 / (ci * 9) as f32).sqrt());
+                let b = rng.normal_vec(co, 0.5);
+                let r = rng.tensor([1, co, h, w]);
+                let run = |algo| {
+                    Conv2d::with_algorithm(isa, algo, spec, &wt, Some(&b), Activation::Relu)
+                        .unwrap()
+                        .forward_add(&x, &r)
+                        .unwrap()
+                };
+                let packed = run(packed_algo);
+                let lazy = run(lazy_algo);
+                let what = format!("{isa} {lazy_algo:?} case {i} {h}x{w} {ci}->{co}");
+                let differ = packed
+                    .data()
+                    .iter()
+                    .zip(lazy.data())
+                    .filter(|(a, b)| a.to_bits() != b.to_bits())
+                    .count();
+                assert_eq!(
+                    differ, 0,
+                    "{what}: lazy differs from packed in {differ} values"
+                );
+                let mut expected = reference::conv2d(&x, &wt, Some(&b), spec).unwrap();
+                expected = reference::activate(&expected, Activation::Relu);
+                expected = reference::add(&expected, &r).unwrap();
+                check(&what, &lazy, &expected, Tolerance::WINOGRAD_F32);
+            }
         }
     }
 }

@@ -1,10 +1,21 @@
-//! Winograd F(4×4, 3×3) for stride-1 3×3 convolutions (Lavin & Gray 2016):
-//! each 4×4 output tile takes 36 multiplies per input/output channel pair
-//! instead of 144.
+//! Winograd convolutions for stride-1 3×3 layers (Lavin & Gray 2016), in
+//! two tile sizes ([`Tile`]; transform matrices in `points`): F(4×4, 3×3)
+//! takes 36 multiplies per input/output channel pair for a 4×4 output tile
+//! instead of 144, F(6×6, 3×3) 64 for a 6×6 tile instead of 324.
 //!
-//! With `d` a 6×6 input tile, `g` a 3×3 kernel: `Y = Aᵀ [Σ_ci (G g Gᵀ) ⊙ (Bᵀ d B)] A`.
-//! The weights are transformed (in f64) and packed once, as 36 `c_out × c_in`
-//! matrices `U[ξ]` in the micro-kernel's A-panel layout.
+//! With `d` a `T × T` input tile (`T = 6` or 8), `g` a 3×3 kernel:
+//! `Y = Aᵀ [Σ_ci (G g Gᵀ) ⊙ (Bᵀ d B)] A`. The weights are transformed and
+//! packed once (or at each pass, lazy `U`), as `T²` `c_out × c_in` matrices
+//! `U[ξ]` in the micro-kernel's A-panel layout.
+//!
+//! F(6×6) on an Intel Xeon with AMX (2 threads, 60×80×256 layer, `tune res`):
+//! 7.6–8.1 ms packed and 8.1 ms lazy, against F(4×4)'s 7.8–8.0 ms packed: the
+//! products fall by 11% in micro-kernel samples, but its 8×8 output transform
+//! spills registers and its column phases take gathers, and its packed `U`
+//! (7.1× the 3×3 weights) streams from memory. The MSN at 240×320 ran in
+//! 229–231 ms with lazy F(6×6) against 224–234 ms with packed F(4×4). So
+//! [`crate::ConvAlgorithm::Auto`] keeps F(4×4) (`PICKER_WINOGRAD_TILE=6`
+//! switches it, to measure on other CPUs).
 //!
 //! A forward pass walks the output tiles in blocks of `NR`-wide panels
 //! ([`WINO_PANELS_PER_BLOCK`]), so that no transformed tensor ever leaves the
@@ -13,14 +24,14 @@
 //!    into the gather) and transformed, in parallel over input channels,
 //!    straight into the micro-kernel's packed B layout: `V[ξ]` is `c_in × tiles`;
 //! 2. in parallel over chunks of output channels (`c_out / threads`, within
-//!    [`WINO_CO_PER_TASK`]..[`WINO_CO_PER_TASK_MAX`]), the 36 products
+//!    [`WINO_CO_PER_TASK`]..[`WINO_CO_PER_TASK_MAX`]), the `T²` products
 //!    `M[ξ] = U[ξ] · V[ξ]` are run by the GEMM micro-kernel into a per-thread
 //!    buffer, for a group of panels at a time (as many as the L2 holds, at
 //!    most [`WINO_PANELS_PER_GROUP`]: each `U` panel is read once per group,
 //!    and each depth block's B panel stays in L1 for all the chunk's row
 //!    panels); the output transform then turns them into output pixels at
 //!    once, fused with bias, activation and residual add. With weights made
-//!    per pass (lazy `U`) over few panels, the chunk makes six `U[ξ]` of one
+//!    per pass (lazy `U`) over few panels, the chunk makes `T` `U[ξ]` of one
 //!    depth block at a time and runs them over every panel of the block
 //!    ([`WINO_ROW_BLOCK_PANELS`]).
 //!
@@ -45,37 +56,7 @@ use crate::params::{
     WINO_BF16_KC, WINO_CO_PER_TASK, WINO_CO_PER_TASK_MAX, WINO_KC, WINO_LAZY_V_BYTES,
     WINO_PANELS_PER_BLOCK, WINO_PANELS_PER_GROUP, WINO_ROW_BLOCK_PANELS,
 };
-
-/// Points of the transformed tile along one axis.
-const T: usize = 6;
-/// Outputs per tile side.
-const M: usize = 4;
-/// Points of the transformed tile.
-const P: usize = T * T;
-
-/// `Bᵀ x` for the points 0, ±1, ±2, ∞.
-#[inline(always)]
-fn bt(d: [f32; 6]) -> [f32; 6] {
-    [
-        4.0 * d[0] - 5.0 * d[2] + d[4],
-        -4.0 * d[1] - 4.0 * d[2] + d[3] + d[4],
-        4.0 * d[1] - 4.0 * d[2] - d[3] + d[4],
-        -2.0 * d[1] - d[2] + 2.0 * d[3] + d[4],
-        2.0 * d[1] - d[2] - 2.0 * d[3] + d[4],
-        4.0 * d[1] - 5.0 * d[3] + d[5],
-    ]
-}
-
-/// `Aᵀ m`.
-#[inline(always)]
-fn at(m: [f32; 6]) -> [f32; 4] {
-    [
-        m[0] + m[1] + m[2] + m[3] + m[4],
-        m[1] - m[2] + 2.0 * (m[3] - m[4]),
-        m[1] + m[2] + 4.0 * (m[3] + m[4]),
-        m[1] - m[2] + 8.0 * (m[3] - m[4]) + m[5],
-    ]
-}
+use points::{Points, F4, F6};
 
 /// `N` disjoint `len`-long lanes of `out`, at `base + i·stride` (`stride ≥ len`).
 #[inline(always)]
@@ -94,49 +75,37 @@ fn lanes_mut<const N: usize>(
     })
 }
 
-/// Six `len`-long input lanes of `buf`, at `base + r·stride`.
+/// `N` `len`-long input lanes of `buf`, at `base + r·stride`.
 #[inline(always)]
-fn lanes(buf: &[f32], base: usize, stride: usize, len: usize) -> [&[f32]; 6] {
+fn lanes<const N: usize>(buf: &[f32], base: usize, stride: usize, len: usize) -> [&[f32]; N] {
     std::array::from_fn(|r| &buf[base + r * stride..][..len])
 }
 
-/// `Bᵀ` applied lane-wise: `o_i[k] = (Bᵀ [s_0[k] … s_5[k]])_i`.
+/// `Bᵀ` applied lane-wise: `o_i[k] = (Bᵀ [s_0[k] … s_{T−1}[k]])_i`.
 #[inline(always)]
-fn bt_lanes(s: [&[f32]; 6], o: [&mut [f32]; 6]) {
+fn bt_lanes<const T: usize, const M: usize, W: Points<T, M>>(s: [&[f32]; T], o: [&mut [f32]; T]) {
     let len = o[0].len();
-    let [o0, o1, o2, o3, o4, o5] = o;
-    let (o1, o2, o3, o4, o5) = (
-        &mut o1[..len],
-        &mut o2[..len],
-        &mut o3[..len],
-        &mut o4[..len],
-        &mut o5[..len],
-    );
-    let s: [&[f32]; 6] = std::array::from_fn(|r| &s[r][..len]);
+    let mut o = o.map(|x| &mut x[..len]);
+    let s: [&[f32]; T] = std::array::from_fn(|r| &s[r][..len]);
     for k in 0..len {
-        let v = bt([s[0][k], s[1][k], s[2][k], s[3][k], s[4][k], s[5][k]]);
-        o0[k] = v[0];
-        o1[k] = v[1];
-        o2[k] = v[2];
-        o3[k] = v[3];
-        o4[k] = v[4];
-        o5[k] = v[5];
+        let v = W::bt(std::array::from_fn(|r| s[r][k]));
+        for (oi, vi) in o.iter_mut().zip(v) {
+            oi[k] = vi;
+        }
     }
 }
 
-/// `Aᵀ` applied lane-wise: `o_i[k] = (Aᵀ [s_0[k] … s_5[k]])_i`.
+/// `Aᵀ` applied lane-wise: `o_i[k] = (Aᵀ [s_0[k] … s_{T−1}[k]])_i`.
 #[inline(always)]
-fn at_lanes(s: [&[f32]; 6], o: [&mut [f32]; 4]) {
+fn at_lanes<const T: usize, const M: usize, W: Points<T, M>>(s: [&[f32]; T], o: [&mut [f32]; M]) {
     let len = o[0].len();
-    let [o0, o1, o2, o3] = o;
-    let (o1, o2, o3) = (&mut o1[..len], &mut o2[..len], &mut o3[..len]);
-    let s: [&[f32]; 6] = std::array::from_fn(|r| &s[r][..len]);
+    let mut o = o.map(|x| &mut x[..len]);
+    let s: [&[f32]; T] = std::array::from_fn(|r| &s[r][..len]);
     for k in 0..len {
-        let v = at([s[0][k], s[1][k], s[2][k], s[3][k], s[4][k], s[5][k]]);
-        o0[k] = v[0];
-        o1[k] = v[1];
-        o2[k] = v[2];
-        o3[k] = v[3];
+        let v = W::at(std::array::from_fn(|r| s[r][k]));
+        for (oi, vi) in o.iter_mut().zip(v) {
+            oi[k] = vi;
+        }
     }
 }
 
@@ -163,8 +132,19 @@ pub(crate) struct Winograd {
     m_panels: usize,
     /// `(k0, kc, offset)` of each depth block inside one `U[ξ]` (in depth units).
     kblocks: Vec<(usize, usize, usize)>,
+    /// The tile size (F4 for bf16).
+    tile: Tile,
     /// `U[ξ]`, `c_out × c_in`, in the micro-kernel's A-panel layout.
     u: UStore,
+}
+
+/// The output tile of a Winograd layer.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Tile {
+    /// F(4×4, 3×3): 36 products per 16 outputs.
+    F4,
+    /// F(6×6, 3×3): 64 products per 36 outputs.
+    F6,
 }
 
 /// Where one forward pass reads its input and writes its output.
@@ -245,7 +225,7 @@ thread_local! {
 
 /// Floats between consecutive `U[ξ]` of a chunk's own `U` holding `len`
 /// floats each: one cache line more when `len` is a multiple of 1 KiB, so
-/// the weight transform's 36 stores per lane block do not all fall into one
+/// the weight transform's `T²` stores per lane block do not all fall into one
 /// L1 set.
 fn chunk_per_xi(len: usize) -> usize {
     if len.is_multiple_of(256) {
@@ -277,12 +257,12 @@ impl UView<'_> {
 /// into `v` (the block's packed B panels) where `rows` says.
 ///
 /// Per panel and padded row `r` of each tile row: the row is split into its
-/// four column phases (`q_c[k] = row[4k + c]`, so tile `k` reads `q_0..q_3` at
-/// `k` and `q_0, q_1` at `k + 1`), `Bᵀ` runs along the columns with the tiles
-/// in the lanes, then `Bᵀ` along the rows over the whole panel.
+/// `M` column phases (`q_c[k] = row[M·k + c]`, so tile `k` reads `q_0..q_M`
+/// at `k` and `q_0, q_1` at `k + 1`), `Bᵀ` runs along the columns with the
+/// tiles in the lanes, then `Bᵀ` along the rows over the whole panel.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn input_channel_body(
+fn input_channel_body<const T: usize, const M: usize, W: Points<T, M>>(
     g: &Geometry<'_>,
     ci: usize,
     t0: usize,
@@ -294,11 +274,11 @@ fn input_channel_body(
 ) {
     let (h, w, tw) = (g.h, g.w, g.tw);
     let plane = &g.x[ci * h * w..(ci + 1) * h * w];
-    // Padded row: tiles 0..tw need columns up to 4·tw + 1; one more phase
+    // Padded row: tiles 0..tw need columns up to M·tw + 1; one more phase
     // group keeps the k + 1 reads of the last tile inside.
     let pw = M * tw + M;
     let qlen = tw + 1;
-    let d_len = P * nr;
+    let d_len = T * T * nr;
     scratch.resize(pw + M * qlen + d_len, 0.0);
     let (row, rest) = scratch.split_at_mut(pw);
     let (q, t1buf) = rest.split_at_mut(M * qlen);
@@ -307,7 +287,7 @@ fn input_channel_body(
     let mut panel = 0;
     while p0 < t1 {
         let p1 = (p0 + nr).min(t1);
-        // t1buf[(j·6 + r)·nr + lane] = Σ_c Bᵀ[j][c] padded[4ty + r][4tx + c]
+        // t1buf[(j·T + r)·nr + lane] = Σ_c Bᵀ[j][c] padded[M·ty + r][M·tx + c]
         if p1 - p0 < nr {
             t1buf.fill(0.0);
         }
@@ -315,37 +295,35 @@ fn input_channel_body(
         for &(l0, ty, tx0, len) in &segs {
             for r in 0..T {
                 g.padded_row(plane, g.row_map[M * ty + r], row);
-                // q_c[k] = row[4(tx0 + k) + c], k in 0..=len
+                // q_c[k] = row[M(tx0 + k) + c], k in 0..=len
                 {
-                    let [q0, q1, q2, q3] = lanes_mut::<4>(q, 0, qlen, len + 1);
+                    let mut qs = lanes_mut::<M>(q, 0, qlen, len + 1);
                     let src = &row[M * tx0..M * (tx0 + len + 1)];
                     for (k, c) in src.chunks_exact(M).enumerate() {
-                        q0[k] = c[0];
-                        q1[k] = c[1];
-                        q2[k] = c[2];
-                        q3[k] = c[3];
+                        for (qc, &x) in qs.iter_mut().zip(c) {
+                            qc[k] = x;
+                        }
                     }
                 }
-                let s: [&[f32]; 6] = [
-                    &q[..len],
-                    &q[qlen..qlen + len],
-                    &q[2 * qlen..2 * qlen + len],
-                    &q[3 * qlen..3 * qlen + len],
-                    &q[1..1 + len],
-                    &q[qlen + 1..qlen + 1 + len],
-                ];
-                bt_lanes(s, lanes_mut(t1buf, r * nr + l0, T * nr, len));
+                let s: [&[f32]; T] = std::array::from_fn(|c| {
+                    if c < M {
+                        &q[c * qlen..c * qlen + len]
+                    } else {
+                        &q[(c - M) * qlen + 1..(c - M) * qlen + 1 + len]
+                    }
+                });
+                bt_lanes::<T, M, W>(s, lanes_mut(t1buf, r * nr + l0, T * nr, len));
             }
         }
-        // V[ξ = 6i + j] = Σ_r Bᵀ[i][r] t1[j][r]
+        // V[ξ = T·i + j] = Σ_r Bᵀ[i][r] t1[j][r]
         for j in 0..T {
-            let src = lanes(t1buf, j * T * nr, nr, nr);
+            let src = lanes::<T>(t1buf, j * T * nr, nr, nr);
             // SAFETY: `rows.at(ξ, panel)` rows of channel `ci` are written by
             // this task only, and lie inside the block buffer (see `VRows`).
-            let o: [&mut [f32]; 6] = std::array::from_fn(|i| unsafe {
+            let o: [&mut [f32]; T] = std::array::from_fn(|i| unsafe {
                 std::slice::from_raw_parts_mut(v.add(rows.at(i * T + j, panel)), nr)
             });
-            bt_lanes(src, o);
+            bt_lanes::<T, M, W>(src, o);
         }
         p0 = p1;
         panel += 1;
@@ -365,11 +343,11 @@ pub(super) struct OutPlane<'a> {
     pub(super) residual: Option<&'a [f32]>,
 }
 
-/// Output transform of one channel over one panel of tiles: `m` holds the 36
-/// products (`m[ξ·stride ..][..nr]`), written to `plane` with bias, activation
-/// and residual.
+/// Output transform of one channel over one panel of tiles: `m` holds the
+/// `T²` products (`m[ξ·stride ..][..nr]`), written to `plane` with bias,
+/// activation and residual.
 #[inline(always)]
-fn output_panel_body(
+fn output_panel_body<const T: usize, const M: usize, W: Points<T, M>>(
     m: &[f32],
     stride: usize,
     nr: usize,
@@ -387,16 +365,16 @@ fn output_panel_body(
     } = *o;
     let (t1, y) = scratch.split_at_mut(T * M * nr);
     let y = &mut y[..M * M * nr];
-    // t1[(c·4 + i)·nr] = Σ_r Aᵀ[i][r] M[ξ = 6r + c]
+    // t1[(c·M + i)·nr] = Σ_r Aᵀ[i][r] M[ξ = T·r + c]
     for c in 0..T {
-        at_lanes(
+        at_lanes::<T, M, W>(
             lanes(m, c * stride, T * stride, nr),
             lanes_mut(t1, c * M * nr, nr, nr),
         );
     }
-    // y[(i·4 + j)·nr] = Σ_c Aᵀ[j][c] t1[c][i]
+    // y[(i·M + j)·nr] = Σ_c Aᵀ[j][c] t1[c][i]
     for i in 0..M {
-        at_lanes(
+        at_lanes::<T, M, W>(
             lanes(t1, i * nr, M * nr, nr),
             lanes_mut(y, i * M * nr, nr, nr),
         );
@@ -413,15 +391,13 @@ fn output_panel_body(
             }
             let orow = &mut plane[oy * ow..(oy + 1) * ow];
             let seg = &mut orow[x0..x1];
-            let yl: [&[f32]; 4] = std::array::from_fn(|j| &y[(i * M + j) * nr + l0..][..len]);
+            let yl: [&[f32]; M] = std::array::from_fn(|j| &y[(i * M + j) * nr + l0..][..len]);
             {
-                let [y0, y1, y2, y3] = yl;
-                let (y0, y1, y2, y3) = (&y0[..full], &y1[..full], &y2[..full], &y3[..full]);
+                let yf: [&[f32]; M] = std::array::from_fn(|j| &yl[j][..full]);
                 for (k, o) in seg.chunks_exact_mut(M).take(full).enumerate() {
-                    o[0] = y0[k];
-                    o[1] = y1[k];
-                    o[2] = y2[k];
-                    o[3] = y3[k];
+                    for (oj, yj) in o.iter_mut().zip(&yf) {
+                        *oj = yj[k];
+                    }
                 }
             }
             for (j, o) in seg[M * full..].iter_mut().enumerate() {
@@ -450,7 +426,7 @@ macro_rules! transforms_for {
     ($input:ident, $output:ident, $($feat:literal)?) => {
         $(#[target_feature(enable = $feat)])?
         #[allow(clippy::too_many_arguments)]
-        unsafe fn $input(
+        unsafe fn $input<const T: usize, const M: usize, W: Points<T, M>>(
             g: &Geometry<'_>,
             ci: usize,
             t0: usize,
@@ -460,11 +436,11 @@ macro_rules! transforms_for {
             v: *mut f32,
             scratch: &mut Vec<f32>,
         ) {
-            input_channel_body(g, ci, t0, t1, nr, rows, v, scratch)
+            input_channel_body::<T, M, W>(g, ci, t0, t1, nr, rows, v, scratch)
         }
 
         $(#[target_feature(enable = $feat)])?
-        unsafe fn $output(
+        unsafe fn $output<const T: usize, const M: usize, W: Points<T, M>>(
             m: &[f32],
             stride: usize,
             nr: usize,
@@ -472,43 +448,33 @@ macro_rules! transforms_for {
             plane: &mut [f32],
             scratch: &mut [f32],
         ) {
-            output_panel_body(m, stride, nr, o, plane, scratch)
+            output_panel_body::<T, M, W>(m, stride, nr, o, plane, scratch)
         }
     };
 }
 
 #[cfg(target_arch = "x86_64")]
 mod avx512;
+mod points;
 #[cfg(target_arch = "x86_64")]
 use avx512::{input as input_avx512, output as output_avx512};
 #[cfg(target_arch = "x86_64")]
 transforms_for!(input_avx2, output_avx2, "avx2,fma");
 transforms_for!(input_portable, output_portable,);
 
-/// `G x` for one column `x` of a 3×3 kernel, with `G` (6×3) the rows
-/// `[¼ 0 0] [−⅙ −⅙ −⅙] [−⅙ ⅙ −⅙] [1/24 1/12 ⅙] [1/24 −1/12 ⅙] [0 0 1]`.
+/// Rows `rows` of `G g Gᵀ` lane-wise: `g[k]` holds tap `k` (row-major 3×3)
+/// of many kernels, `u[((i − rows.start)·T + j)·stride ..]` gets their
+/// transformed point `ξ = T·i + j`. All rows (`0..T`) give the `T²` points in
+/// `ξ` order; one row gives `T` of them with the same operations (so the same
+/// bits). Works on blocks of 16 lanes held in fixed-size arrays, so the
+/// arithmetic is vectorised.
 #[inline(always)]
-fn g3(x0: f32, x1: f32, x2: f32) -> [f32; 6] {
-    let (a, b) = (x0 + x2, x1);
-    let c = x0 * (1.0 / 24.0) + x2 * (1.0 / 6.0);
-    [
-        x0 * 0.25,
-        -(a + b) * (1.0 / 6.0),
-        -(a - b) * (1.0 / 6.0),
-        c + b * (1.0 / 12.0),
-        c - b * (1.0 / 12.0),
-        x2,
-    ]
-}
-
-/// Rows `R0..R1` of `G g Gᵀ` lane-wise: `g[k]` holds tap `k` (row-major 3×3)
-/// of many kernels, `u[((i − R0)·6 + j)·stride ..]` gets their transformed
-/// point `ξ = 6i + j`. All rows (`0..6`) give the 36 points in `ξ` order; one
-/// row gives six of them with the same operations (so the same bits). Works
-/// on blocks of 16 lanes held in fixed-size arrays, so the arithmetic is
-/// vectorised.
-#[inline(always)]
-fn transform_lanes<const R0: usize, const R1: usize>(g: [&[f32]; 9], u: &mut [f32], stride: usize) {
+fn transform_lanes<const T: usize, const M: usize, W: Points<T, M>>(
+    g: [&[f32]; 9],
+    u: &mut [f32],
+    stride: usize,
+    rows: std::ops::Range<usize>,
+) {
     const L: usize = 16;
     let len = g[0].len();
     let mut l0 = 0;
@@ -522,27 +488,27 @@ fn transform_lanes<const R0: usize, const R1: usize>(g: [&[f32]; 9], u: &mut [f3
                 Err(_) => xk[..n].copy_from_slice(&g[k][l0..l0 + n]),
             }
         }
-        let col = |a: usize, b: usize, c: usize| -> [[f32; L]; 6] {
-            let mut o = [[0.0f32; L]; 6];
+        let col = |a: usize, b: usize, c: usize| -> [[f32; L]; T] {
+            let mut o = [[0.0f32; L]; T];
             for l in 0..L {
-                let r = g3(x[a][l], x[b][l], x[c][l]);
-                for i in R0..R1 {
-                    o[i][l] = r[i];
+                let r = W::g(x[a][l], x[b][l], x[c][l]);
+                for (oi, ri) in o.iter_mut().zip(r) {
+                    oi[l] = ri;
                 }
             }
             o
         };
         let (c0, c1, c2) = (col(0, 3, 6), col(1, 4, 7), col(2, 5, 8));
-        for i in R0..R1 {
-            let mut r = [[0.0f32; L]; 6];
+        for i in rows.clone() {
+            let mut r = [[0.0f32; L]; T];
             for l in 0..L {
-                let v = g3(c0[i][l], c1[i][l], c2[i][l]);
-                for j in 0..6 {
-                    r[j][l] = v[j];
+                let v = W::g(c0[i][l], c1[i][l], c2[i][l]);
+                for (rj, vj) in r.iter_mut().zip(v) {
+                    rj[l] = vj;
                 }
             }
             for (j, rj) in r.iter().enumerate() {
-                let at = ((i - R0) * T + j) * stride + l0;
+                let at = ((i - rows.start) * T + j) * stride + l0;
                 match <&mut [f32; L]>::try_from(&mut u[at..at + n]) {
                     Ok(full) => *full = *rj,
                     Err(_) => u[at..at + n].copy_from_slice(&rj[..n]),
@@ -555,40 +521,21 @@ fn transform_lanes<const R0: usize, const R1: usize>(g: [&[f32]; 9], u: &mut [f3
 
 macro_rules! weight_transform_for {
     ($name:ident, $($feat:literal)?) => {
-        /// The weight transform of `g` into `u` (see [`transform_lanes`]): all
-        /// 36 points when `row` is `None`, else the six of row `row`.
+        /// The weight transform of `g` into `u` (see [`transform_lanes`]):
+        /// the points of transform rows `rows`.
         $(#[target_feature(enable = $feat)])?
-        unsafe fn $name(g: [&[f32]; 9], u: &mut [f32], stride: usize, row: Option<usize>) {
-            match row {
-                None => transform_lanes::<0, 6>(g, u, stride),
-                Some(0) => transform_lanes::<0, 1>(g, u, stride),
-                Some(1) => transform_lanes::<1, 2>(g, u, stride),
-                Some(2) => transform_lanes::<2, 3>(g, u, stride),
-                Some(3) => transform_lanes::<3, 4>(g, u, stride),
-                Some(4) => transform_lanes::<4, 5>(g, u, stride),
-                Some(5) => transform_lanes::<5, 6>(g, u, stride),
-                Some(r) => panic!("transform row {r} of 6"),
-            }
+        unsafe fn $name<const T: usize, const M: usize, W: Points<T, M>>(
+            g: [&[f32]; 9],
+            u: &mut [f32],
+            stride: usize,
+            rows: std::ops::Range<usize>,
+        ) {
+            transform_lanes::<T, M, W>(g, u, stride, rows)
         }
     };
 }
-/// The AVX-512 weight transform (see [`weight_transform_for`]'s functions).
-///
-/// # Safety
-/// The CPU has AVX-512F.
 #[cfg(target_arch = "x86_64")]
-unsafe fn weights_avx512(g: [&[f32]; 9], u: &mut [f32], stride: usize, row: Option<usize>) {
-    match row {
-        None => avx512::weights::<0, 6>(g, u, stride),
-        Some(0) => avx512::weights::<0, 1>(g, u, stride),
-        Some(1) => avx512::weights::<1, 2>(g, u, stride),
-        Some(2) => avx512::weights::<2, 3>(g, u, stride),
-        Some(3) => avx512::weights::<3, 4>(g, u, stride),
-        Some(4) => avx512::weights::<4, 5>(g, u, stride),
-        Some(5) => avx512::weights::<5, 6>(g, u, stride),
-        Some(r) => panic!("transform row {r} of 6"),
-    }
-}
+use avx512::weights as weights_avx512;
 #[cfg(target_arch = "x86_64")]
 weight_transform_for!(weights_avx2, "avx2,fma");
 weight_transform_for!(weights_portable,);
@@ -615,7 +562,7 @@ impl Winograd {
     /// Builds the layer for `weight` (`[c_out, c_in, 3, 3]`) and `kernel`,
     /// packing `U` once when `packed`, else at every forward pass; with
     /// `bf16` the products run in bf16 (the caller checks that the CPU has
-    /// AVX512_BF16 and `kernel` is the AVX-512 family).
+    /// AVX512_BF16 and `kernel` is the AVX-512 family, and `tile` is F4).
     pub(crate) fn new(
         kernel: MicroKernel,
         c_in: usize,
@@ -623,7 +570,9 @@ impl Winograd {
         weight: &[f32],
         packed: bool,
         bf16: bool,
+        tile: Tile,
     ) -> Self {
+        assert!(!bf16 || tile == Tile::F4, "bf16 products use F(4×4, 3×3)");
         let mr = kernel.mr;
         let m_panels = c_out.div_ceil(mr);
         let (depth, block, run, narrow) = if bf16 {
@@ -669,16 +618,29 @@ impl Winograd {
             narrow,
             m_panels,
             kblocks,
+            tile,
             u: UStore::Lazy(taps),
         };
         if packed {
-            let mut buf = AlignedBuf::zeroed(P * w.per_xi());
+            let points = match tile {
+                Tile::F4 => 36,
+                Tile::F6 => 64,
+            };
+            let mut buf = AlignedBuf::zeroed(points * w.per_xi());
             if let UStore::Lazy(taps) = &w.u {
-                w.pack_u(taps, buf.as_mut_slice());
+                match tile {
+                    Tile::F4 => w.pack_u::<6, 4, F4>(taps, buf.as_mut_slice()),
+                    Tile::F6 => w.pack_u::<8, 6, F6>(taps, buf.as_mut_slice()),
+                }
             }
             w.u = UStore::Packed(buf);
         }
         w
+    }
+
+    /// The tile size.
+    pub(crate) fn tile(&self) -> Tile {
+        self.tile
     }
 
     /// True when `U` is packed once (not made at every pass).
@@ -697,25 +659,30 @@ impl Winograd {
     }
 
     /// Transforms `taps` (`[m_panels][9][c_in][mr]`) and writes every `U[ξ]`
-    /// into `dst` (`36 · per_xi` floats, `ξ`-major, each in the
+    /// into `dst` (`T² · per_xi` floats, `ξ`-major, each in the
     /// micro-kernel's A-panel layout), in parallel over row panels.
-    fn pack_u(&self, taps: &[f32], dst: &mut [f32]) {
+    fn pack_u<const T: usize, const M: usize, W: Points<T, M>>(
+        &self,
+        taps: &[f32],
+        dst: &mut [f32],
+    ) {
+        let p = T * T;
         let (mr, depth, per_xi, m_panels) =
             (self.kernel.mr, self.depth, self.per_xi(), self.m_panels);
         let ptr = SharedPtr(dst.as_mut_ptr());
         let ptr = &ptr;
-        assert!(dst.len() >= P * per_xi);
+        assert!(dst.len() >= p * per_xi);
         (0..m_panels).into_par_iter().for_each_init(
-            || (Vec::new(), vec![0.0f32; P * depth * mr]),
+            || (Vec::new(), vec![0.0f32; p * depth * mr]),
             |(scratch, staged), mp| {
                 // The panel as [ξ][d][r], then each depth block to its place.
-                self.pack_panel(taps, mp, scratch, staged, depth * mr, |k0, _| k0 * mr);
-                for xi in 0..P {
+                self.pack_panel::<T, M, W>(taps, mp, scratch, staged, depth * mr, |k0, _| k0 * mr);
+                for xi in 0..p {
                     for &(k0, kc, _) in &self.kblocks {
                         let src = &staged[(xi * depth + k0) * mr..][..kc * mr];
                         let at = xi * per_xi + k0 * m_panels * mr + mp * kc * mr;
                         // SAFETY: row panel `mp` owns these kc·mr floats of U[ξ]
-                        // (below `P · per_xi`, checked above).
+                        // (below `T² · per_xi`, checked above).
                         unsafe {
                             std::ptr::copy_nonoverlapping(src.as_ptr(), ptr.0.add(at), kc * mr)
                         };
@@ -727,7 +694,7 @@ impl Winograd {
 
     /// Row panels `mp0..mp1` of every `U[ξ]` into `dst`, laid out as a `U`
     /// of only those panels (see [`UView`]); one thread.
-    fn pack_u_chunk(
+    fn pack_u_chunk<const T: usize, const M: usize, W: Points<T, M>>(
         &self,
         taps: &[f32],
         mp0: usize,
@@ -738,32 +705,39 @@ impl Winograd {
         let (mr, n) = (self.kernel.mr, mp1 - mp0);
         let per_xi = chunk_per_xi(n * mr * self.depth);
         for mp in mp0..mp1 {
-            self.pack_panel(taps, mp, scratch, dst, per_xi, |k0, kc| {
+            self.pack_panel::<T, M, W>(taps, mp, scratch, dst, per_xi, |k0, kc| {
                 k0 * n * mr + (mp - mp0) * kc * mr
             });
         }
     }
 
     /// The weight transform for this layer's ISA (see [`transform_lanes`]).
-    fn transform(&self, g: [&[f32]; 9], u: &mut [f32], stride: usize, row: Option<usize>) {
+    fn transform<const T: usize, const M: usize, W: Points<T, M>>(
+        &self,
+        g: [&[f32]; 9],
+        u: &mut [f32],
+        stride: usize,
+        rows: std::ops::Range<usize>,
+    ) {
+        assert!(rows.end <= T, "transform rows {rows:?} of {T}");
         // SAFETY: the CPU has the kernel family's ISA.
         unsafe {
             match self.kernel.isa {
                 #[cfg(target_arch = "x86_64")]
-                Isa::Avx512 => weights_avx512(g, u, stride, row),
+                Isa::Avx512 => weights_avx512::<T, M, W>(g, u, stride, rows),
                 #[cfg(target_arch = "x86_64")]
-                Isa::Avx2Fma => weights_avx2(g, u, stride, row),
-                _ => weights_portable(g, u, stride, row),
+                Isa::Avx2Fma => weights_avx2::<T, M, W>(g, u, stride, rows),
+                _ => weights_portable::<T, M, W>(g, u, stride, rows),
             }
         }
     }
 
-    /// Row `row` of the transform (`U[ξ]` for `ξ = 6·row .. 6·row + 6`) of
+    /// Row `row` of the transform (`U[ξ]` for `ξ = T·row .. T·row + T`) of
     /// depth block `(k0, kc)` of row panels `mp0..mp1` (f32 only), into `dst`
-    /// as six `U[ξ]` of `xi_stride` floats, each holding the panels' `kc·MR`
+    /// as `T` `U[ξ]` of `xi_stride` floats, each holding the panels' `kc·MR`
     /// floats one after another (a [`UView`] with `k0 = 0`).
     #[allow(clippy::too_many_arguments)]
-    fn pack_row_block(
+    fn pack_row_block<const T: usize, const M: usize, W: Points<T, M>>(
         &self,
         taps: &[f32],
         mps: std::ops::Range<usize>,
@@ -781,14 +755,14 @@ impl Winograd {
                 std::array::from_fn(|k| &taps[((mp * 9 + k) * c_in + k0) * mr..][..lanes]);
             let base = i * lanes;
             let len = (T - 1) * xi_stride + lanes;
-            self.transform(g, &mut dst[base..base + len], xi_stride, Some(row));
+            self.transform::<T, M, W>(g, &mut dst[base..base + len], xi_stride, row..row + 1);
         }
     }
 
     /// Transforms the weights of row panel `mp` (`MR` output channels):
     /// depth block `(k0, kc)` of `U[ξ]` (`kc` groups of `MR` floats, or of
     /// pair words in bf16) goes to `dst[ξ · xi_stride + at(k0, kc)..]`.
-    fn pack_panel(
+    fn pack_panel<const T: usize, const M: usize, W: Points<T, M>>(
         &self,
         taps: &[f32],
         mp: usize,
@@ -798,7 +772,8 @@ impl Winograd {
         at: impl Fn(usize, usize) -> usize,
     ) {
         let (mr, c_in) = (self.kernel.mr, self.c_in);
-        let transform = |g, u: &mut [f32], stride| self.transform(g, u, stride, None);
+        let p = T * T;
+        let transform = |g, u: &mut [f32], stride| self.transform::<T, M, W>(g, u, stride, 0..T);
         for &(k0, kc, _) in &self.kblocks {
             // Input channels of the block: kc, or up to 2·kc in bf16.
             let (c0, c1) = if self.bf16 {
@@ -812,15 +787,15 @@ impl Winograd {
             let base = at(k0, kc);
             if !self.bf16 {
                 // The lanes (ci, r) are the A panel's order: straight in place.
-                let len = (P - 1) * xi_stride + lanes;
+                let len = (p - 1) * xi_stride + lanes;
                 transform(g, &mut dst[base..base + len], xi_stride);
                 continue;
             }
             // bf16: the f32 points as [ξ][ci][r], then channel pairs to words.
             let cpad = 2 * kc * mr;
-            scratch.resize(P * cpad, 0.0);
+            scratch.resize(p * cpad, 0.0);
             transform(g, scratch, cpad);
-            for xi in 0..P {
+            for xi in 0..p {
                 let st = &mut scratch[xi * cpad..(xi + 1) * cpad];
                 st[lanes..].fill(0.0);
                 let out = &mut dst[base + xi * xi_stride..][..kc * mr];
@@ -857,7 +832,7 @@ impl Winograd {
     /// The input transform of channel `ci` over tiles `[t0, t1)` into `v`
     /// where `rows` says, with this layer's ISA.
     #[allow(clippy::too_many_arguments)]
-    fn input(
+    fn input<const T: usize, const M: usize, W: Points<T, M>>(
         &self,
         g: &Geometry<'_>,
         ci: usize,
@@ -873,17 +848,17 @@ impl Winograd {
         unsafe {
             match self.kernel.isa {
                 #[cfg(target_arch = "x86_64")]
-                Isa::Avx512 => input_avx512(g, ci, t0, t1, nr, rows, v, scratch),
+                Isa::Avx512 => input_avx512::<T, M, W>(g, ci, t0, t1, nr, rows, v, scratch),
                 #[cfg(target_arch = "x86_64")]
-                Isa::Avx2Fma => input_avx2(g, ci, t0, t1, nr, rows, v, scratch),
-                _ => input_portable(g, ci, t0, t1, nr, rows, v, scratch),
+                Isa::Avx2Fma => input_avx2::<T, M, W>(g, ci, t0, t1, nr, rows, v, scratch),
+                _ => input_portable::<T, M, W>(g, ci, t0, t1, nr, rows, v, scratch),
             }
         }
     }
 
-    /// The output transform of one channel's panel (`m`, the 36 products
+    /// The output transform of one channel's panel (`m`, the `T²` products
     /// `stride` apart) into `plane`, with this layer's ISA.
-    fn output(
+    fn output<const T: usize, const M: usize, W: Points<T, M>>(
         &self,
         m: &[f32],
         stride: usize,
@@ -896,10 +871,10 @@ impl Winograd {
         unsafe {
             match self.kernel.isa {
                 #[cfg(target_arch = "x86_64")]
-                Isa::Avx512 => output_avx512(m, stride, nr, o, plane, scratch),
+                Isa::Avx512 => output_avx512::<T, M, W>(m, stride, nr, o, plane, scratch),
                 #[cfg(target_arch = "x86_64")]
-                Isa::Avx2Fma => output_avx2(m, stride, nr, o, plane, scratch),
-                _ => output_portable(m, stride, nr, o, plane, scratch),
+                Isa::Avx2Fma => output_avx2::<T, M, W>(m, stride, nr, o, plane, scratch),
+                _ => output_portable::<T, M, W>(m, stride, nr, o, plane, scratch),
             }
         }
     }
@@ -962,7 +937,7 @@ impl Winograd {
         let local = |which: usize| VRows {
             xi_stride: 2 * nr,
             base: which * nr,
-            panel_stride: 2 * P * nr,
+            panel_stride: 2 * 36 * nr,
         };
         (0..self.depth)
             .into_par_iter()
@@ -970,14 +945,22 @@ impl Winograd {
             .for_each_init(
                 || (Vec::new(), Vec::new()),
                 |(scratch, pairbuf): &mut (Vec<f32>, Vec<f32>), d| {
-                    pairbuf.resize(2 * P * nr * panels, 0.0);
+                    pairbuf.resize(2 * 36 * nr * panels, 0.0);
                     for which in 0..2 {
                         let ci = 2 * d + which;
                         if ci < self.c_in {
-                            self.input(g, ci, t0, t1, local(which), pairbuf.as_mut_ptr(), scratch);
+                            self.input::<6, 4, F4>(
+                                g,
+                                ci,
+                                t0,
+                                t1,
+                                local(which),
+                                pairbuf.as_mut_ptr(),
+                                scratch,
+                            );
                         } else {
                             for p in 0..panels {
-                                for xi in 0..P {
+                                for xi in 0..36 {
                                     let at = local(which).at(xi, p);
                                     pairbuf[at..at + nr].fill(0.0);
                                 }
@@ -986,7 +969,7 @@ impl Winograd {
                     }
                     let rows = self.v_rows(d, tpb);
                     for p in 0..panels {
-                        for xi in 0..P {
+                        for xi in 0..36 {
                             let (lo, hi) = (local(0).at(xi, p), local(1).at(xi, p));
                             // SAFETY: pair row `d` of `V[ξ]`, panel `p`, is
                             // written by this task only and lies inside the
@@ -1019,6 +1002,25 @@ impl Winograd {
         epi: &Epilogue<'_>,
         out: &mut [f32],
     ) {
+        match self.tile {
+            Tile::F4 => self.forward_tiles::<6, 4, F4>(x, h, w, pad, fill, epi, out),
+            Tile::F6 => self.forward_tiles::<8, 6, F6>(x, h, w, pad, fill, epi, out),
+        }
+    }
+
+    /// [`Winograd::forward_image`] with the tile of `T × T` points.
+    #[allow(clippy::too_many_arguments)]
+    fn forward_tiles<const T: usize, const M: usize, W: Points<T, M>>(
+        &self,
+        x: &[f32],
+        h: usize,
+        w: usize,
+        pad: usize,
+        fill: Fill,
+        epi: &Epilogue<'_>,
+        out: &mut [f32],
+    ) {
+        let points = T * T;
         let (bias, act, residual) = (epi.bias, epi.act, epi.residual);
         let (oh, ow) = (h + 2 * pad - 2, w + 2 * pad - 2);
         let (th, tw) = (oh.div_ceil(M), ow.div_ceil(M));
@@ -1042,7 +1044,7 @@ impl Winograd {
         // block. Lazy U: blocks as large as WINO_LAZY_V_BYTES of V allows, and
         // each output-channel chunk makes its own part of U once per block.
         let panels_per_block = if lazy || self.amx {
-            let per_panel = P * self.depth * nr * std::mem::size_of::<f32>();
+            let per_panel = points * self.depth * nr * std::mem::size_of::<f32>();
             (WINO_LAZY_V_BYTES / per_panel).clamp(1, 32)
         } else {
             WINO_PANELS_PER_BLOCK
@@ -1055,11 +1057,11 @@ impl Winograd {
             .map(|&(k0, ..)| self.v_rows(k0, tpb))
             .collect();
         let block_rows = &block_rows;
-        let mut v = crate::pool::take(P * self.depth * tpb);
+        let mut v = crate::pool::take(points * self.depth * tpb);
         let m_panels = self.m_panels;
         // Output-channel chunks: one per thread, within bounds (a larger
         // chunk reads each B panel for more rows; the products' buffer is
-        // `group · 36 · chunk · NR` floats and should stay in L2). At least
+        // `group · T² · chunk · NR` floats and should stay in L2). At least
         // one panel: `m_panels ≥ 1` (c_out > 0 is checked at build).
         let chunk_panels = m_panels
             .div_ceil(rayon::current_num_threads().max(1))
@@ -1076,7 +1078,7 @@ impl Winograd {
         let chunk_rows = chunk_panels * mr;
         let plane_len = oh * ow;
         let stride = chunk_rows * nr;
-        let m_len = P * stride;
+        let m_len = points * stride;
         // Panels whose products a task keeps at once: as many as the L2
         // holds (each U panel is then read once for all of them), at most
         // WINO_PANELS_PER_GROUP.
@@ -1101,11 +1103,11 @@ impl Winograd {
             let kc_max = self.kblocks.iter().map(|b| b.1).max().unwrap_or(0);
             T * chunk_per_xi(chunk_rows * kc_max)
         } else {
-            P * chunk_per_xi(chunk_rows * self.depth)
+            points * chunk_per_xi(chunk_rows * self.depth)
         };
         // AMX: the chunk's U as A tiles, [ξ][16-row block][16-pair block].
         let amx_len = if self.amx {
-            P * chunk_rows * self.depth
+            points * chunk_rows * self.depth
         } else {
             0
         };
@@ -1125,7 +1127,7 @@ impl Winograd {
                     .into_par_iter()
                     .with_min_len(8)
                     .for_each_init(Vec::new, |scratch, ci| {
-                        self.input(&g, ci, t0, t1, self.v_rows(ci, tpb), vp.0, scratch);
+                        self.input::<T, M, W>(&g, ci, t0, t1, self.v_rows(ci, tpb), vp.0, scratch);
                     });
             }
 
@@ -1164,7 +1166,7 @@ impl Winograd {
                                     act,
                                     residual: residual.map(|rs| &rs[co * plane_len..][..plane_len]),
                                 };
-                                self.output(&m[r * nr..], stride, &o, plane, scratch);
+                                self.output::<T, M, W>(&m[r * nr..], stride, &o, plane, scratch);
                             }
                         };
                         if row_blocks {
@@ -1179,7 +1181,7 @@ impl Winograd {
                             for (bi, &(k0, kc, _)) in self.kblocks.iter().enumerate() {
                                 let per_xi = chunk_per_xi(n * mr * kc);
                                 for row in 0..T {
-                                    self.pack_row_block(
+                                    self.pack_row_block::<T, M, W>(
                                         taps,
                                         mp0..mp1,
                                         k0,
@@ -1229,7 +1231,13 @@ impl Winograd {
                             },
                             UStore::Lazy(taps) => {
                                 PACK_SCRATCH.with(|ps| {
-                                    self.pack_u_chunk(taps, mp0, mp1, u_chunk, &mut ps.borrow_mut())
+                                    self.pack_u_chunk::<T, M, W>(
+                                        taps,
+                                        mp0,
+                                        mp1,
+                                        u_chunk,
+                                        &mut ps.borrow_mut(),
+                                    )
                                 });
                                 UView {
                                     u: u_chunk,
@@ -1241,7 +1249,7 @@ impl Winograd {
                         };
                         let (nj, nkk) = (rows / amx::ROWS, self.depth / amx::COLS);
                         let tiles = if self.amx {
-                            for xi in 0..P {
+                            for xi in 0..points {
                                 let dst = &mut a_tiles[xi * nj * nkk * amx::TILE..];
                                 for &(k0, kc, _) in &self.kblocks {
                                     for mp in mp0..mp1 {
@@ -1260,7 +1268,7 @@ impl Winograd {
                         // panels.
                         for g0 in (0..panels).step_by(group) {
                             let g1 = (g0 + group).min(panels);
-                            for xi in 0..P {
+                            for xi in 0..points {
                                 for (bi, &(k0, kc, _)) in self.kblocks.iter().enumerate() {
                                     if let Some(tiles) = &tiles {
                                         for p in g0..g1 {
@@ -1347,6 +1355,35 @@ mod tests {
 
     /// The AVX-512 weight transform gives the generic one's bits, for all
     /// rows and each single row, with full and partial lane blocks.
+    fn avx512_weights_match<const T: usize, const M: usize, W: Points<T, M>>() {
+        let mut rng = crate::Rng::new(77);
+        for len in [1, 15, 16, 17, 40, 64] {
+            let taps: Vec<Vec<f32>> = (0..9).map(|_| rng.normal_vec(len, 1.0)).collect();
+            let g: [&[f32]; 9] = std::array::from_fn(|k| taps[k].as_slice());
+            let stride = len + 3;
+            let mut generic = vec![0.0f32; T * T * stride];
+            transform_lanes::<T, M, W>(g, &mut generic, stride, 0..T);
+            let all = std::iter::once(0..T).chain((0..T).map(|r| r..r + 1));
+            for rows in all {
+                let mut fast = vec![f32::NAN; rows.len() * T * stride];
+                // SAFETY: the CPU has AVX-512F (checked by the caller).
+                unsafe { weights_avx512::<T, M, W>(g, &mut fast, stride, rows.clone()) };
+                let first = rows.start * T;
+                for k in 0..rows.len() * T {
+                    let (a, b) = (
+                        &fast[k * stride..][..len],
+                        &generic[(first + k) * stride..][..len],
+                    );
+                    assert!(
+                        a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits()),
+                        "T {T}, len {len}, rows {rows:?}, point {}",
+                        first + k
+                    );
+                }
+            }
+        }
+    }
+
     #[test]
     #[cfg(target_arch = "x86_64")]
     fn avx512_weight_transform_matches_generic_bits() {
@@ -1354,31 +1391,7 @@ mod tests {
             eprintln!("SKIPPED: AVX-512 weight transform (the CPU lacks AVX-512)");
             return;
         }
-        let mut rng = crate::Rng::new(77);
-        for len in [1, 15, 16, 17, 40, 64] {
-            let taps: Vec<Vec<f32>> = (0..9).map(|_| rng.normal_vec(len, 1.0)).collect();
-            let g: [&[f32]; 9] = std::array::from_fn(|k| taps[k].as_slice());
-            let stride = len + 3;
-            let mut generic = vec![0.0f32; P * stride];
-            transform_lanes::<0, 6>(g, &mut generic, stride);
-            for row in [None, Some(0), Some(1), Some(2), Some(3), Some(4), Some(5)] {
-                let rows = if row.is_some() { 1 } else { T };
-                let mut fast = vec![f32::NAN; rows * T * stride];
-                // SAFETY: the CPU has AVX-512F (checked above).
-                unsafe { weights_avx512(g, &mut fast, stride, row) };
-                let first = row.unwrap_or(0) * T;
-                for k in 0..rows * T {
-                    let (a, b) = (
-                        &fast[k * stride..][..len],
-                        &generic[(first + k) * stride..][..len],
-                    );
-                    assert!(
-                        a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits()),
-                        "len {len}, row {row:?}, point {}",
-                        first + k
-                    );
-                }
-            }
-        }
+        avx512_weights_match::<6, 4, F4>();
+        avx512_weights_match::<8, 6, F6>();
     }
 }

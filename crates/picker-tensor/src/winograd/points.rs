@@ -1,0 +1,190 @@
+//! The transform matrices of the two Winograd tile sizes, written once for
+//! every kind of lane ([`Arith`]: one `f32`, or a vector of them), so the
+//! generic transforms and the intrinsics ones do the same operations in the
+//! same order.
+//!
+//! - [`F4`]: F(4×4, 3×3), 6×6 input tiles, the points 0, ±1, ±2, ∞.
+//! - [`F6`]: F(6×6, 3×3), 8×8 input tiles, the points 0, ±1, ±2, ±½, ∞
+//!   (Lavin & Gray 2016; the points Barabasz et al. 2018 found the most
+//!   accurate in f32). 64 products per 36 outputs instead of 36 per 16: 21%
+//!   fewer multiplications, for about twice F4's rounding error (measured on a
+//!   256-channel layer with outputs of standard deviation 1.4: max 5.6e-5 vs
+//!   3.5e-5 against f64).
+
+/// The arithmetic the transforms need, for one lane type.
+pub(crate) trait Arith: Copy {
+    /// `self + o`.
+    fn add(self, o: Self) -> Self;
+    /// `self − o`.
+    fn sub(self, o: Self) -> Self;
+    /// `self · k`.
+    fn mul(self, k: f32) -> Self;
+}
+
+impl Arith for f32 {
+    #[inline(always)]
+    fn add(self, o: Self) -> Self {
+        self + o
+    }
+    #[inline(always)]
+    fn sub(self, o: Self) -> Self {
+        self - o
+    }
+    #[inline(always)]
+    fn mul(self, k: f32) -> Self {
+        self * k
+    }
+}
+
+/// One tile size: `T` points per axis of the transformed tile, `M` outputs
+/// per tile side (`T = M + 2` for a 3×3 kernel).
+pub(crate) trait Points<const T: usize, const M: usize> {
+    /// `Bᵀ d`: one axis of the input transform.
+    fn bt<A: Arith>(d: [A; T]) -> [A; T];
+    /// `Aᵀ m`: one axis of the output transform.
+    fn at<A: Arith>(m: [A; T]) -> [A; M];
+    /// `G x` for one column `(x0, x1, x2)` of a 3×3 kernel.
+    fn g<A: Arith>(x0: A, x1: A, x2: A) -> [A; T];
+}
+
+/// F(4×4, 3×3).
+pub(crate) struct F4;
+
+impl Points<6, 4> for F4 {
+    #[inline(always)]
+    fn bt<A: Arith>(d: [A; 6]) -> [A; 6] {
+        [
+            d[0].mul(4.0).sub(d[2].mul(5.0)).add(d[4]),
+            d[1].mul(-4.0).sub(d[2].mul(4.0)).add(d[3]).add(d[4]),
+            d[1].mul(4.0).sub(d[2].mul(4.0)).sub(d[3]).add(d[4]),
+            d[1].mul(-2.0).sub(d[2]).add(d[3].mul(2.0)).add(d[4]),
+            d[1].mul(2.0).sub(d[2]).sub(d[3].mul(2.0)).add(d[4]),
+            d[1].mul(4.0).sub(d[3].mul(5.0)).add(d[5]),
+        ]
+    }
+
+    #[inline(always)]
+    fn at<A: Arith>(m: [A; 6]) -> [A; 4] {
+        [
+            m[0].add(m[1]).add(m[2]).add(m[3]).add(m[4]),
+            m[1].sub(m[2]).add(m[3].sub(m[4]).mul(2.0)),
+            m[1].add(m[2]).add(m[3].add(m[4]).mul(4.0)),
+            m[1].sub(m[2]).add(m[3].sub(m[4]).mul(8.0)).add(m[5]),
+        ]
+    }
+
+    /// `G` (6×3) has the rows `[¼ 0 0] [−⅙ −⅙ −⅙] [−⅙ ⅙ −⅙] [1/24 1/12 ⅙]
+    /// [1/24 −1/12 ⅙] [0 0 1]`.
+    #[inline(always)]
+    fn g<A: Arith>(x0: A, x1: A, x2: A) -> [A; 6] {
+        let (a, b) = (x0.add(x2), x1);
+        let c = x0.mul(1.0 / 24.0).add(x2.mul(1.0 / 6.0));
+        [
+            x0.mul(0.25),
+            a.add(b).mul(-(1.0 / 6.0)),
+            a.sub(b).mul(-(1.0 / 6.0)),
+            c.add(b.mul(1.0 / 12.0)),
+            c.sub(b.mul(1.0 / 12.0)),
+            x2,
+        ]
+    }
+}
+
+/// F(6×6, 3×3).
+pub(crate) struct F6;
+
+impl Points<8, 6> for F6 {
+    /// `Bᵀ` (8×8) has the rows `[1 0 −21/4 0 21/4 0 −1 0]`,
+    /// `[0 ±1 1 ∓17/4 −17/4 ±1 1 0]`, `[0 ±½ ¼ ∓5/2 −5/4 ±2 1 0]`,
+    /// `[0 ±2 4 ∓5/2 −5 ±½ 1 0]` and `[0 −1 0 21/4 0 −21/4 0 1]`.
+    #[inline(always)]
+    fn bt<A: Arith>(d: [A; 8]) -> [A; 8] {
+        let e1 = d[2].add(d[6]).sub(d[4].mul(4.25));
+        let o1 = d[1].add(d[5]).sub(d[3].mul(4.25));
+        let e2 = d[2].mul(0.25).sub(d[4].mul(1.25)).add(d[6]);
+        let o2 = d[1].mul(0.5).sub(d[3].mul(2.5)).add(d[5].mul(2.0));
+        let e3 = d[2].mul(4.0).sub(d[4].mul(5.0)).add(d[6]);
+        let o3 = d[1].mul(2.0).sub(d[3].mul(2.5)).add(d[5].mul(0.5));
+        [
+            d[0].sub(d[6]).add(d[4].sub(d[2]).mul(5.25)),
+            e1.add(o1),
+            e1.sub(o1),
+            e2.add(o2),
+            e2.sub(o2),
+            e3.add(o3),
+            e3.sub(o3),
+            d[7].sub(d[1]).add(d[3].sub(d[5]).mul(5.25)),
+        ]
+    }
+
+    /// `Aᵀ` (6×8) has the rows `[1 1 1 1 1 1 1 0]` and
+    /// `[0 1 (−1)ⁱ 2ⁱ (−2)ⁱ 2⁻ⁱ (−½)ⁱ δᵢ₅]` for `i = 1..6`.
+    #[inline(always)]
+    fn at<A: Arith>(m: [A; 8]) -> [A; 6] {
+        let (a, b) = (m[1].add(m[2]), m[1].sub(m[2]));
+        let (c, d) = (m[3].add(m[4]), m[3].sub(m[4]));
+        let (e, f) = (m[5].add(m[6]), m[5].sub(m[6]));
+        [
+            m[0].add(a).add(c).add(e),
+            b.add(d.mul(2.0)).add(f.mul(0.5)),
+            a.add(c.mul(4.0)).add(e.mul(0.25)),
+            b.add(d.mul(8.0)).add(f.mul(0.125)),
+            a.add(c.mul(16.0)).add(e.mul(0.0625)),
+            b.add(d.mul(32.0)).add(f.mul(0.03125)).add(m[7]),
+        ]
+    }
+
+    /// `G` (8×3) has the rows `[1 0 0] [−2/9 ∓2/9 −2/9] [1/90 ±1/45 2/45]
+    /// [32/45 ±16/45 8/45] [0 0 1]`.
+    #[inline(always)]
+    fn g<A: Arith>(x0: A, x1: A, x2: A) -> [A; 8] {
+        let p = x0.add(x2);
+        let c1 = x0.mul(1.0 / 90.0).add(x2.mul(2.0 / 45.0));
+        let c2 = x0.mul(32.0 / 45.0).add(x2.mul(8.0 / 45.0));
+        [
+            x0,
+            p.add(x1).mul(-(2.0 / 9.0)),
+            p.sub(x1).mul(-(2.0 / 9.0)),
+            c1.add(x1.mul(1.0 / 45.0)),
+            c1.sub(x1.mul(1.0 / 45.0)),
+            c2.add(x1.mul(16.0 / 45.0)),
+            c2.sub(x1.mul(16.0 / 45.0)),
+            x2,
+        ]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `Aᵀ [(G g) ⊙ (Bᵀ d)]` is the 1-D correlation of `d` with `g`, in f64
+    /// arithmetic to f32 rounding (the exact identity the 2-D transform is
+    /// the square of).
+    fn correlates<const T: usize, const M: usize, W: Points<T, M>>() {
+        let mut rng = crate::Rng::new(5);
+        for _ in 0..50 {
+            let d: [f32; T] = std::array::from_fn(|_| rng.normal());
+            let g: [f32; 3] = std::array::from_fn(|_| rng.normal());
+            let (u, v) = (W::g(g[0], g[1], g[2]), W::bt(d));
+            let y = W::at(std::array::from_fn(|k| u[k] * v[k]));
+            for (i, &yi) in y.iter().enumerate() {
+                let exact: f64 = (0..3).map(|k| d[i + k] as f64 * g[k] as f64).sum();
+                assert!(
+                    (yi as f64 - exact).abs() < 1e-5 * (1.0 + exact.abs()),
+                    "output {i}: {yi} vs {exact}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn f4_points_correlate() {
+        correlates::<6, 4, F4>();
+    }
+
+    #[test]
+    fn f6_points_correlate() {
+        correlates::<8, 6, F6>();
+    }
+}
