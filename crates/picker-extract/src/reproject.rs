@@ -86,8 +86,8 @@ impl Coords {
     }
 
     /// The texture-square area per pixel at which the texture is sized: the
-    /// [`DENSITY_QUANTILE`] quantile, i.e. the density of the best-seen part
-    /// of the material (the closest pixels show the finest detail).
+    /// [`DENSITY_QUANTILE`] quantile of the picked pixels' texture areas (the
+    /// median: half the pixels see the texture at least this finely).
     pub fn sizing_area(&self, mask: &[bool]) -> Option<f32> {
         self.area_quantile(mask, DENSITY_QUANTILE)
     }
@@ -116,8 +116,10 @@ impl Coords {
     }
 }
 
-/// Quantile of the per-pixel texture area that sizes the texture (0.1: the
-/// best-resolved tenth of the picked pixels gets about one texel per pixel).
+/// Quantile of the per-pixel texture area that sizes the texture (0.5: the
+/// median picked pixel gets about one texel). Sized finer, the texture is
+/// mostly interpolated: textures 1.5× and 2× this side scored 36.7 and 35.7 dB
+/// against 38.8 dB (`picker eval`, seed 4242, ground-truth elements).
 pub const DENSITY_QUANTILE: f32 = 0.5;
 
 /// The texture side that gives about one texel per picked pixel at the
