@@ -54,7 +54,7 @@ pub use activation::Activation;
 /// The low-memory mode, `PICKER_MEMORY=low` in the environment (read when
 /// layers are built and when a network runs): 3×3 layers keep only their
 /// 3×3 weights and make the Winograd ones at every pass
-/// ([`ConvAlgorithm::WinogradLowMemory`]), and networks with several towers
+/// ([`ConvAlgorithm::WinogradLowMemoryAutoTile`]), and networks with several towers
 /// run them one after another, so that one tower's activations are live at a
 /// time. Slower (IRN at 240×320 on 2 cores: ~10–15%), for machines where
 /// memory is the limit.

@@ -43,7 +43,8 @@ fn tolerance(algo: ConvAlgorithm) -> Tolerance {
         ConvAlgorithm::Winograd
         | ConvAlgorithm::WinogradLowMemory
         | ConvAlgorithm::Winograd6
-        | ConvAlgorithm::Winograd6LowMemory => Tolerance::WINOGRAD_F32,
+        | ConvAlgorithm::Winograd6LowMemory
+        | ConvAlgorithm::WinogradLowMemoryAutoTile => Tolerance::WINOGRAD_F32,
         a if a.is_bf16() => Tolerance::WINOGRAD_BF16,
         _ => Tolerance::KERNEL_F32,
     }
@@ -244,13 +245,14 @@ fn auto_algorithm_choice() {
         (ConvAlgorithm::Auto, ConvAlgorithm::Winograd),
         (
             ConvAlgorithm::AutoLowMemory,
-            ConvAlgorithm::WinogradLowMemory,
+            ConvAlgorithm::WinogradLowMemoryAutoTile,
         ),
     ] {
         let pick = |s: ConvSpec| pick_with(auto, s);
         if std::env::var_os("PICKER_WINOGRAD_WEIGHTS").is_none()
             && std::env::var_os("PICKER_MEMORY").is_none()
             && std::env::var_os("PICKER_PRECISION").is_none()
+            && std::env::var_os("PICKER_WINOGRAD_TILE").is_none()
         {
             assert_eq!(pick(ConvSpec::square(256, 256, 3, 1, 0)), winograd);
         }

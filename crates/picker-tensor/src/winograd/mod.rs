@@ -132,8 +132,9 @@ pub(crate) struct Winograd {
     m_panels: usize,
     /// `(k0, kc, offset)` of each depth block inside one `U[ξ]` (in depth units).
     kblocks: Vec<(usize, usize, usize)>,
-    /// The tile size (F4 for bf16).
-    tile: Tile,
+    /// The tile size (F4 for bf16), or `None` to choose it per image
+    /// ([`Tile::for_output`]; lazy f32 `U` only).
+    tile: Option<Tile>,
     /// `U[ξ]`, `c_out × c_in`, in the micro-kernel's A-panel layout.
     u: UStore,
 }
@@ -145,6 +146,28 @@ pub(crate) enum Tile {
     F4,
     /// F(6×6, 3×3): 64 products per 36 outputs.
     F6,
+}
+
+impl Tile {
+    /// The tile for an `oh × ow` output in panels of `nr` tiles, with lazy
+    /// `U`: F4 where its tiles fit in [`WINO_ROW_BLOCK_PANELS`] panels (its
+    /// `U` is then made in L2 row by row, and F6's emptier panels and larger
+    /// weight transform lose: the EnvMap's 30×40 blocks), or where F6 would
+    /// not run fewer product columns; else F6.
+    ///
+    /// Measured on an Intel Xeon with AMX, 2 threads, interleaved
+    /// `picker bench` (PICKER_WINOGRAD_TILE=4 / 6), in ms: EnvMap 240×320
+    /// (30×40 blocks) 21.3, 22.7 with F4 vs 22.9, 23.4 with F6; IRN 240×320
+    /// (60×80) 1455, 1471 vs 1358, 1412; EnvMap 480×640 (60×80) 92.9, 88.5
+    /// vs 82.3, 81.4; IRN 480×640 (120×160) 5487, 5282 vs 5279, 5091.
+    pub(crate) fn for_output(oh: usize, ow: usize, nr: usize) -> Tile {
+        let panels = |m: usize| (oh.div_ceil(m) * ow.div_ceil(m)).div_ceil(nr);
+        if panels(4) <= WINO_ROW_BLOCK_PANELS || panels(6) * 64 >= panels(4) * 36 {
+            Tile::F4
+        } else {
+            Tile::F6
+        }
+    }
 }
 
 /// Where one forward pass reads its input and writes its output.
@@ -563,6 +586,8 @@ impl Winograd {
     /// packing `U` once when `packed`, else at every forward pass; with
     /// `bf16` the products run in bf16 (the caller checks that the CPU has
     /// AVX512_BF16 and `kernel` is the AVX-512 family, and `tile` is F4).
+    /// `tile: None` chooses the tile per image ([`Tile::for_output`]) and
+    /// needs lazy f32 `U`.
     pub(crate) fn new(
         kernel: MicroKernel,
         c_in: usize,
@@ -570,9 +595,16 @@ impl Winograd {
         weight: &[f32],
         packed: bool,
         bf16: bool,
-        tile: Tile,
+        tile: Option<Tile>,
     ) -> Self {
-        assert!(!bf16 || tile == Tile::F4, "bf16 products use F(4×4, 3×3)");
+        assert!(
+            !bf16 || tile == Some(Tile::F4),
+            "bf16 products use F(4×4, 3×3)"
+        );
+        assert!(
+            tile.is_some() || !packed,
+            "packed U needs a fixed tile size"
+        );
         let mr = kernel.mr;
         let m_panels = c_out.div_ceil(mr);
         let (depth, block, run, narrow) = if bf16 {
@@ -621,7 +653,7 @@ impl Winograd {
             tile,
             u: UStore::Lazy(taps),
         };
-        if packed {
+        if let (true, Some(tile)) = (packed, tile) {
             let points = match tile {
                 Tile::F4 => 36,
                 Tile::F6 => 64,
@@ -638,8 +670,8 @@ impl Winograd {
         w
     }
 
-    /// The tile size.
-    pub(crate) fn tile(&self) -> Tile {
+    /// The tile size, `None` when it is chosen per image.
+    pub(crate) fn tile(&self) -> Option<Tile> {
         self.tile
     }
 
@@ -1002,7 +1034,11 @@ impl Winograd {
         epi: &Epilogue<'_>,
         out: &mut [f32],
     ) {
-        match self.tile {
+        let (oh, ow) = (h + 2 * pad - 2, w + 2 * pad - 2);
+        let tile = self
+            .tile
+            .unwrap_or_else(|| Tile::for_output(oh, ow, self.kernel.nr));
+        match tile {
             Tile::F4 => self.forward_tiles::<6, 4, F4>(x, h, w, pad, fill, epi, out),
             Tile::F6 => self.forward_tiles::<8, 6, F6>(x, h, w, pad, fill, epi, out),
         }
@@ -1382,6 +1418,20 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// The per-image tile: F4 where its tiles fit the row-block panels (a
+    /// 30×40 map: 80 tiles, 2 panels of 48) or F6 would not save product
+    /// columns (a 4×4 or 8×8 output: one panel either way), F6 on the 60×80
+    /// and 120×160 maps (7 and 25 F4 panels; 9216 vs 12096 and 36864 vs
+    /// 43200 columns).
+    #[test]
+    fn tile_choice_per_image() {
+        assert_eq!(Tile::for_output(30, 40, 48), Tile::F4);
+        assert_eq!(Tile::for_output(4, 4, 48), Tile::F4);
+        assert_eq!(Tile::for_output(8, 8, 48), Tile::F4);
+        assert_eq!(Tile::for_output(60, 80, 48), Tile::F6);
+        assert_eq!(Tile::for_output(120, 160, 48), Tile::F6);
     }
 
     #[test]
