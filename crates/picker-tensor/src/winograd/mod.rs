@@ -12,10 +12,10 @@
 //! 7.6–8.1 ms packed and 8.1 ms lazy, against F(4×4)'s 7.8–8.0 ms packed: the
 //! products fall by 11% in micro-kernel samples, but its 8×8 output transform
 //! spills registers and its column phases take gathers, and its packed `U`
-//! (7.1× the 3×3 weights) streams from memory. The MSN at 240×320 ran in
-//! 229–231 ms with lazy F(6×6) against 224–234 ms with packed F(4×4). So
-//! [`crate::ConvAlgorithm::Auto`] keeps F(4×4) (`PICKER_WINOGRAD_TILE=6`
-//! switches it, to measure on other CPUs).
+//! (7.1× the 3×3 weights) streams from memory, so packed `U` stays F(4×4).
+//! With lazy `U` (every network's default) F(6×6) wins on maps too large for
+//! F(4×4)'s row blocks: [`Tile::for_output`] chooses per image, and
+//! `PICKER_WINOGRAD_TILE=4|6` overrides ([`crate::ConvAlgorithm::Auto`]).
 //!
 //! A forward pass walks the output tiles in blocks of `NR`-wide panels
 //! ([`WINO_PANELS_PER_BLOCK`]), so that no transformed tensor ever leaves the
@@ -149,6 +149,20 @@ pub(crate) enum Tile {
 }
 
 impl Tile {
+    /// Output pixels per tile side.
+    pub(crate) fn outputs(self) -> usize {
+        match self {
+            Tile::F4 => 4,
+            Tile::F6 => 6,
+        }
+    }
+
+    /// Points of the transformed tile (`U[ξ]`, `V[ξ]` per layer).
+    pub(crate) fn points(self) -> usize {
+        let t = self.outputs() + 2;
+        t * t
+    }
+
     /// The tile for an `oh × ow` output in panels of `nr` tiles, with lazy
     /// `U`: F4 where its tiles fit in [`WINO_ROW_BLOCK_PANELS`] panels (its
     /// `U` is then made in L2 row by row, and F6's emptier panels and larger
@@ -161,8 +175,9 @@ impl Tile {
     /// (60×80) 1455, 1471 vs 1358, 1412; EnvMap 480×640 (60×80) 92.9, 88.5
     /// vs 82.3, 81.4; IRN 480×640 (120×160) 5487, 5282 vs 5279, 5091.
     pub(crate) fn for_output(oh: usize, ow: usize, nr: usize) -> Tile {
-        let panels = |m: usize| (oh.div_ceil(m) * ow.div_ceil(m)).div_ceil(nr);
-        if panels(4) <= WINO_ROW_BLOCK_PANELS || panels(6) * 64 >= panels(4) * 36 {
+        let panels = |t: Tile| (oh.div_ceil(t.outputs()) * ow.div_ceil(t.outputs())).div_ceil(nr);
+        let columns = |t: Tile| panels(t) * t.points();
+        if panels(Tile::F4) <= WINO_ROW_BLOCK_PANELS || columns(Tile::F6) >= columns(Tile::F4) {
             Tile::F4
         } else {
             Tile::F6
@@ -654,11 +669,7 @@ impl Winograd {
             u: UStore::Lazy(taps),
         };
         if let (true, Some(tile)) = (packed, tile) {
-            let points = match tile {
-                Tile::F4 => 36,
-                Tile::F6 => 64,
-            };
-            let mut buf = AlignedBuf::zeroed(points * w.per_xi());
+            let mut buf = AlignedBuf::zeroed(tile.points() * w.per_xi());
             if let UStore::Lazy(taps) = &w.u {
                 match tile {
                     Tile::F4 => w.pack_u::<6, 4, F4>(taps, buf.as_mut_slice()),
@@ -963,13 +974,13 @@ impl Winograd {
     /// interleaved into pair words at its rows of `v` (a missing odd channel
     /// is zero).
     fn input_bf16(&self, g: &Geometry<'_>, t0: usize, t1: usize, tpb: usize, v: &SharedPtr) {
-        let nr = self.kernel.nr;
+        let (nr, points) = (self.kernel.nr, Tile::F4.points());
         let panels = (t1 - t0).div_ceil(nr);
         // The task buffer holds [panel][ξ][channel of the pair][nr].
         let local = |which: usize| VRows {
             xi_stride: 2 * nr,
             base: which * nr,
-            panel_stride: 2 * 36 * nr,
+            panel_stride: 2 * points * nr,
         };
         (0..self.depth)
             .into_par_iter()
@@ -977,7 +988,7 @@ impl Winograd {
             .for_each_init(
                 || (Vec::new(), Vec::new()),
                 |(scratch, pairbuf): &mut (Vec<f32>, Vec<f32>), d| {
-                    pairbuf.resize(2 * 36 * nr * panels, 0.0);
+                    pairbuf.resize(2 * points * nr * panels, 0.0);
                     for which in 0..2 {
                         let ci = 2 * d + which;
                         if ci < self.c_in {
@@ -992,7 +1003,7 @@ impl Winograd {
                             );
                         } else {
                             for p in 0..panels {
-                                for xi in 0..36 {
+                                for xi in 0..points {
                                     let at = local(which).at(xi, p);
                                     pairbuf[at..at + nr].fill(0.0);
                                 }
@@ -1001,7 +1012,7 @@ impl Winograd {
                     }
                     let rows = self.v_rows(d, tpb);
                     for p in 0..panels {
-                        for xi in 0..36 {
+                        for xi in 0..points {
                             let (lo, hi) = (local(0).at(xi, p), local(1).at(xi, p));
                             // SAFETY: pair row `d` of `V[ξ]`, panel `p`, is
                             // written by this task only and lies inside the
