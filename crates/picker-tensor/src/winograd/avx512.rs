@@ -173,11 +173,12 @@ pub(super) unsafe fn input<const T: usize, const M: usize, W: Points<T, M>>(
                     *z.add(i * zs + x) = *oi;
                 }
             }
-            // The column pass reads whole groups of 16 tiles, one past the run.
-            let zlen = 16 * M * (len.div_ceil(16) + 1);
-            for i in 0..T {
-                std::ptr::write_bytes(z.add(i * zs + nx), 0, zlen - nx);
-            }
+            // The column pass reads whole groups of 16 tiles, one past the
+            // run: past `nx` it reads what earlier rows left in `z` (zero
+            // when the scratch was made), only ever into lanes of tiles past
+            // the run, which are not stored (tile `k < len` reads
+            // `z[M·k + c] ≤ z[M·len + 1]`, below `nx`). Zeroing that tail
+            // here was 5% of a 60×80 F(6×6) layer (one `memset` per row).
             // V[T·i + j] = Σ_c Bᵀ[j][c] z_i[M·k + c] for the run's tiles k.
             for i in 0..T {
                 let zi = z.add(i * zs);
@@ -387,6 +388,21 @@ pub(super) unsafe fn weights<const T: usize, const M: usize, W: Points<T, M>>(
         "weight transform output too short"
     );
     let up = u.as_mut_ptr();
+    if rows.len() == 1 {
+        // One row (lazy `U` made row by row): with the row a constant, only
+        // its point of each column transform is computed.
+        match rows.start {
+            0 => return weights_row::<T, M, W, 0>(g, up, stride, len),
+            1 => return weights_row::<T, M, W, 1>(g, up, stride, len),
+            2 => return weights_row::<T, M, W, 2>(g, up, stride, len),
+            3 => return weights_row::<T, M, W, 3>(g, up, stride, len),
+            4 => return weights_row::<T, M, W, 4>(g, up, stride, len),
+            5 => return weights_row::<T, M, W, 5>(g, up, stride, len),
+            6 if T > 6 => return weights_row::<T, M, W, 6>(g, up, stride, len),
+            7 if T > 7 => return weights_row::<T, M, W, 7>(g, up, stride, len),
+            _ => {}
+        }
+    }
     let mut l0 = 0;
     while l0 < len {
         let n = (len - l0).min(16);
@@ -407,6 +423,34 @@ pub(super) unsafe fn weights<const T: usize, const M: usize, W: Points<T, M>>(
                 let at = ((i - rows.start) * T + j) * stride + l0;
                 _mm512_mask_storeu_ps(up.add(at), mask, rj.0);
             }
+        }
+        l0 += n;
+    }
+}
+
+/// Row `I` of [`weights`] (its `T` points `T·I + j` at `j·stride`): the same
+/// operations for the points it keeps (the column transforms' other points
+/// are never computed), so the same bits.
+///
+/// # Safety
+/// As [`weights`], with `I < T` and `up` holding `(T − 1)·stride + len` floats.
+#[inline(always)]
+unsafe fn weights_row<const T: usize, const M: usize, W: Points<T, M>, const I: usize>(
+    g: [&[f32]; 9],
+    up: *mut f32,
+    stride: usize,
+    len: usize,
+) {
+    let mut l0 = 0;
+    while l0 < len {
+        let n = (len - l0).min(16);
+        let mask: __mmask16 = if n == 16 { !0 } else { (1u16 << n) - 1 };
+        let x: [Z; 9] =
+            std::array::from_fn(|k| Z(_mm512_maskz_loadu_ps(mask, g[k].as_ptr().add(l0))));
+        let col = |c: usize| W::g(x[c], x[c + 3], x[c + 6])[I];
+        let r = W::g(col(0), col(1), col(2));
+        for (j, rj) in r.iter().enumerate() {
+            _mm512_mask_storeu_ps(up.add(j * stride + l0), mask, rj.0);
         }
         l0 += n;
     }
