@@ -2,7 +2,7 @@
 //! `T × T` points for `M × M` outputs), written with intrinsics: the generic
 //! transforms (`super::input_channel_body`, `super::output_panel_body`) spend
 //! most of their time splitting rows into column phases and back one float at
-//! a time; here those are permutes (F4) or gathers (F6) per 16 tiles, and
+//! a time; here those are permutes per 16 tiles, and
 //! each pass reads its rows where they lie.
 //!
 //! **Input** (one channel, one block of tiles), per run of tiles in one tile
@@ -11,13 +11,13 @@
 //! reflected row, padding columns are computed from their source column),
 //! giving `T` rows `z_i`; for 16 tiles at once, the `T` columns of each tile
 //! (`z_i[M·k + c]`) are taken from `z_i` (F4: its four column phases by
-//! `vpermt2ps`; F6: one gather per column), and `Bᵀ` along the columns writes
+//! `vpermt2ps`; F6: its six phases by three `vpermt2ps` each), and `Bᵀ` along the columns writes
 //! `V[T·i + j]`.
 //!
 //! **Output** (one output channel, one panel): `Aᵀ` over the rows and then
 //! the columns of the `T²` products, 16 tiles per register; the `M` columns
-//! of each tile row are interleaved back into pixels (permutes for F4, a
-//! gather per 16 pixels for F6), and bias, activation and residual are
+//! of each tile row are interleaved back into pixels (permutes; three per 16
+//! pixels for F6), and bias, activation and residual are
 //! applied on whole vectors before a masked store.
 //!
 //! The matrices are `super::points`' (the same operations as the generic
@@ -54,16 +54,6 @@ impl Arith for Z {
     }
 }
 
-/// `n` lanes `base + stride·t` for `t = 0..16`, as gather indices.
-#[inline(always)]
-unsafe fn strided(base: usize, stride: usize) -> __m512i {
-    let t = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
-    _mm512_add_epi32(
-        _mm512_mullo_epi32(t, _mm512_set1_epi32(stride as i32)),
-        _mm512_set1_epi32(base as i32),
-    )
-}
-
 /// The mask of the first `n ≤ 16` lanes.
 #[inline(always)]
 fn first(n: usize) -> __mmask16 {
@@ -97,6 +87,78 @@ unsafe fn phases(p: *const f32) -> [__m512; 4] {
         _mm512_shuffle_f32x4::<0x44>(a23, b23),
         _mm512_shuffle_f32x4::<0xee>(a23, b23),
     ]
+}
+
+/// The F6 permute tables: for each of six result vectors, per pair of
+/// source vectors `(2p, 2p + 1)`, the `vpermt2ps` index of every lane and
+/// the mask of the lanes that pair supplies (the three masks partition the
+/// lanes).
+struct PairTables {
+    idx: [[[i32; 16]; 3]; 6],
+    mask: [[u16; 3]; 6],
+}
+
+/// Phase split, 16 tiles of 6 columns (96 floats in six vectors): phase `c`,
+/// lane `k` is float `6k + c`, in pair `(6k + c) / 32` at `(6k + c) mod 32`.
+const F6_SPLIT: PairTables = {
+    let mut t = PairTables {
+        idx: [[[0; 16]; 3]; 6],
+        mask: [[0; 3]; 6],
+    };
+    let mut c = 0;
+    while c < 6 {
+        let mut k = 0;
+        while k < 16 {
+            let f = 6 * k + c;
+            t.idx[c][f / 32][k] = (f % 32) as i32;
+            t.mask[c][f / 32] |= 1 << k;
+            k += 1;
+        }
+        c += 1;
+    }
+    t
+};
+
+/// Interleave, the inverse: pixel `f = 16s + e` of 16 tiles is column
+/// `j = f mod 6` (source vector `j`, in pair `j / 2`) of tile `f / 6`.
+const F6_JOIN: PairTables = {
+    let mut t = PairTables {
+        idx: [[[0; 16]; 3]; 6],
+        mask: [[0; 3]; 6],
+    };
+    let mut s = 0;
+    while s < 6 {
+        let mut e = 0;
+        while e < 16 {
+            let f = 16 * s + e;
+            let j = f % 6;
+            t.idx[s][j / 2][e] = (f / 6 + 16 * (j % 2)) as i32;
+            t.mask[s][j / 2] |= 1 << e;
+            e += 1;
+        }
+        s += 1;
+    }
+    t
+};
+
+/// Result vector `r` of `t` from the six vectors `z`: three two-source
+/// permutes blended by their masks.
+#[inline(always)]
+unsafe fn pair_permute(t: &PairTables, r: usize, z: &[__m512; 6]) -> __m512 {
+    let idx = |p: usize| _mm512_loadu_si512(t.idx[r][p].as_ptr().cast());
+    let a = _mm512_permutex2var_ps(z[0], idx(0), z[1]);
+    let b = _mm512_permutex2var_ps(z[2], idx(1), z[3]);
+    let c = _mm512_permutex2var_ps(z[4], idx(2), z[5]);
+    let ab = _mm512_mask_mov_ps(a, t.mask[r][1], b);
+    _mm512_mask_mov_ps(ab, t.mask[r][2], c)
+}
+
+/// The six column phases of 16 tiles: `q_c[t] = z[6t + c]` for the 96
+/// floats at `p`, by permutes (a gather per phase was slower).
+#[inline(always)]
+unsafe fn phases6(p: *const f32) -> [__m512; 6] {
+    let z: [__m512; 6] = std::array::from_fn(|v| _mm512_loadu_ps(p.add(16 * v)));
+    std::array::from_fn(|c| pair_permute(&F6_SPLIT, c, &z))
 }
 
 /// Lanes `1..16` of `a` followed by lane 0 of `b`.
@@ -135,8 +197,6 @@ pub(super) unsafe fn input<const T: usize, const M: usize, W: Points<T, M>>(
     let (z, zero_row) = scratch.split_at_mut(T * zs);
     zero_row.fill(0.0);
     let (z, zero_row) = (z.as_mut_ptr(), zero_row.as_ptr());
-    // F6: tile k of a group reads z[M·k + c], c < T, by a gather.
-    let idx: [__m512i; T] = std::array::from_fn(|c| strided(c, M));
     let mut segs = Vec::with_capacity(4);
     let mut p0 = t0;
     let mut panel = 0;
@@ -205,16 +265,25 @@ pub(super) unsafe fn input<const T: usize, const M: usize, W: Points<T, M>>(
                         k += 16;
                     }
                 } else {
+                    // The same with six phases: tile k reads phases 0..6 at
+                    // k and phases 0, 1 at k + 1.
+                    let mut cur = phases6(zi);
                     let mut k = 0;
                     while k < len {
                         let mask = first(len - k);
-                        let base = zi.add(M * k);
-                        let d: [Z; T] =
-                            std::array::from_fn(|c| Z(_mm512_i32gather_ps::<4>(idx[c], base)));
+                        let next = phases6(zi.add(M * (k + 16)));
+                        let d: [Z; T] = std::array::from_fn(|c| {
+                            Z(if c < M {
+                                cur[c]
+                            } else {
+                                next_lane(cur[c - M], next[c - M])
+                            })
+                        });
                         for (j, oj) in W::bt(d).iter().enumerate() {
                             let dst = v.add(rows.at(i * T + j, panel) + l0 + k);
                             _mm512_mask_storeu_ps(dst, mask, oj.0);
                         }
+                        cur = next;
                         k += 16;
                     }
                 }
@@ -263,6 +332,16 @@ pub(super) unsafe fn output<const T: usize, const M: usize, W: Points<T, M>>(
     // y[(i·M + j)·nr + lane] = Σ_c Aᵀ[j][c] Σ_r Aᵀ[i][r] M[T·r + c][lane]
     // Plain loops over fixed-size arrays: closures here were not inlined.
     let z = Z(_mm512_setzero_ps());
+    // The next output channel's products lie `nr` floats on in each of the
+    // `T²` rows, which are `stride` apart: too many streams for the
+    // hardware prefetcher, so they are fetched here (a prefetch never
+    // faults; past the last channel it is wasted).
+    for xi in 0..T * T {
+        let next = mp.wrapping_add(xi * stride + nr);
+        for l in (0..nr).step_by(16) {
+            _mm_prefetch::<_MM_HINT_T0>(next.wrapping_add(l).cast());
+        }
+    }
     for l in (0..nr).step_by(16) {
         let mut t1 = [[z; M]; T];
         for (c, t1c) in t1.iter_mut().enumerate() {
@@ -286,15 +365,7 @@ pub(super) unsafe fn output<const T: usize, const M: usize, W: Points<T, M>>(
     // F4: pixel 4t + j of a tile row comes from lane t of column j, by permutes.
     let lo = _mm512_setr_epi32(0, 8, 16, 24, 1, 9, 17, 25, 2, 10, 18, 26, 3, 11, 19, 27);
     let hi = _mm512_setr_epi32(4, 12, 20, 28, 5, 13, 21, 29, 6, 14, 22, 30, 7, 15, 23, 31);
-    // F6: pixel q = 16s + e of 16 tiles is column q mod 6 of tile q / 6, by a
-    // gather from y: index (q mod 6)·nr + q / 6.
-    let pix: [__m512i; M] = std::array::from_fn(|s| {
-        let q: [i32; 16] = std::array::from_fn(|e| {
-            let q = 16 * s + e;
-            ((q % M) * nr + q / M) as i32
-        });
-        _mm512_loadu_si512(q.as_ptr().cast())
-    });
+    // F6: pixel 16s + e of 16 tiles by permutes of the six columns (`F6_JOIN`).
     let vb = _mm512_set1_ps(bias);
     let zero = _mm512_setzero_ps();
     let out = plane.as_mut_ptr();
@@ -324,9 +395,13 @@ pub(super) unsafe fn output<const T: usize, const M: usize, W: Points<T, M>>(
                     px[2] = _mm512_permutex2var_ps(b01, lo, b23);
                     px[3] = _mm512_permutex2var_ps(b01, hi, b23);
                 } else {
+                    // The row's 16 lanes past `len` (garbage, never stored)
+                    // lie inside `scratch` (its 16 spare floats).
+                    let ys: [__m512; 6] =
+                        std::array::from_fn(|j| _mm512_loadu_ps(yrow.add(j * nr)));
                     for (s, p) in px.iter_mut().enumerate() {
                         if M * k + 16 * s < n {
-                            *p = _mm512_i32gather_ps::<4>(pix[s], yrow);
+                            *p = pair_permute(&F6_JOIN, s, &ys);
                         }
                     }
                 }
