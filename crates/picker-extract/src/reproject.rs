@@ -191,9 +191,13 @@ fn samples(
         .into_par_iter()
         .map(|y| (y * w..(y + 1) * w).filter(|&i| keep(i).is_some()).count())
         .collect();
-    let mut out = vec![Sample::default(); counts.iter().sum()];
+    // Written in place without first filling the vector: at 12 MP a filled
+    // `vec![Sample::default(); n]` (~140 MB, one thread, every page faulted
+    // in by that thread) took 216 ms of the samples' 300 ms.
+    let total: usize = counts.iter().sum();
+    let mut out: Vec<Sample> = Vec::with_capacity(total);
     let mut rows = Vec::with_capacity(counts.len());
-    let mut rest = out.as_mut_slice();
+    let mut rest = &mut out.spare_capacity_mut()[..total];
     for &k in &counts {
         let (row, tail) = rest.split_at_mut(k);
         rows.push(row);
@@ -203,9 +207,21 @@ fn samples(
         let mut slots = row.iter_mut();
         let kept = (y * w..(y + 1) * w).filter_map(|i| keep(i).map(|c| (i, c)));
         for (i, c) in kept {
-            *slots.next().expect("counted") = splat_sample(coords, mask, confidence, size, i, c);
+            slots
+                .next()
+                .expect("counted")
+                .write(splat_sample(coords, mask, confidence, size, i, c));
         }
+        // Every slot of the row written: the set_len below relies on it.
+        assert!(
+            slots.next().is_none(),
+            "row {y}: fewer samples than counted"
+        );
     });
+    // SAFETY: the first `total` slots were split into the rows, and every row
+    // wrote each of its slots (asserted above; a panic there never reaches
+    // this line). `Sample` is `Copy`, so nothing needs dropping.
+    unsafe { out.set_len(total) };
     out
 }
 
