@@ -734,11 +734,13 @@ impl PatchMatchInpainter {
             }
             let (img, change) = vote(&ctx, &lv.img, &lv.known, &nnf, &dist);
             lv.img = img;
-            pad = ctx.pad(&lv.img);
-            compute_distances(&ctx, &pad, &nnf, &mut dist);
-            if change <= self.tolerance {
+            if change <= self.tolerance || em + 1 == em_iterations {
+                // Only the field leaves the level: the padded estimate and
+                // the distances of the next iteration are not needed.
                 break;
             }
+            pad = ctx.pad(&lv.img);
+            compute_distances(&ctx, &pad, &nnf, &mut dist);
         }
         nnf
     }
