@@ -98,48 +98,43 @@ struct PairTables {
     mask: [[u16; 3]; 6],
 }
 
-/// Phase split, 16 tiles of 6 columns (96 floats in six vectors): phase `c`,
-/// lane `k` is float `6k + c`, in pair `(6k + c) / 32` at `(6k + c) mod 32`.
-const F6_SPLIT: PairTables = {
+/// The tables that make result vector `r`, lane `e`, from source vector
+/// `v`, lane `l` (`source(r, e) = (v, l)`): pair `v / 2`, index
+/// `l + 16·(v mod 2)`.
+const fn pair_tables(join: bool) -> PairTables {
     let mut t = PairTables {
         idx: [[[0; 16]; 3]; 6],
         mask: [[0; 3]; 6],
     };
-    let mut c = 0;
-    while c < 6 {
-        let mut k = 0;
-        while k < 16 {
-            let f = 6 * k + c;
-            t.idx[c][f / 32][k] = (f % 32) as i32;
-            t.mask[c][f / 32] |= 1 << k;
-            k += 1;
-        }
-        c += 1;
-    }
-    t
-};
-
-/// Interleave, the inverse: pixel `f = 16s + e` of 16 tiles is column
-/// `j = f mod 6` (source vector `j`, in pair `j / 2`) of tile `f / 6`.
-const F6_JOIN: PairTables = {
-    let mut t = PairTables {
-        idx: [[[0; 16]; 3]; 6],
-        mask: [[0; 3]; 6],
-    };
-    let mut s = 0;
-    while s < 6 {
+    let mut r = 0;
+    while r < 6 {
         let mut e = 0;
         while e < 16 {
-            let f = 16 * s + e;
-            let j = f % 6;
-            t.idx[s][j / 2][e] = (f / 6 + 16 * (j % 2)) as i32;
-            t.mask[s][j / 2] |= 1 << e;
+            let (v, l) = if join {
+                // Pixel f = 16r + e is column f mod 6 of tile f / 6.
+                let f = 16 * r + e;
+                (f % 6, f / 6)
+            } else {
+                // Phase r of tile e is float 6e + r of the 96.
+                let f = 6 * e + r;
+                (f / 16, f % 16)
+            };
+            t.idx[r][v / 2][e] = (l + 16 * (v % 2)) as i32;
+            t.mask[r][v / 2] |= 1 << e;
             e += 1;
         }
-        s += 1;
+        r += 1;
     }
     t
-};
+}
+
+/// Phase split, 16 tiles of 6 columns (96 floats in six vectors): phase `c`,
+/// lane `k` is float `6k + c`.
+const F6_SPLIT: PairTables = pair_tables(false);
+
+/// Interleave, the inverse: pixel `f = 16s + e` of 16 tiles is column
+/// `f mod 6` (source vector `f mod 6`) of tile `f / 6`.
+const F6_JOIN: PairTables = pair_tables(true);
 
 /// Result vector `r` of `t` from the six vectors `z`: three two-source
 /// permutes blended by their masks.
