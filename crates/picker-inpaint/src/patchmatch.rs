@@ -26,7 +26,11 @@
 //!
 //! The coarsest level starts from the harmonic fill of
 //! [`DiffusionInpainter`](crate::DiffusionInpainter); each finer level starts from the upsampled NNF of the
-//! level below, voted once. In toroidal mode every coordinate wraps, so target
+//! level below, voted once. Each level runs up to
+//! [`PatchMatchInpainter::em_iterations`] (finest:
+//! [`PatchMatchInpainter::em_iterations_finest`]) search-and-vote iterations;
+//! the finest one stops early once its estimate settles
+//! ([`PatchMatchInpainter::finest_mean_tolerance`]). In toroidal mode every coordinate wraps, so target
 //! and source patches may straddle the edges and the result tiles seamlessly.
 //!
 //! Determinism: PatchMatch runs on fixed bands of rows in parallel, each band
@@ -63,6 +67,12 @@ pub struct PatchMatchInpainter {
     pub min_source_fraction: f32,
     /// An EM loop at a level stops early once no texel moves by more than this.
     pub tolerance: f32,
+    /// The finest level's EM loop, when that level starts from a coarser
+    /// one's solution, also stops once the unknown texels move by at most
+    /// this on average (a quarter of an 8-bit step: the result has settled).
+    /// Not at coarser levels, whose product is the field handed down, which
+    /// keeps improving while the estimate barely moves.
+    pub finest_mean_tolerance: f64,
     /// Stop coarsening once every unknown texel of a level is within half a
     /// patch of a known texel (coarser levels would only lose detail).
     pub adaptive_levels: bool,
@@ -79,6 +89,7 @@ impl Default for PatchMatchInpainter {
             band_rows: 16,
             min_source_fraction: 0.05,
             tolerance: 1e-3,
+            finest_mean_tolerance: 1e-3,
             adaptive_levels: true,
         }
     }
@@ -714,8 +725,7 @@ impl PatchMatchInpainter {
         let mut dist = vec![0.0f32; n];
         compute_distances(&ctx, &pad, &nnf, &mut dist);
         if upsampled {
-            let change = vote(&ctx, &lv.img, &lv.known, &nnf, &dist);
-            lv.img = change.0;
+            lv.img = vote(&ctx, &lv.img, &lv.known, &nnf, &dist).0;
             pad = ctx.pad(&lv.img);
             compute_distances(&ctx, &pad, &nnf, &mut dist);
         }
@@ -734,7 +744,12 @@ impl PatchMatchInpainter {
             }
             let (img, change) = vote(&ctx, &lv.img, &lv.known, &nnf, &dist);
             lv.img = img;
-            if change <= self.tolerance || em + 1 == em_iterations {
+            // At the finest level the estimate is the result (no field goes
+            // further down): started from a coarser solution, it has settled
+            // once an iteration moves it by at most `finest_mean_tolerance`
+            // on average.
+            let settled = level == 0 && upsampled && change.mean <= self.finest_mean_tolerance;
+            if change.max <= self.tolerance || settled || em + 1 == em_iterations {
                 // Only the field leaves the level: the padded estimate and
                 // the distances of the next iteration are not needed.
                 break;
@@ -1078,13 +1093,41 @@ fn compute_distances(ctx: &Ctx, pad: &[f32], nnf: &[u32], dist: &mut [f32]) {
     });
 }
 
+/// How much a vote moved the unknown texels.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Change {
+    /// The largest absolute change of a channel.
+    max: f32,
+    /// The mean absolute change over the unknown texels' channels.
+    mean: f64,
+}
+
+impl Change {
+    /// From each row's (largest, summed) absolute change, summed in row order
+    /// (the same value whatever the threads).
+    fn of_rows(rows: &[(f32, f64)], known: &[bool], c: usize) -> Change {
+        let unknown = known.iter().filter(|&&k| !k).count() * c;
+        let (max, sum) = rows
+            .iter()
+            .fold((0.0f32, 0.0f64), |(m, s), &(rm, rs)| (m.max(rm), s + rs));
+        Change {
+            max,
+            mean: if unknown > 0 {
+                sum / unknown as f64
+            } else {
+                0.0
+            },
+        }
+    }
+}
+
 /// Patch voting: every unknown texel becomes the weighted mean of the texels
 /// that the overlapping target patches' nearest neighbours put there.
-/// Returns the new estimate and the largest change.
+/// Returns the new estimate and how much it moved.
 ///
 /// Same sums in the same order as `vote_reference`, with the wrapped (or
 /// clipped) coordinates looked up in tables instead of computed per texel.
-fn vote(ctx: &Ctx, img: &[f32], known: &[bool], nnf: &[u32], dist: &[f32]) -> (Vec<f32>, f32) {
+fn vote(ctx: &Ctx, img: &[f32], known: &[bool], nnf: &[u32], dist: &[f32]) -> (Vec<f32>, Change) {
     let (h, w, c, r) = (ctx.h, ctx.w, ctx.c, ctx.r as isize);
     // σ² = 75th percentile of the mean squared patch differences.
     let norm = 1.0 / (ctx.p * ctx.p * c) as f32;
@@ -1138,11 +1181,11 @@ fn vote(ctx: &Ctx, img: &[f32], known: &[bool], nnf: &[u32], dist: &[f32]) -> (V
         }
     });
     let mut out = img.to_vec();
-    let change = out
+    let rows = out
         .par_chunks_mut(w * c)
         .enumerate()
         .map(|(y, row)| {
-            let mut change = 0.0f32;
+            let (mut change, mut total) = (0.0f32, 0.0f64);
             let (mut acc, mut kacc) = ([0.0f32; 4], [0.0f32; 4]);
             for x in 0..w {
                 let q = y * w + x;
@@ -1197,15 +1240,17 @@ fn vote(ctx: &Ctx, img: &[f32], known: &[bool], nnf: &[u32], dist: &[f32]) -> (V
                 if wsum > 0.0 {
                     for ch in 0..c {
                         let v = acc[ch] / wsum;
-                        change = change.max((v - row[x * c + ch]).abs());
+                        let d = (v - row[x * c + ch]).abs();
+                        change = change.max(d);
+                        total += f64::from(d);
                         row[x * c + ch] = v;
                     }
                 }
             }
-            change
+            (change, total)
         })
-        .reduce(|| 0.0, f32::max);
-    (out, change)
+        .collect::<Vec<_>>();
+    (out, Change::of_rows(&rows, known, c))
 }
 
 /// The plain implementation of [`vote`] (per-texel offsets with `rem_euclid`),
@@ -1217,7 +1262,7 @@ fn vote_reference(
     known: &[bool],
     nnf: &[u32],
     dist: &[f32],
-) -> (Vec<f32>, f32) {
+) -> (Vec<f32>, Change) {
     let (h, w, c, r) = (ctx.h, ctx.w, ctx.c, ctx.r as isize);
     // σ² = 75th percentile of the mean squared patch differences.
     let norm = 1.0 / (ctx.p * ctx.p * c) as f32;
@@ -1243,11 +1288,11 @@ fn vote_reference(
         })
         .collect();
     let mut out = img.to_vec();
-    let change = out
+    let rows = out
         .par_chunks_mut(w * c)
         .enumerate()
         .map(|(y, row)| {
-            let mut change = 0.0f32;
+            let (mut change, mut total) = (0.0f32, 0.0f64);
             let (mut acc, mut kacc) = ([0.0f32; 4], [0.0f32; 4]);
             for x in 0..w {
                 let q = y * w + x;
@@ -1292,15 +1337,17 @@ fn vote_reference(
                 if wsum > 0.0 {
                     for ch in 0..c {
                         let v = acc[ch] / wsum;
-                        change = change.max((v - row[x * c + ch]).abs());
+                        let d = (v - row[x * c + ch]).abs();
+                        change = change.max(d);
+                        total += f64::from(d);
                         row[x * c + ch] = v;
                     }
                 }
             }
-            change
+            (change, total)
         })
-        .reduce(|| 0.0, f32::max);
-    (out, change)
+        .collect::<Vec<_>>();
+    (out, Change::of_rows(&rows, known, c))
 }
 
 #[cfg(test)]
@@ -1462,11 +1509,13 @@ mod tests {
                     }
                     let ctx = case.ctx();
                     let (a, ca) = vote(&ctx, &case.img, &case.known, &case.nnf, &case.dist);
+                    assert!(ca.mean.is_finite() && ca.mean <= f64::from(ca.max));
                     let (b, cb) =
                         vote_reference(&ctx, &case.img, &case.known, &case.nnf, &case.dist);
                     let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
                     assert_eq!(bits(&a), bits(&b), "{h}x{w}x{c} p{p} toroidal {toroidal}");
-                    assert_eq!(ca.to_bits(), cb.to_bits());
+                    assert_eq!(ca.max.to_bits(), cb.max.to_bits());
+                    assert_eq!(ca.mean.to_bits(), cb.mean.to_bits());
                 }
             }
         }

@@ -666,3 +666,69 @@ fn density_sweep() {
         }
     }
 }
+
+#[test]
+fn finest_level_stops_once_settled() {
+    // The finest level's EM loop stops after an iteration that moves the
+    // unknown texels by at most `finest_mean_tolerance` on average: periodic
+    // noise with blob holes settles after one (the result is that of a single
+    // iteration); an exact copy without wrapping still moves a lot and gets
+    // its second (the result is that of no early stop).
+    let n = 128;
+    let run = |img: &Image, known: &[bool], toroidal: bool, ip: PatchMatchInpainter| {
+        let opts = InpaintOptions {
+            toroidal,
+            seed: 3,
+            patch_size: 7,
+        };
+        ip.inpaint(&poisoned(img, known), known, &opts).unwrap()
+    };
+    let default = PatchMatchInpainter::default();
+    assert_eq!(default.em_iterations_finest, 2);
+    let one = PatchMatchInpainter {
+        em_iterations_finest: 1,
+        ..default
+    };
+    let never = PatchMatchInpainter {
+        finest_mean_tolerance: -1.0,
+        ..default
+    };
+    let img = periodic_noise(n);
+    let known = blob_mask(n, n, 0.3, 31);
+    let a = run(&img, &known, true, default);
+    assert!(
+        a == run(&img, &known, true, one),
+        "periodic noise: settled after one"
+    );
+    assert_ne!(
+        a,
+        run(&img, &known, true, never),
+        "periodic noise: a second iteration differs"
+    );
+    let tile: Vec<[f32; 4]> = {
+        let mut rng = Rng::new(3);
+        (0..256)
+            .map(|_| {
+                [
+                    rng.uniform(0.0, 1.0),
+                    rng.uniform(0.0, 1.0),
+                    rng.uniform(0.0, 1.0),
+                    0.0,
+                ]
+            })
+            .collect()
+    };
+    let copy = image_from(3, 96, 96, |y, x| tile[(y % 16) * 16 + x % 16]);
+    let known = blob_mask(96, 96, 0.3, 21);
+    let b = run(&copy, &known, false, default);
+    assert_eq!(
+        b,
+        run(&copy, &known, false, never),
+        "exact copy: both iterations"
+    );
+    assert_ne!(
+        b,
+        run(&copy, &known, false, one),
+        "exact copy: one iteration differs"
+    );
+}
