@@ -733,12 +733,19 @@ pub fn extract(
     let rerender_psnr = p.inputs.envmap.as_ref().and_then(|env| {
         let shader = Shader::new(env, Quality::Fast);
         let mut render = Image::zeros(3, h, w);
-        let mut phong = params.phong();
-        for &i in &idx {
-            if let (Some(uv), Some(t)) = (uv_work, texture.as_ref()) {
-                phong.diffuse = sample_wrapped(&t.texture, uv.at(0, i), uv.at(1, i));
-            }
-            render.set_rgb(i, shader.shade(el.normals.rgb(i), el.view.rgb(i), &phong));
+        // Every pixel on its own (in parallel, the same values as in turn).
+        let shaded: Vec<Vec3> = idx
+            .par_iter()
+            .map(|&i| {
+                let mut phong = params.phong();
+                if let (Some(uv), Some(t)) = (uv_work, texture.as_ref()) {
+                    phong.diffuse = sample_wrapped(&t.texture, uv.at(0, i), uv.at(1, i));
+                }
+                shader.shade(el.normals.rgb(i), el.view.rgb(i), &phong)
+            })
+            .collect();
+        for (&i, &c) in idx.iter().zip(&shaded) {
+            render.set_rgb(i, c);
         }
         picker_render::compare(&render, &p.photo_work, Some(mw))
             .ok()
