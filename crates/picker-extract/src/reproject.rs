@@ -14,7 +14,10 @@
 //! observation weight (the same tent weights without the pixels' confidence)
 //! reaches [`KNOWN_WEIGHT`] (or, when no texel reaches it, half the largest):
 //! low-confidence pixels still observe a texel, they only count less in its
-//! colour.
+//! colour. When the texture is capped below the photo's density (a
+//! 12-megapixel photo, a 1024² texture), coherent blocks of sub-texel pixels
+//! are merged into one sample each first ([`MAX_MERGE_BLOCK`]): they would all
+//! get the smallest tent anyway.
 
 use glam::Vec3;
 use picker_render::io::Image;
