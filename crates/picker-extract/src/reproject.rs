@@ -243,18 +243,20 @@ fn merge_block(coords: &Coords, mask: &[bool], size: usize) -> usize {
 /// their confidences as weight (each would have had its confidence: a
 /// one-texel tent), radius 1 and `count` the number of pixels. `px` is
 /// scratch space.
-#[allow(clippy::too_many_arguments)]
 fn block_samples(
-    coords: &Coords,
-    mask: &[bool],
-    colour: &Image,
-    confidence: &[f32],
-    size: usize,
+    src: &Picked<'_>,
     f: usize,
     (bx, by): (usize, usize),
     px: &mut Vec<(usize, Vec3)>,
     out: &mut Vec<Sample>,
 ) {
+    let Picked {
+        coords,
+        mask,
+        colour,
+        confidence,
+        size,
+    } = *src;
     let w = coords.width;
     let (x0, x1) = (bx * f, ((bx + 1) * f).min(w));
     let (y0, y1) = (by * f, ((by + 1) * f).min(coords.height));
@@ -306,6 +308,26 @@ fn block_samples(
     }
 }
 
+/// The samples of block row `by` ([`block_samples`] of each block, left to
+/// right), appended to `out`.
+fn block_row(src: &Picked<'_>, f: usize, by: usize, out: &mut Vec<Sample>) {
+    let mut px = Vec::with_capacity(f * f);
+    for bx in 0..src.coords.width.div_ceil(f) {
+        block_samples(src, f, (bx, by), &mut px, out);
+    }
+}
+
+/// The inputs of [`samples`]: the pixels' coordinates, the mask, the de-lit
+/// colours and confidences, and the texture size.
+#[derive(Clone, Copy)]
+struct Picked<'a> {
+    coords: &'a Coords,
+    mask: &'a [bool],
+    colour: &'a Image,
+    confidence: &'a [f32],
+    size: usize,
+}
+
 /// The picked pixels with a positive confidence and finite coordinates and
 /// colour ([`kept`]), in pixel order, with their splat radius and weight;
 /// with `block > 1`, by `block × block` pixel blocks in row-major order,
@@ -324,25 +346,20 @@ fn samples(
 ) -> Vec<Sample> {
     let w = coords.width.max(1);
     if block > 1 {
+        let src = Picked {
+            coords,
+            mask,
+            colour,
+            confidence,
+            size,
+        };
         // Rows of blocks in parallel (a few samples per block: collected
         // per row and concatenated, in order).
         let rows: Vec<Vec<Sample>> = (0..coords.height.div_ceil(block))
             .into_par_iter()
             .map(|by| {
-                let (mut out, mut px) = (Vec::new(), Vec::with_capacity(block * block));
-                for bx in 0..coords.width.div_ceil(block) {
-                    block_samples(
-                        coords,
-                        mask,
-                        colour,
-                        confidence,
-                        size,
-                        block,
-                        (bx, by),
-                        &mut px,
-                        &mut out,
-                    );
-                }
+                let mut out = Vec::new();
+                block_row(&src, block, by, &mut out);
                 out
             })
             .collect();
@@ -425,21 +442,16 @@ fn samples_reference(
     block: usize,
 ) -> Vec<Sample> {
     if block > 1 {
-        let (mut out, mut px) = (Vec::new(), Vec::new());
+        let src = Picked {
+            coords,
+            mask,
+            colour,
+            confidence,
+            size,
+        };
+        let mut out = Vec::new();
         for by in 0..coords.height.div_ceil(block) {
-            for bx in 0..coords.width.div_ceil(block) {
-                block_samples(
-                    coords,
-                    mask,
-                    colour,
-                    confidence,
-                    size,
-                    block,
-                    (bx, by),
-                    &mut px,
-                    &mut out,
-                );
-            }
+            block_row(&src, block, by, &mut out);
         }
         return out;
     }
@@ -1256,24 +1268,37 @@ mod tests {
         }
     }
 
+    /// Random coordinates in [−0.1, 1.1) on a `w × h` grid, `u` NaN at every
+    /// `nan_every`-th pixel.
+    fn random_coords(
+        rng: &mut picker_tensor::Rng,
+        w: usize,
+        h: usize,
+        wrap: bool,
+        nan_every: usize,
+    ) -> Coords {
+        let n = w * h;
+        let mut u = rng.uniform_vec(n, -0.1, 1.1);
+        let v = rng.uniform_vec(n, -0.1, 1.1);
+        for i in (0..n).step_by(nan_every) {
+            u[i] = f32::NAN;
+        }
+        Coords {
+            width: w,
+            height: h,
+            u,
+            v,
+            wrap,
+        }
+    }
+
     #[test]
     fn parallel_samples_match_reference() {
         let mut rng = picker_tensor::Rng::new(13);
         for &(w, h) in &[(1usize, 1usize), (5, 1), (1, 6), (37, 23)] {
             for wrap in [true, false] {
                 let n = w * h;
-                let mut u = rng.uniform_vec(n, -0.1, 1.1);
-                let v = rng.uniform_vec(n, -0.1, 1.1);
-                for i in (0..n).step_by(5) {
-                    u[i] = f32::NAN;
-                }
-                let coords = Coords {
-                    width: w,
-                    height: h,
-                    u,
-                    v,
-                    wrap,
-                };
+                let coords = random_coords(&mut rng, w, h, wrap, 5);
                 let mut colour = Image::new(3, h, w, rng.uniform_vec(3 * n, 0.0, 1.0)).unwrap();
                 colour.data[n / 2] = f32::INFINITY;
                 let mask: Vec<bool> = (0..n).map(|_| rng.f64() < 0.7).collect();
@@ -1405,18 +1430,7 @@ mod tests {
         for &(w, h) in &[(0usize, 0usize), (1, 1), (2, 2), (7, 3), (31, 29)] {
             for wrap in [true, false] {
                 let n = w * h;
-                let mut u = rng.uniform_vec(n, -0.1, 1.1);
-                let v = rng.uniform_vec(n, -0.1, 1.1);
-                for i in (0..n).step_by(9) {
-                    u[i] = f32::NAN;
-                }
-                let coords = Coords {
-                    width: w,
-                    height: h,
-                    u,
-                    v,
-                    wrap,
-                };
+                let coords = random_coords(&mut rng, w, h, wrap, 9);
                 let mask: Vec<bool> = (0..n).map(|_| rng.f64() < 0.8).collect();
                 for step in [1, 2, 4] {
                     let mut a: Vec<f32> = (0..n)

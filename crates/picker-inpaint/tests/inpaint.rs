@@ -487,24 +487,28 @@ fn patchmatch_beats_diffusion_on_textures() {
     }
 }
 
+/// An `n × n` RGB image of a random 16×16 tile repeated: every texel
+/// exists elsewhere.
+fn repeated_tile(n: usize) -> Image {
+    let mut rng = Rng::new(3);
+    let tile: Vec<[f32; 4]> = (0..256)
+        .map(|_| {
+            [
+                rng.uniform(0.0, 1.0),
+                rng.uniform(0.0, 1.0),
+                rng.uniform(0.0, 1.0),
+                0.0,
+            ]
+        })
+        .collect();
+    image_from(3, n, n, |y, x| tile[(y % 16) * 16 + x % 16])
+}
+
 #[test]
 fn exact_copies_are_reconstructed() {
     // A random 16×16 tile repeated: every hole texel exists elsewhere.
     let n = 96;
-    let tile: Vec<[f32; 4]> = {
-        let mut rng = Rng::new(3);
-        (0..256)
-            .map(|_| {
-                [
-                    rng.uniform(0.0, 1.0),
-                    rng.uniform(0.0, 1.0),
-                    rng.uniform(0.0, 1.0),
-                    0.0,
-                ]
-            })
-            .collect()
-    };
-    let img = image_from(3, n, n, |y, x| tile[(y % 16) * 16 + x % 16]);
+    let img = repeated_tile(n);
     let known = blob_mask(n, n, 0.3, 21);
     let hole: Vec<bool> = known.iter().map(|k| !k).collect();
     for toroidal in [true, false] {
@@ -705,20 +709,7 @@ fn finest_level_stops_once_settled() {
         run(&img, &known, true, never),
         "periodic noise: a second iteration differs"
     );
-    let tile: Vec<[f32; 4]> = {
-        let mut rng = Rng::new(3);
-        (0..256)
-            .map(|_| {
-                [
-                    rng.uniform(0.0, 1.0),
-                    rng.uniform(0.0, 1.0),
-                    rng.uniform(0.0, 1.0),
-                    0.0,
-                ]
-            })
-            .collect()
-    };
-    let copy = image_from(3, 96, 96, |y, x| tile[(y % 16) * 16 + x % 16]);
+    let copy = repeated_tile(96);
     let known = blob_mask(96, 96, 0.3, 21);
     let b = run(&copy, &known, false, default);
     assert_eq!(
