@@ -204,8 +204,10 @@ fn kept(
     (coords.u[i].is_finite() && coords.v[i].is_finite() && c.is_finite()).then_some(c)
 }
 
-/// Largest side, in photo pixels, of the blocks [`samples`] may merge into
-/// one sample ([`merge_block`]).
+/// Largest side, in photo pixels, of the pixel blocks that [`reproject`]
+/// merges into one sample when its texture is capped below the photo's
+/// density: the largest power of two up to this with the block at most a
+/// texel wide, each block merged only where its coordinates are coherent.
 pub const MAX_MERGE_BLOCK: usize = 8;
 
 /// The side `f` of the pixel blocks that [`samples`] merges: the largest
