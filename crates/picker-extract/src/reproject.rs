@@ -365,43 +365,65 @@ fn samples(
                 out
             })
             .collect();
-        return rows.concat();
+        let counts: Vec<usize> = rows.iter().map(Vec::len).collect();
+        return filled_in_parts(&counts, |r, part| {
+            for (slot, s) in part.iter_mut().zip(&rows[r]) {
+                slot.write(*s);
+            }
+            rows[r].len()
+        });
     }
     let keep = |i: usize| kept(coords, mask, colour, confidence, i);
     let counts: Vec<usize> = (0..coords.height)
         .into_par_iter()
         .map(|y| (y * w..(y + 1) * w).filter(|&i| keep(i).is_some()).count())
         .collect();
-    // Written in place without first filling the vector: at 12 MP a filled
-    // `vec![Sample::default(); n]` (~140 MB, one thread, every page faulted
-    // in by that thread) took 216 ms of the samples' 300 ms.
+    filled_in_parts(&counts, |y, part| {
+        let mut n = 0;
+        for (i, c) in (y * w..(y + 1) * w).filter_map(|i| keep(i).map(|c| (i, c))) {
+            part[n].write(splat_sample(coords, mask, confidence, size, i, c));
+            n += 1;
+        }
+        n
+    })
+}
+
+/// A vector of `counts.iter().sum()` samples made of consecutive parts, part
+/// `r` (`counts[r]` long) written by `write(r, part)`, which returns how many
+/// of the part's slots it wrote; the parts in parallel.
+///
+/// Written in place without first filling the vector: at 12 MP a filled
+/// `vec![Sample::default(); n]` (~140 MB, one thread, every page faulted
+/// in by that thread) took 216 ms of the samples' 300 ms, and concatenating
+/// per-row vectors on one thread cost as much again.
+///
+/// # Panics
+/// When a part writes more or fewer slots than its count.
+fn filled_in_parts(
+    counts: &[usize],
+    write: impl Fn(usize, &mut [std::mem::MaybeUninit<Sample>]) -> usize + Sync,
+) -> Vec<Sample> {
     let total: usize = counts.iter().sum();
     let mut out: Vec<Sample> = Vec::with_capacity(total);
-    let mut rows = Vec::with_capacity(counts.len());
+    let mut parts = Vec::with_capacity(counts.len());
     let mut rest = &mut out.spare_capacity_mut()[..total];
-    for &k in &counts {
-        let (row, tail) = rest.split_at_mut(k);
-        rows.push(row);
+    for &k in counts {
+        let (part, tail) = rest.split_at_mut(k);
+        parts.push(part);
         rest = tail;
     }
-    rows.into_par_iter().enumerate().for_each(|(y, row)| {
-        let mut slots = row.iter_mut();
-        let kept = (y * w..(y + 1) * w).filter_map(|i| keep(i).map(|c| (i, c)));
-        for (i, c) in kept {
-            slots
-                .next()
-                .expect("counted")
-                .write(splat_sample(coords, mask, confidence, size, i, c));
-        }
-        // Every slot of the row written: the set_len below relies on it.
-        assert!(
-            slots.next().is_none(),
-            "row {y}: fewer samples than counted"
+    parts.into_par_iter().enumerate().for_each(|(r, part)| {
+        let k = part.len();
+        // Every slot of the part written: the set_len below relies on it.
+        assert_eq!(
+            write(r, part),
+            k,
+            "part {r}: not every counted sample written"
         );
     });
-    // SAFETY: the first `total` slots were split into the rows, and every row
-    // wrote each of its slots (asserted above; a panic there never reaches
-    // this line). `Sample` is `Copy`, so nothing needs dropping.
+    // SAFETY: the first `total` slots were split into the parts, and every
+    // part wrote each of its slots (asserted above; a panic there never
+    // reaches this line). `Sample` is `Copy`, so nothing needs dropping.
     unsafe { out.set_len(total) };
     out
 }
