@@ -1317,6 +1317,40 @@ mod tests {
     }
 
     #[test]
+    fn filled_in_parts_writes_every_part_in_order() {
+        let counts = [3usize, 0, 5, 1];
+        let v = filled_in_parts(&counts, |r, part| {
+            for (k, slot) in part.iter_mut().enumerate() {
+                slot.write(Sample {
+                    u: r as f32,
+                    v: k as f32,
+                    ..Sample::default()
+                });
+            }
+            part.len()
+        });
+        let got: Vec<(f32, f32)> = v.iter().map(|s| (s.u, s.v)).collect();
+        let want: Vec<(f32, f32)> = counts
+            .iter()
+            .enumerate()
+            .flat_map(|(r, &k)| (0..k).map(move |j| (r as f32, j as f32)))
+            .collect();
+        assert_eq!(got, want);
+    }
+
+    #[test]
+    #[should_panic(expected = "not every counted sample written")]
+    fn filled_in_parts_refuses_a_short_part() {
+        filled_in_parts(&[2, 2], |r, part| {
+            let n = if r == 1 { 1 } else { part.len() };
+            for slot in &mut part[..n] {
+                slot.write(Sample::default());
+            }
+            n
+        });
+    }
+
+    #[test]
     fn parallel_samples_match_reference() {
         let mut rng = picker_tensor::Rng::new(13);
         for &(w, h) in &[(1usize, 1usize), (5, 1), (1, 6), (37, 23)] {
