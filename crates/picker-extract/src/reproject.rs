@@ -338,30 +338,16 @@ struct Picked<'a> {
 /// Rows in parallel: the samples of each row are counted first, then written
 /// straight into their place (the same samples in the same order as the plain
 /// filter over the pixels, `tests::parallel_samples_match_reference`).
-fn samples(
-    coords: &Coords,
-    mask: &[bool],
-    colour: &Image,
-    confidence: &[f32],
-    size: usize,
-    block: usize,
-) -> Vec<Sample> {
-    let w = coords.width.max(1);
+fn samples(src: &Picked<'_>, block: usize) -> Vec<Sample> {
+    let w = src.coords.width.max(1);
     if block > 1 {
-        let src = Picked {
-            coords,
-            mask,
-            colour,
-            confidence,
-            size,
-        };
         // Rows of blocks in parallel (a few samples per block: collected
-        // per row and concatenated, in order).
-        let rows: Vec<Vec<Sample>> = (0..coords.height.div_ceil(block))
+        // per row, then copied into place in order).
+        let rows: Vec<Vec<Sample>> = (0..src.coords.height.div_ceil(block))
             .into_par_iter()
             .map(|by| {
                 let mut out = Vec::new();
-                block_row(&src, block, by, &mut out);
+                block_row(src, block, by, &mut out);
                 out
             })
             .collect();
@@ -373,15 +359,22 @@ fn samples(
             rows[r].len()
         });
     }
-    let keep = |i: usize| kept(coords, mask, colour, confidence, i);
-    let counts: Vec<usize> = (0..coords.height)
+    let keep = |i: usize| kept(src.coords, src.mask, src.colour, src.confidence, i);
+    let counts: Vec<usize> = (0..src.coords.height)
         .into_par_iter()
         .map(|y| (y * w..(y + 1) * w).filter(|&i| keep(i).is_some()).count())
         .collect();
     filled_in_parts(&counts, |y, part| {
         let mut n = 0;
         for (i, c) in (y * w..(y + 1) * w).filter_map(|i| keep(i).map(|c| (i, c))) {
-            part[n].write(splat_sample(coords, mask, confidence, size, i, c));
+            part[n].write(splat_sample(
+                src.coords,
+                src.mask,
+                src.confidence,
+                src.size,
+                i,
+                c,
+            ));
             n += 1;
         }
         n
@@ -457,39 +450,32 @@ fn splat_sample(
 /// The plain implementation of [`samples`] (a filter over the pixels, or
 /// over the blocks one after the other).
 #[cfg(test)]
-fn samples_reference(
-    coords: &Coords,
-    mask: &[bool],
-    colour: &Image,
-    confidence: &[f32],
-    size: usize,
-    block: usize,
-) -> Vec<Sample> {
+fn samples_reference(src: &Picked<'_>, block: usize) -> Vec<Sample> {
     if block > 1 {
-        let src = Picked {
-            coords,
-            mask,
-            colour,
-            confidence,
-            size,
-        };
         let mut out = Vec::new();
-        for by in 0..coords.height.div_ceil(block) {
-            block_row(&src, block, by, &mut out);
+        for by in 0..src.coords.height.div_ceil(block) {
+            block_row(src, block, by, &mut out);
         }
         return out;
     }
-    (0..mask.len())
+    (0..src.mask.len())
         .filter_map(|i| {
-            if !mask[i] || confidence[i] <= 0.0 {
+            if !src.mask[i] || src.confidence[i] <= 0.0 {
                 return None;
             }
-            let (u, v) = (coords.u[i], coords.v[i]);
-            let c = colour.rgb(i);
+            let (u, v) = (src.coords.u[i], src.coords.v[i]);
+            let c = src.colour.rgb(i);
             if !u.is_finite() || !v.is_finite() || !c.is_finite() {
                 return None;
             }
-            Some(splat_sample(coords, mask, confidence, size, i, c))
+            Some(splat_sample(
+                src.coords,
+                src.mask,
+                src.confidence,
+                src.size,
+                i,
+                c,
+            ))
         })
         .collect()
 }
@@ -771,7 +757,14 @@ impl Fit {
         size: usize,
         block: usize,
     ) -> Self {
-        let samples = samples(coords, mask, colour, confidence, size, block);
+        let src = Picked {
+            coords,
+            mask,
+            colour,
+            confidence,
+            size,
+        };
+        let samples = samples(&src, block);
         let members = band_members(&samples, size, coords.wrap);
         let (sum, wsum, seen) = splat(&samples, &members, size, coords.wrap, None, 1.0, None, true);
         let mean = texel_means(&sum, &wsum);
@@ -1371,8 +1364,15 @@ mod tests {
                     .collect();
                 for size in [1, 16, 1024] {
                     for block in [1, 2, 3, 8] {
-                        let a = samples(&coords, &mask, &colour, &conf, size, block);
-                        let b = samples_reference(&coords, &mask, &colour, &conf, size, block);
+                        let src = Picked {
+                            coords: &coords,
+                            mask: &mask,
+                            colour: &colour,
+                            confidence: &conf,
+                            size,
+                        };
+                        let a = samples(&src, block);
+                        let b = samples_reference(&src, block);
                         assert_eq!(a, b, "{w}x{h} wrap {wrap} size {size} block {block}");
                     }
                 }
@@ -1436,8 +1436,15 @@ mod tests {
             .collect();
         let f = merge_block(&coords, &mask, size);
         assert_eq!(f, 2);
-        let all = samples(&coords, &mask, &img, &conf, size, 1);
-        let merged = samples(&coords, &mask, &img, &conf, size, f);
+        let src = Picked {
+            coords: &coords,
+            mask: &mask,
+            colour: &img,
+            confidence: &conf,
+            size,
+        };
+        let all = samples(&src, 1);
+        let merged = samples(&src, f);
         assert!(
             merged.len() * 3 < all.len(),
             "{} of {}",
