@@ -56,7 +56,7 @@ pub struct Flags {
     /// Keep only the connected region at the pick.
     #[arg(long)]
     pub connected: bool,
-    /// Segmentation-colour tolerance (RGB distance in [0,1]); default automatic.
+    /// Segmentation-colour tolerance (an RGB distance, 0 to 1); default automatic.
     #[arg(long)]
     pub tolerance: Option<f32>,
     /// Texture coordinates: predicted UVs, a rectified plane, or the more consistent.

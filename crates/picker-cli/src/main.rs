@@ -13,7 +13,7 @@
 //!   ([`infer`]).
 //! - `picker weights random|inspect`: make random weights files, describe one
 //!   ([`weights_cmd`]).
-//! - `picker bench --net irn --size 240x320`: time forward passes ([`bench`]).
+//! - `picker bench --net irn --size 240x320`: time forward passes ([`mod@bench`]).
 //! - `picker synth --count N --size HxW --seed S --out DIR`: synthetic scenes
 //!   with ground-truth render elements ([`synth`]).
 //! - `picker render ELEMENTS_DIR --envmap F --out DIR`: re-render from render

@@ -45,10 +45,10 @@ pub struct Args {
     /// Render a material preview (sphere and tile; fast renderer) instead of re-rendering elements.
     #[arg(long, requires_all = ["diffuse", "specular", "exponent"])]
     pub preview: bool,
-    /// Preview: diffuse albedo, linear RGB in [0,1].
+    /// Preview: diffuse albedo, linear RGB, each channel 0 to 1.
     #[arg(long, value_name = "R,G,B", value_parser = parse_rgb, requires = "preview")]
     pub diffuse: Option<[f32; 3]>,
-    /// Preview: specular albedo, linear RGB in [0,1].
+    /// Preview: specular albedo, linear RGB, each channel 0 to 1.
     #[arg(long, value_name = "R,G,B", value_parser = parse_rgb, requires = "preview")]
     pub specular: Option<[f32; 3]>,
     /// Preview: Phong exponent n (glossiness g ↔ n = 2^(13g): 1 … 8192).

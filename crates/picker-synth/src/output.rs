@@ -5,7 +5,7 @@
 //! |---|---|
 //! | `image.exr` / `image.png` | linear RGB (exposure applied) / sRGB 8-bit, clipped |
 //! | `diffuse_albedo`, `specular_albedo` `.exr/.png` | linear ρd, ρs / sRGB-encoded |
-//! | `glossiness.exr/.png` | g ∈ [0,1] (channel Y) / g as grey |
+//! | `glossiness.exr/.png` | g ∈ \[0,1\] (channel Y) / g as grey |
 //! | `normals`, `view_vector` `.exr/.png` | unit camera-space vectors / (n+1)/2 |
 //! | `uv.exr/.png` | (u, v, t), u, v ∈ [0,1) wrapped texture coordinates as given to `Texture::sample`, t = 1 textured / 0 single colour (then u = v = 0) / as RGB |
 //! | `depth.exr` | distance along −z in metres (channel Y), 0 where the sky is seen |
