@@ -253,6 +253,7 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
         size: None,
         max_size: pipeline::DEFAULT_MAX_SIZE,
         fov_deg: None,
+        line_refine: true,
         tileable: true,
         seamless: false,
         seed: 0,

@@ -65,6 +65,10 @@ pub struct Flags {
     /// Vertical field of view in degrees for --uv plane (default: from the view vectors).
     #[arg(long)]
     pub fov: Option<f32>,
+    /// Keep the predicted normals' plane for --uv plane: do not refine it with the vanishing
+    /// directions of the photo's straight lines in the picked region.
+    #[arg(long)]
+    pub no_lines: bool,
     /// Texture side in texels (default: the observed texel density, capped by --max-size).
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=8192))]
     pub size: Option<u32>,
@@ -130,6 +134,7 @@ impl Flags {
             size: self.size.map(|s| s as usize),
             max_size: self.max_size as usize,
             fov_deg: self.fov,
+            line_refine: !self.no_lines,
             tileable: !self.no_tile,
             seamless: self.seamless,
             seed: self.seed,

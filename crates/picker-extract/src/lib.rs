@@ -20,6 +20,7 @@ pub mod error;
 pub mod eval;
 pub mod export;
 pub mod guided;
+pub mod lines;
 pub mod mask;
 pub mod material;
 pub mod photo;

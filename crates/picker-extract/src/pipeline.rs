@@ -98,6 +98,9 @@ pub struct Options<'a> {
     pub max_size: usize,
     /// Vertical field of view (degrees) for the plane mode (else from the view vectors).
     pub fov_deg: Option<f32>,
+    /// Refine the plane mode's normal with the vanishing directions of the
+    /// photo's straight lines in the mask ([`crate::lines`]).
+    pub line_refine: bool,
     /// Make the texture tileable (toroidal inpainting).
     pub tileable: bool,
     /// Also remove colour jumps across the wrap edges when they show (see
@@ -125,6 +128,9 @@ pub struct Prepared {
     pub valid: Vec<bool>,
     /// Time spent preparing, ms.
     pub prepare_ms: f64,
+    /// The focal length from the photo's lines, found once at the first
+    /// pick that needs it ([`Prepared::line_focal`]).
+    line_focal: std::sync::OnceLock<(crate::lines::SmallLuma, Option<crate::lines::LineFocal>)>,
 }
 
 fn check_size(what: &str, img: &Image, c: usize, w: usize, h: usize) -> Result<()> {
@@ -159,7 +165,20 @@ impl Prepared {
             luma,
             valid,
             prepare_ms: t.elapsed().as_secs_f64() * 1e3,
+            line_focal: std::sync::OnceLock::new(),
         })
+    }
+
+    /// The photo's downsampled luma and its focal length from its straight
+    /// lines ([`crate::lines::focal_from_lines`]), computed once.
+    pub fn line_focal(&self) -> (&crate::lines::SmallLuma, Option<&crate::lines::LineFocal>) {
+        let (fw, fh) = self.photo_size();
+        let (small, focal) = self.line_focal.get_or_init(|| {
+            let small = crate::lines::SmallLuma::new(&self.luma, fw, fh);
+            let focal = crate::lines::focal_from_lines(&small);
+            (small, focal)
+        });
+        (small, focal.as_ref())
     }
 
     /// Photo size `(width, height)`.
@@ -364,6 +383,8 @@ pub struct UvDecision {
     pub plane_spread_deg: Option<f32>,
     /// Focal length used by the plane mode (photo pixels).
     pub focal_px: Option<f32>,
+    /// The plane mode's line refinement, when it ran.
+    pub lines: Option<crate::lines::LineRefinement>,
 }
 
 /// Diagnostics of one extraction, beyond the [`Material`].
@@ -579,18 +600,44 @@ pub fn extract(
                     wrap: true,
                 }
             });
-        let plane_coords = |diag_focal: &mut Option<f32>| -> Option<Coords> {
+        let plane_coords = |diag_focal: &mut Option<f32>,
+                            diag_lines: &mut Option<crate::lines::LineRefinement>|
+         -> Option<Coords> {
             let n = normal?;
-            let f_work = match opts.fov_deg {
-                Some(fov) => plane::focal_from_fov(h, fov),
-                None => plane::focal_from_view(&el.view, mw)
-                    .unwrap_or_else(|| plane::focal_from_fov(h, plane::DEFAULT_FOV_Y_DEG)),
+            // --fov, else the photo's lines (when refining with them), else
+            // the predicted view vectors, else the default field of view.
+            let line_focal = (opts.fov_deg.is_none() && opts.line_refine)
+                .then(|| p.line_focal().1)
+                .flatten();
+            let f = match (opts.fov_deg, line_focal) {
+                (Some(fov), _) => plane::focal_from_fov(fh, fov),
+                (None, Some(lf)) => lf.focal_px,
+                (None, None) => {
+                    plane::focal_from_view(&el.view, mw)
+                        .unwrap_or_else(|| plane::focal_from_fov(h, plane::DEFAULT_FOV_Y_DEG))
+                        * fh as f32
+                        / h as f32
+                }
             };
-            let f = f_work * fh as f32 / h as f32;
             *diag_focal = Some(f);
+            let n = if opts.line_refine {
+                let (n, mut found) = crate::lines::refine_plane_normal(
+                    p.line_focal().0,
+                    &full.data,
+                    n,
+                    f,
+                    line_focal.map(|lf| &lf.axes),
+                );
+                found.focal = line_focal.cloned();
+                *diag_lines = Some(found);
+                n
+            } else {
+                n
+            };
             Some(plane::plane_coords(fw, fh, &full.data, n, f))
         };
         let mut focal = None;
+        let mut lines = None;
         // Never more than ~4 texels per observed pixel: beyond that the texture is mostly invented.
         let observed_cap = opts
             .max_size
@@ -613,7 +660,7 @@ pub fn extract(
                             .into(),
                     )),
                 },
-                UvChoice::Plane => match plane_coords(&mut focal) {
+                UvChoice::Plane => match plane_coords(&mut focal, &mut lines) {
                     Some(c) => (UvMode::Plane, c),
                     None => {
                         return Err(Error::Invalid(
@@ -630,7 +677,7 @@ pub fn extract(
                             Some(c) => (UvMode::Net, c),
                             None => (
                                 UvMode::Plane,
-                                plane_coords(&mut focal).ok_or_else(|| {
+                                plane_coords(&mut focal, &mut lines).ok_or_else(|| {
                                     Error::Invalid(
                                         "no texture coordinates and no usable normals".into(),
                                     )
@@ -638,7 +685,7 @@ pub fn extract(
                             ),
                         }
                     } else {
-                        match plane_coords(&mut focal) {
+                        match plane_coords(&mut focal, &mut lines) {
                             Some(c) => (UvMode::Plane, c),
                             None => (
                                 UvMode::Net,
@@ -659,6 +706,7 @@ pub fn extract(
             net_uv_footprint: net_footprint,
             plane_spread_deg: spread,
             focal_px: focal,
+            lines,
         });
         lap("coordinates", &mut timings);
         let size = opts.size.unwrap_or_else(|| {
