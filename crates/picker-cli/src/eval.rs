@@ -28,7 +28,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{anyhow, bail, Context, Result};
 use picker_extract::eval as metrics;
 use picker_extract::mask::Mask;
-use picker_extract::{pipeline, Inputs, Prepared, UvChoice};
+use picker_extract::{pipeline, Inputs, Prepared, UvChoice, UvMode};
 use picker_inpaint::{seam_score, PatchMatchInpainter};
 use picker_render::io as rio;
 use picker_render::{ElementImages, EnvMap};
@@ -56,6 +56,9 @@ pub struct Args {
     /// Worker threads (default: one per logical core).
     #[arg(long)]
     pub threads: Option<usize>,
+    /// Do not refine the plane mode's focal and normal with the photo's lines (`extract --no-lines`).
+    #[arg(long)]
+    pub no_lines: bool,
 }
 
 /// One evaluated material.
@@ -83,6 +86,14 @@ pub struct Row {
     coverage: Option<f64>,
     uv_mode: Option<String>,
     colour_rmse: Option<f64>,
+    /// Plane mode: the angle (degrees) between the true plane normal (the
+    /// per-component median of the true normals over the true mask) and the
+    /// plane the predicted normals give.
+    plane_predicted_error_deg: Option<f64>,
+    /// Plane mode: the same for the normal used (refined by the lines).
+    plane_error_deg: Option<f64>,
+    /// Plane mode: |focal used / true focal − 1|.
+    focal_rel_error: Option<f64>,
 }
 
 fn scene_dirs(dir: &Path) -> Result<Vec<PathBuf>> {
@@ -253,7 +264,7 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
         size: None,
         max_size: pipeline::DEFAULT_MAX_SIZE,
         fov_deg: None,
-        line_refine: true,
+        line_refine: !a.no_lines,
         tileable: true,
         seamless: false,
         seed: 0,
@@ -314,7 +325,37 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
                 .as_ref()
                 .map(|u| format!("{:?}", u.mode).to_lowercase()),
             colour_rmse: None,
+            plane_predicted_error_deg: None,
+            plane_error_deg: None,
+            focal_rel_error: None,
         };
+        if let Some(uv) = diag.uv.as_ref().filter(|u| u.mode == UvMode::Plane) {
+            let truth_n = picker_extract::plane::plane_normal(&truth.normals, &true_mask);
+            let angle = |a: glam::Vec3, b: glam::Vec3| {
+                f64::from(
+                    a.normalize()
+                        .dot(b.normalize())
+                        .clamp(-1.0, 1.0)
+                        .acos()
+                        .to_degrees(),
+                )
+            };
+            let predicted = picker_extract::plane::plane_normal(&el.normals, &got.data);
+            let used = uv
+                .lines
+                .as_ref()
+                .map(|l| glam::Vec3::from(l.normal))
+                .or(predicted);
+            if let Some(t) = truth_n {
+                row.plane_predicted_error_deg = predicted.map(|p| angle(p, t));
+                row.plane_error_deg = used.map(|u| angle(u, t));
+            }
+            let fov = scene["camera"]["fov_y_deg"].as_f64();
+            if let (Some(f), Some(fov)) = (uv.focal_px, fov) {
+                let true_f = h as f64 / 2.0 / (fov.to_radians() / 2.0).tan();
+                row.focal_rel_error = Some((f64::from(f) / true_f - 1.0).abs());
+            }
+        }
         if textured_truth {
             let tex_path = dir
                 .join("materials")
@@ -349,6 +390,12 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
 fn mean(v: impl Iterator<Item = f64>) -> Option<f64> {
     let v: Vec<f64> = v.filter(|x| x.is_finite()).collect();
     (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
+}
+
+fn median(mut v: Vec<f64>) -> Option<f64> {
+    v.retain(|x| x.is_finite());
+    v.sort_by(f64::total_cmp);
+    (!v.is_empty()).then(|| v[v.len() / 2])
 }
 
 fn min(v: impl Iterator<Item = f64>) -> Option<f64> {
@@ -432,6 +479,12 @@ pub fn run(a: Args) -> Result<()> {
         "mean_albedo_rmse": mean(rows.iter().map(|r| r.albedo_rmse)),
         "mean_normal_error_deg": mean(rows.iter().map(|r| r.normal_error_deg)),
         "mean_colour_rmse_single_colour": mean(rows.iter().filter_map(|r| r.colour_rmse)),
+        "plane_rows": rows.iter().filter(|r| r.plane_error_deg.is_some()).count(),
+        "mean_plane_predicted_error_deg": mean(rows.iter().filter_map(|r| r.plane_predicted_error_deg)),
+        "mean_plane_error_deg": mean(rows.iter().filter_map(|r| r.plane_error_deg)),
+        "median_plane_error_deg": median(rows.iter().filter_map(|r| r.plane_error_deg).collect()),
+        "median_plane_predicted_error_deg": median(rows.iter().filter_map(|r| r.plane_predicted_error_deg).collect()),
+        "mean_focal_rel_error": mean(rows.iter().filter_map(|r| r.focal_rel_error)),
         "textured_detected": tex.iter().filter(|r| r.textured_extracted).count(),
     });
     println!("{}", serde_json::to_string_pretty(&agg)?);

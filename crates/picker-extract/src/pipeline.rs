@@ -613,7 +613,15 @@ pub fn extract(
                 (Some(fov), _) => plane::focal_from_fov(fh, fov),
                 (None, Some(lf)) => lf.focal_px,
                 (None, None) => {
+                    // The view vectors' focal, unless its field of view is
+                    // implausible for a photo of a room (the default
+                    // networks' view vectors often say ~20°).
+                    let (lo, hi) = crate::lines::FOCAL_FOV_RANGE;
                     plane::focal_from_view(&el.view, mw)
+                        .filter(|&f| {
+                            let fov = 2.0 * (h as f32 / 2.0 / f).atan().to_degrees();
+                            (lo..=hi).contains(&fov)
+                        })
                         .unwrap_or_else(|| plane::focal_from_fov(h, plane::DEFAULT_FOV_Y_DEG))
                         * fh as f32
                         / h as f32
