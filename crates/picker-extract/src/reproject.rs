@@ -210,9 +210,12 @@ fn kept(
 /// texel wide, each block merged only where its coordinates are coherent.
 pub const MAX_MERGE_BLOCK: usize = 8;
 
-/// The side `f` of the pixel blocks that [`samples`] merges: the largest
-/// power of two up to [`MAX_MERGE_BLOCK`] with `f` times the median picked
-/// pixel's side in texels at most one texel (1: no merging).
+/// The side `f` of the pixel blocks that [`samples`] merges: 1 (no merging)
+/// unless twice the median picked pixel's side in texels is at most one
+/// texel; then the largest power of two up to [`MAX_MERGE_BLOCK`] with `f`
+/// times the [`MERGE_QUANTILE`] pixel's side at most one texel (a block that
+/// is not coherent is split into its quadrants, down to single pixels:
+/// [`block_samples`]).
 ///
 /// A texture sized by the observed density ([`texture_size`]) gets about one
 /// texel per median pixel, so `f` is 1 unless the size was capped below the
@@ -226,20 +229,37 @@ fn merge_block(coords: &Coords, mask: &[bool], size: usize) -> usize {
     let Some(area) = coords.sizing_area(mask) else {
         return 1;
     };
-    let side = area.sqrt() * size as f32;
-    let mut f = 1;
-    while 2 * f <= MAX_MERGE_BLOCK && (2 * f) as f32 * side <= 1.0 {
-        f *= 2;
+    let largest = |area: f32| {
+        let side = area.sqrt() * size as f32;
+        let mut f = 1;
+        while 2 * f <= MAX_MERGE_BLOCK && (2 * f) as f32 * side <= 1.0 {
+            f *= 2;
+        }
+        f
+    };
+    let f = largest(area);
+    if f == 1 {
+        return 1;
     }
-    f
+    // The finer pixels (the near part of a receding plane) may merge in
+    // larger blocks; the coarser ones are reached by splitting.
+    let step = (coords.height / SIZING_ROWS).max(1);
+    coords
+        .area_quantile_rows(mask, MERGE_QUANTILE, step)
+        .map_or(f, |a| largest(a).max(f))
 }
+
+/// The quantile of the picked pixels' texture areas that sets the largest
+/// merged block once merging applies ([`merge_block`]).
+pub const MERGE_QUANTILE: f32 = 0.1;
 
 /// The samples of the `f × f` pixel block at block column `bx`, block row
 /// `by` (clipped to the image), appended to `out`: one merged sample when
 /// the block holds at least two kept pixels whose coordinates span at most
 /// `(f − 1)/f` texel on each axis (so the block's footprint is at most a
-/// texel, the smallest tent's radius), else each kept pixel's own sample in
-/// row-major order. A merged sample sits at the confidence-weighted mean of
+/// texel, the smallest tent's radius); else, for `f ≥ 4`, the samples of its
+/// four quadrants in turn (see [`region_samples`]), and for `f = 2` each kept
+/// pixel's own sample in row-major order. A merged sample sits at the confidence-weighted mean of
 /// the pixels' coordinates (unwrapped around the first pixel's when the
 /// coordinates wrap) with their confidence-weighted mean colour, the sum of
 /// their confidences as weight (each would have had its confidence: a
@@ -252,6 +272,19 @@ fn block_samples(
     px: &mut Vec<(usize, Vec3)>,
     out: &mut Vec<Sample>,
 ) {
+    region_samples(src, f, (bx * f, by * f), px, out);
+}
+
+/// [`block_samples`] of the `f × f` block with top-left pixel `(x0, y0)`;
+/// a block of side `f ≥ 4` that does not merge is split into its four
+/// quadrants (top-left, top-right, bottom-left, bottom-right), each in turn.
+fn region_samples(
+    src: &Picked<'_>,
+    f: usize,
+    (x0, y0): (usize, usize),
+    px: &mut Vec<(usize, Vec3)>,
+    out: &mut Vec<Sample>,
+) {
     let Picked {
         coords,
         mask,
@@ -260,8 +293,10 @@ fn block_samples(
         size,
     } = *src;
     let w = coords.width;
-    let (x0, x1) = (bx * f, ((bx + 1) * f).min(w));
-    let (y0, y1) = (by * f, ((by + 1) * f).min(coords.height));
+    if x0 >= w || y0 >= coords.height {
+        return;
+    }
+    let (x1, y1) = ((x0 + f).min(w), (y0 + f).min(coords.height));
     px.clear();
     for y in y0..y1 {
         for i in y * w + x0..y * w + x1 {
@@ -303,6 +338,12 @@ fn block_samples(
     });
     match merged.flatten() {
         Some(s) => out.push(s),
+        None if f >= 4 && k >= 2 => {
+            let g = f / 2;
+            for (dx, dy) in [(0, 0), (g, 0), (0, g), (g, g)] {
+                region_samples(src, g, (x0 + dx, y0 + dy), px, out);
+            }
+        }
         None => out.extend(
             px.iter()
                 .map(|&(i, c)| splat_sample(coords, mask, confidence, size, i, c)),
@@ -1517,6 +1558,72 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn incoherent_blocks_split_into_coherent_quadrants() {
+        // An 8×8 image, texture 64: each 4×4 quadrant's pixels are 0.1
+        // texel apart (coherent at every level), but the quadrants sit 10
+        // texels apart, so the 8×8 block splits into four merged 4×4 ones.
+        let (w, h, size) = (8usize, 8usize, 64usize);
+        let at = |x: usize, y: usize| {
+            let (qx, qy) = (x / 4, y / 4);
+            (
+                (10.0 * qx as f32 + 0.1 * (x % 4) as f32 + 5.0) / size as f32,
+                (10.0 * qy as f32 + 0.1 * (y % 4) as f32 + 5.0) / size as f32,
+            )
+        };
+        let coords = Coords {
+            width: w,
+            height: h,
+            u: (0..w * h).map(|i| at(i % w, i / w).0).collect(),
+            v: (0..w * h).map(|i| at(i % w, i / w).1).collect(),
+            wrap: false,
+        };
+        let img = Image::zeros(3, h, w);
+        let mask = vec![true; w * h];
+        let conf = vec![1.0f32; w * h];
+        let src = Picked {
+            coords: &coords,
+            mask: &mask,
+            colour: &img,
+            confidence: &conf,
+            size,
+        };
+        let s = samples(&src, 8);
+        assert_eq!(s.len(), 4, "{s:?}");
+        // In quadrant order: top-left, top-right, bottom-left, bottom-right.
+        let centres: Vec<(f32, f32)> = s.iter().map(|s| (s.u * 64.0, s.v * 64.0)).collect();
+        for (c, want) in
+            centres
+                .iter()
+                .zip([(5.15, 5.15), (15.15, 5.15), (5.15, 15.15), (15.15, 15.15)])
+        {
+            assert!(
+                (c.0 - want.0).abs() < 1e-3 && (c.1 - want.1).abs() < 1e-3,
+                "{centres:?}"
+            );
+        }
+        assert!(s.iter().all(|s| s.count == 16.0));
+        assert_eq!(samples_reference(&src, 8).len(), 4);
+        // A quadrant whose pixels are themselves spread (one pixel moved
+        // 5 texels) splits again: its other three 2×2 blocks merge, the
+        // moved pixel's 2×2 block gives one sample per pixel.
+        let mut u = coords.u.clone();
+        u[0] += 5.0 / size as f32;
+        let spread = Coords {
+            u,
+            ..coords.clone()
+        };
+        let src = Picked {
+            coords: &spread,
+            ..src
+        };
+        let s = samples(&src, 8);
+        assert_eq!(s.len(), 3 + 3 + 4, "{s:?}");
+        let count: f32 = s.iter().map(|s| s.count).sum();
+        assert_eq!(count, 64.0);
+        assert_eq!(s.len(), samples_reference(&src, 8).len());
     }
 
     #[test]
