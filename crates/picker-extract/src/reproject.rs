@@ -250,35 +250,23 @@ fn merge_block(coords: &Coords, mask: &[bool], size: usize) -> usize {
 }
 
 /// The quantile of the picked pixels' texture areas that sets the largest
-/// merged block once merging applies ([`merge_block`]).
+/// merged pixel block once [`reproject`] merges blocks (when the median
+/// pixel allows 2×2 ones; see [`MAX_MERGE_BLOCK`]).
 pub const MERGE_QUANTILE: f32 = 0.1;
 
-/// The samples of the `f × f` pixel block at block column `bx`, block row
-/// `by` (clipped to the image), appended to `out`: one merged sample when
-/// the block holds at least two kept pixels whose coordinates span at most
+/// The samples of the `f × f` pixel block with top-left pixel `(x0, y0)`
+/// (clipped to the image), appended to `out`: one merged sample when the
+/// block holds at least two kept pixels whose coordinates span at most
 /// `(f − 1)/f` texel on each axis (so the block's footprint is at most a
 /// texel, the smallest tent's radius); else, for `f ≥ 4`, the samples of its
-/// four quadrants in turn (see [`region_samples`]), and for `f = 2` each kept
-/// pixel's own sample in row-major order. A merged sample sits at the confidence-weighted mean of
-/// the pixels' coordinates (unwrapped around the first pixel's when the
-/// coordinates wrap) with their confidence-weighted mean colour, the sum of
-/// their confidences as weight (each would have had its confidence: a
-/// one-texel tent), radius 1 and `count` the number of pixels. `px` is
-/// scratch space.
+/// four quadrants in turn (top-left, top-right, bottom-left, bottom-right),
+/// and for `f = 2` each kept pixel's own sample in row-major order. A merged
+/// sample sits at the confidence-weighted mean of the pixels' coordinates
+/// (unwrapped around the first pixel's when the coordinates wrap) with their
+/// confidence-weighted mean colour, the sum of their confidences as weight
+/// (each would have had its confidence: a one-texel tent), radius 1 and
+/// `count` the number of pixels. `px` is scratch space.
 fn block_samples(
-    src: &Picked<'_>,
-    f: usize,
-    (bx, by): (usize, usize),
-    px: &mut Vec<(usize, Vec3)>,
-    out: &mut Vec<Sample>,
-) {
-    region_samples(src, f, (bx * f, by * f), px, out);
-}
-
-/// [`block_samples`] of the `f × f` block with top-left pixel `(x0, y0)`;
-/// a block of side `f ≥ 4` that does not merge is split into its four
-/// quadrants (top-left, top-right, bottom-left, bottom-right), each in turn.
-fn region_samples(
     src: &Picked<'_>,
     f: usize,
     (x0, y0): (usize, usize),
@@ -341,7 +329,7 @@ fn region_samples(
         None if f >= 4 && k >= 2 => {
             let g = f / 2;
             for (dx, dy) in [(0, 0), (g, 0), (0, g), (g, g)] {
-                region_samples(src, g, (x0 + dx, y0 + dy), px, out);
+                block_samples(src, g, (x0 + dx, y0 + dy), px, out);
             }
         }
         None => out.extend(
@@ -356,7 +344,7 @@ fn region_samples(
 fn block_row(src: &Picked<'_>, f: usize, by: usize, out: &mut Vec<Sample>) {
     let mut px = Vec::with_capacity(f * f);
     for bx in 0..src.coords.width.div_ceil(f) {
-        block_samples(src, f, (bx, by), &mut px, out);
+        block_samples(src, f, (bx * f, by * f), &mut px, out);
     }
 }
 
