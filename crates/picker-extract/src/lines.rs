@@ -578,39 +578,53 @@ pub fn focal_from_lines(small: &SmallLuma) -> Option<LineFocal> {
     })
 }
 
-/// A vanishing direction within this angle (degrees) of one of the scene's
-/// axes is taken to be that axis.
-pub const AXIS_MATCH_DEG: f32 = 5.0;
+/// A scene axis lies in the region's plane when the region's segments that
+/// point at its vanishing point make at least this share of their length.
+pub const MIN_AXIS_SUPPORT: f32 = 0.1;
+/// A scene axis can be the region's normal only when at most this share of
+/// the region's pixels look at the back of a plane with that normal.
+pub const MAX_BACKFACING: f32 = 0.02;
 /// The largest turn (degrees) from the line-refined normal to the scene axis
-/// it is snapped to.
-pub const MAX_SNAP_DEG: f32 = 30.0;
+/// it is snapped to (a sanity bound: the axes may be wrong in a scene
+/// without orthogonal structure).
+pub const MAX_SNAP_DEG: f32 = 60.0;
 
-/// The scene axis to use as the normal: when the region's first vanishing
-/// direction is one of `axes` (within [`AXIS_MATCH_DEG`]), the plane holds
-/// that axis, so its normal is one of the other two: the one nearer `n`
-/// (oriented like it), when within [`MAX_SNAP_DEG`].
-pub fn snap_to_axes(n: Vec3, vanishing: &[Vanishing], axes: &[[f32; 3]; 3]) -> Option<Vec3> {
-    let d = Vec3::from(vanishing.first()?.direction);
-    let axes = axes.map(Vec3::from);
-    let held = axes
-        .iter()
-        .position(|a| a.dot(d).abs() >= AXIS_MATCH_DEG.to_radians().cos())?;
-    let best = axes
-        .iter()
-        .enumerate()
-        .filter(|&(i, _)| i != held)
-        .map(|(_, &a)| if a.dot(n) < 0.0 { -a } else { a })
-        .max_by(|a, b| a.dot(n).total_cmp(&b.dot(n)))?;
-    (best.dot(n) >= MAX_SNAP_DEG.to_radians().cos()).then_some(best)
+/// The scene axis to use as the region's normal, oriented like `n`: the
+/// region's lines point at the axes marked `in_plane`, so the normal is an
+/// axis that is not; of those, it must be the only one `feasible` (a plane
+/// with that normal can show every pixel of the region: it is not seen from
+/// behind anywhere), and within [`MAX_SNAP_DEG`] of `n`. `None` when no
+/// axis is in the plane, or the choice is not unique (a single line family
+/// on a region that could be a wall or a ceiling: the predicted normal is
+/// then all there is).
+pub fn snap_to_axes(
+    n: Vec3,
+    axes: &[[f32; 3]; 3],
+    in_plane: [bool; 3],
+    feasible: [bool; 3],
+) -> Option<Vec3> {
+    if !in_plane.iter().any(|&b| b) {
+        return None;
+    }
+    let mut candidates = (0..3).filter(|&i| !in_plane[i] && feasible[i]);
+    let i = candidates.next()?;
+    if candidates.next().is_some() {
+        return None;
+    }
+    let a = Vec3::from(axes[i]);
+    let a = if a.dot(n) < 0.0 { -a } else { a };
+    (a.dot(n) >= MAX_SNAP_DEG.to_radians().cos()).then_some(a)
 }
 
 /// The whole refinement for the picked `mask` of a photo (full resolution)
 /// whose downsampled luma is `small` (the mask is downsampled alike, a block
-/// in it when all its pixels are): segments, vanishing directions with the focal `focal` (full
-/// photo pixels), and the refined normal, snapped to one of the scene's
-/// `axes` when they are known (found with this focal) and one of them is
-/// the region's vanishing direction ([`snap_to_axes`]). Returns the normal
-/// to use (`n` when nothing was found) and what was found.
+/// in it when all its pixels are): segments, vanishing directions with the
+/// focal `focal` (full photo pixels), and the refined normal, snapped to
+/// one of the scene's `axes` when they are known (found with this focal) and
+/// the region's lines single one out ([`snap_to_axes`]: its segments point
+/// at an axis, and only one of the others is a normal under which every
+/// region pixel sees the plane's front). Returns the normal to use (`n`
+/// when nothing was found) and what was found.
 pub fn refine_plane_normal(
     small: &SmallLuma,
     mask: &[bool],
@@ -643,7 +657,34 @@ pub fn refine_plane_normal(
     let refined = refine_normal(n, &vanishing, view);
     let snapped = match (refined, axes) {
         (Some(r), Some(axes)) => {
-            snap_to_axes(r, &vanishing, axes).filter(|s| s.dot(view.normalize_or_zero()) < -0.05)
+            let total: f32 = segs.iter().map(Segment::length).sum();
+            let cos_tol = INLIER_DEG.to_radians().cos();
+            let in_plane = axes.map(|a| {
+                let d = Vec3::from(a);
+                let along: f32 = segs
+                    .iter()
+                    .filter(|sg| pointing_cos(sg, d, centre, f) >= cos_tol)
+                    .map(Segment::length)
+                    .sum();
+                total > 0.0 && along >= MIN_AXIS_SUPPORT * total
+            });
+            let feasible = axes.map(|a| {
+                // Oriented to face the camera at the region's centre.
+                let a = Vec3::from(a);
+                let a = if a.dot(view) > 0.0 { -a } else { a };
+                let behind = m
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, &b)| b)
+                    .filter(|(i, _)| {
+                        let p = Vec2::new((i % w) as f32 + 0.5, (i / w) as f32 + 0.5);
+                        ray(p, centre, f).dot(a) >= 0.0
+                    })
+                    .count();
+                (behind as f32) <= MAX_BACKFACING * cnt as f32
+            });
+            snap_to_axes(r, axes, in_plane, feasible)
+                .filter(|s| s.dot(view.normalize_or_zero()) < -0.05)
         }
         _ => None,
     };
@@ -820,27 +861,34 @@ mod tests {
     }
 
     #[test]
-    fn snapping_takes_the_nearer_remaining_axis() {
+    fn snapping_needs_a_unique_feasible_axis() {
         let axes = [Vec3::X, Vec3::Y, Vec3::Z].map(|a| a.to_array());
-        let along_x = Vanishing {
-            direction: [1.0, 0.02, 0.0],
-            segments: 10,
-            support: 0.5,
-        };
-        // The plane holds X: its normal is Y or Z, whichever is nearer.
-        let n = Vec3::new(0.0, 0.3, 0.95).normalize();
-        assert_eq!(snap_to_axes(n, &[along_x], &axes), Some(Vec3::Z));
-        let n = Vec3::new(0.0, -0.95, 0.3).normalize();
-        assert_eq!(snap_to_axes(n, &[along_x], &axes), Some(-Vec3::Y));
-        // Too far from both (45°): no snap; a direction on no axis: no snap.
-        let n = Vec3::new(0.0, 0.7, 0.7).normalize();
-        assert_eq!(snap_to_axes(n, &[along_x], &axes), None);
-        let off_axis = Vanishing {
-            direction: [0.7, 0.7, 0.0],
-            ..along_x
-        };
-        assert_eq!(snap_to_axes(Vec3::Z, &[off_axis], &axes), None);
-        assert_eq!(snap_to_axes(Vec3::Z, &[], &axes), None);
+        let n = Vec3::new(0.1, 0.3, 0.95).normalize();
+        // X in the plane, Y not feasible: Z, oriented like n.
+        let got = snap_to_axes(n, &axes, [true, false, false], [true, false, true]);
+        assert_eq!(got, Some(Vec3::Z));
+        let got = snap_to_axes(-n, &axes, [true, false, false], [true, false, true]);
+        assert_eq!(got, Some(-Vec3::Z));
+        // Two axes in the plane: the third, even far from a poor n (50°).
+        let poor = Vec3::new(0.0, 0.77, 0.64).normalize();
+        let got = snap_to_axes(poor, &axes, [true, false, true], [true, true, true]);
+        assert_eq!(got, Some(Vec3::Y));
+        // Ambiguous (Y and Z both possible), no line family, nothing
+        // feasible, or too far from n: no snap.
+        assert_eq!(
+            snap_to_axes(n, &axes, [true, false, false], [true; 3]),
+            None
+        );
+        assert_eq!(snap_to_axes(n, &axes, [false; 3], [true; 3]), None);
+        assert_eq!(
+            snap_to_axes(n, &axes, [true, false, false], [true, false, false]),
+            None
+        );
+        let far = Vec3::new(0.0, 0.9, 0.3).normalize();
+        assert_eq!(
+            snap_to_axes(far, &axes, [true, false, false], [true, false, true]),
+            None
+        );
     }
 
     #[test]
