@@ -136,14 +136,12 @@ pub fn segments(luma: &[f32], mask: &[bool], w: usize, h: usize) -> Vec<Segment>
                 *g = (gx, gy, (gx * gx + gy * gy).sqrt());
             }
         });
-    let gx: Vec<f32> = grad.iter().map(|g| g.0).collect();
-    let gy: Vec<f32> = grad.iter().map(|g| g.1).collect();
-    let mag: Vec<f32> = grad.iter().map(|g| g.2).collect();
+    let mag = |i: usize| grad[i].2;
     // Seeds by decreasing magnitude (ties by index: deterministic).
-    let mut order: Vec<usize> = (0..n).filter(|&i| mag[i] >= MIN_GRADIENT).collect();
-    order.par_sort_unstable_by(|&a, &b| mag[b].total_cmp(&mag[a]).then(a.cmp(&b)));
+    let mut order: Vec<usize> = (0..n).filter(|&i| mag(i) >= MIN_GRADIENT).collect();
+    order.par_sort_unstable_by(|&a, &b| mag(b).total_cmp(&mag(a)).then(a.cmp(&b)));
     // Level-line direction: along the edge, (−gy, gx) in image axes.
-    let dir = |i: usize| Vec2::new(-gy[i], gx[i]) / mag[i];
+    let dir = |i: usize| Vec2::new(-grad[i].1, grad[i].0) / grad[i].2;
     let cos_tol = GROW_TOLERANCE_DEG.to_radians().cos();
     let mut used = vec![false; n];
     let mut out = Vec::new();
@@ -169,7 +167,7 @@ pub fn segments(luma: &[f32], mask: &[bool], w: usize, h: usize) -> Vec<Segment>
                         continue;
                     }
                     let j = ny as usize * w + nx as usize;
-                    if used[j] || mag[j] < MIN_GRADIENT || dir(j).dot(mean) < cos_tol {
+                    if used[j] || mag(j) < MIN_GRADIENT || dir(j).dot(mean) < cos_tol {
                         continue;
                     }
                     used[j] = true;
@@ -178,7 +176,7 @@ pub fn segments(luma: &[f32], mask: &[bool], w: usize, h: usize) -> Vec<Segment>
                 }
             }
         }
-        if let Some(s) = fit_segment(&region, w, &mag) {
+        if let Some(s) = fit_segment(&region, w, mag) {
             out.push(s);
         }
     }
@@ -187,7 +185,7 @@ pub fn segments(luma: &[f32], mask: &[bool], w: usize, h: usize) -> Vec<Segment>
 
 /// The segment of a region of pixels: their magnitude-weighted principal
 /// axis, from the extreme projections; `None` when short or not thin.
-fn fit_segment(region: &[usize], w: usize, mag: &[f32]) -> Option<Segment> {
+fn fit_segment(region: &[usize], w: usize, mag: impl Fn(usize) -> f32) -> Option<Segment> {
     if (region.len() as f32) < MIN_LENGTH {
         return None;
     }
@@ -196,7 +194,7 @@ fn fit_segment(region: &[usize], w: usize, mag: &[f32]) -> Option<Segment> {
     let mut c = [0.0f64; 2];
     for &i in region {
         let p = pt(i);
-        let m = mag[i] as f64;
+        let m = mag(i) as f64;
         wsum += m;
         c[0] += m * p.x as f64;
         c[1] += m * p.y as f64;
@@ -205,7 +203,7 @@ fn fit_segment(region: &[usize], w: usize, mag: &[f32]) -> Option<Segment> {
     let (mut sxx, mut sxy, mut syy) = (0.0f64, 0.0f64, 0.0f64);
     for &i in region {
         let d = pt(i) - c;
-        let m = mag[i] as f64;
+        let m = mag(i) as f64;
         sxx += m * (d.x * d.x) as f64;
         sxy += m * (d.x * d.y) as f64;
         syy += m * (d.y * d.y) as f64;
@@ -253,6 +251,24 @@ fn pointing_cos(s: &Segment, d: Vec3, c: Vec2, f: f32) -> f32 {
     (to_vp.dot(along) / (l1 * l2)).abs()
 }
 
+/// True when segment `s` points at the vanishing point of direction `d`
+/// (within [`INLIER_DEG`]).
+fn points_at(s: &Segment, d: Vec3, c: Vec2, f: f32) -> bool {
+    pointing_cos(s, d, c, f) >= INLIER_DEG.to_radians().cos()
+}
+
+/// The total length of the segments of `segs` that point at direction `d`.
+fn length_pointing_at<'a>(
+    segs: impl Iterator<Item = &'a Segment>,
+    d: Vec3,
+    c: Vec2,
+    f: f32,
+) -> f32 {
+    segs.filter(|s| points_at(s, d, c, f))
+        .map(Segment::length)
+        .sum()
+}
+
 /// Up to two vanishing directions of `segs` in an image with principal
 /// point `c` and focal `f` (pixels), the best supported first, each with at
 /// least [`MIN_SUPPORT`] of the total length (see the module docs).
@@ -281,7 +297,6 @@ fn vanishing_search(
         .iter()
         .map(|s| ray(s.a, c, f).cross(ray(s.b, c, f)).normalize_or_zero())
         .collect();
-    let cos_tol = INLIER_DEG.to_radians().cos();
     let mut rng = picker_tensor::Rng::new(seed);
     let mut left: Vec<usize> = (0..segs.len()).collect();
     let mut found: Vec<Vanishing> = Vec::new();
@@ -299,7 +314,7 @@ fn vanishing_search(
             let mut ids = Vec::new();
             let mut len = 0.0;
             for &i in &left {
-                if pointing_cos(&segs[i], d, c, f) >= cos_tol {
+                if points_at(&segs[i], d, c, f) {
                     ids.push(i);
                     len += segs[i].length();
                 }
@@ -316,12 +331,7 @@ fn vanishing_search(
                 (i != j && d.length() >= 1e-6).then(|| d.normalize())
             })
             .collect();
-        let score = |d: Vec3| -> f32 {
-            left.iter()
-                .filter(|&&i| pointing_cos(&segs[i], d, c, f) >= cos_tol)
-                .map(|&i| segs[i].length())
-                .sum()
-        };
+        let score = |d: Vec3| length_pointing_at(left.iter().map(|&i| &segs[i]), d, c, f);
         let best = hyps
             .par_iter()
             .enumerate()
@@ -658,14 +668,8 @@ pub fn refine_plane_normal(
     let snapped = match (refined, axes) {
         (Some(r), Some(axes)) => {
             let total: f32 = segs.iter().map(Segment::length).sum();
-            let cos_tol = INLIER_DEG.to_radians().cos();
             let in_plane = axes.map(|a| {
-                let d = Vec3::from(a);
-                let along: f32 = segs
-                    .iter()
-                    .filter(|sg| pointing_cos(sg, d, centre, f) >= cos_tol)
-                    .map(Segment::length)
-                    .sum();
+                let along = length_pointing_at(segs.iter(), Vec3::from(a), centre, f);
                 total > 0.0 && along >= MIN_AXIS_SUPPORT * total
             });
             let feasible = axes.map(|a| {
