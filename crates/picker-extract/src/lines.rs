@@ -560,7 +560,7 @@ pub fn focal_from_lines(small: &SmallLuma) -> Option<LineFocal> {
                 continue;
             }
             let f = (-p).sqrt();
-            let fov = 2.0 * ((h as f32 / 2.0) / f).atan().to_degrees();
+            let fov = crate::plane::fov_from_focal(h, f);
             if !(FOCAL_FOV_RANGE.0..=FOCAL_FOV_RANGE.1).contains(&fov) {
                 continue;
             }
@@ -578,7 +578,7 @@ pub fn focal_from_lines(small: &SmallLuma) -> Option<LineFocal> {
     let (d1, d2) = (dir(a), dir(b));
     Some(LineFocal {
         focal_px,
-        fov_y_deg: 2.0 * ((fh as f32 / 2.0) / focal_px).atan().to_degrees(),
+        fov_y_deg: crate::plane::fov_from_focal(fh, focal_px),
         vanishing_points: [full(a), full(b)],
         axes: [
             d1.to_array(),

@@ -618,10 +618,7 @@ pub fn extract(
                     // networks' view vectors often say ~20°).
                     let (lo, hi) = crate::lines::FOCAL_FOV_RANGE;
                     plane::focal_from_view(&el.view, mw)
-                        .filter(|&f| {
-                            let fov = 2.0 * (h as f32 / 2.0 / f).atan().to_degrees();
-                            (lo..=hi).contains(&fov)
-                        })
+                        .filter(|&f| (lo..=hi).contains(&plane::fov_from_focal(h, f)))
                         .unwrap_or_else(|| plane::focal_from_fov(h, plane::DEFAULT_FOV_Y_DEG))
                         * fh as f32
                         / h as f32

@@ -69,6 +69,12 @@ pub fn focal_from_fov(h: usize, fov_y_deg: f32) -> f32 {
     (h as f32 / 2.0) / (fov_y_deg.to_radians() / 2.0).tan()
 }
 
+/// Vertical field of view in degrees of an image `h` pixels tall with focal
+/// length `focal` pixels (the inverse of [`focal_from_fov`]).
+pub fn fov_from_focal(h: usize, focal: f32) -> f32 {
+    2.0 * ((h as f32 / 2.0) / focal).atan().to_degrees()
+}
+
 /// The plane normal: normalised per-component median of `normals` over `mask`.
 pub fn plane_normal(normals: &Image, mask: &[bool]) -> Option<Vec3> {
     let mut comp = [Vec::new(), Vec::new(), Vec::new()];
@@ -277,6 +283,16 @@ mod tests {
                 assert_eq!(bits(&a.v), bits(&b.v), "{w}x{h} k{k}");
             }
         }
+    }
+
+    #[test]
+    fn fov_and_focal_are_inverse() {
+        for (h, fov) in [(240usize, 60.0f32), (3000, 72.64), (1, 25.0), (480, 110.0)] {
+            let f = focal_from_fov(h, fov);
+            assert!((fov_from_focal(h, f) - fov).abs() < 1e-3, "{h} {fov}");
+        }
+        // 320×240 at 72.64°: the README example's 163.2 px.
+        assert!((focal_from_fov(240, 72.64) - 163.2).abs() < 0.1);
     }
 
     #[test]
