@@ -2,9 +2,12 @@
 //!
 //! Every picked pixel carries texture coordinates `(u, v)` (the IRN's wrapped
 //! UVs, or plane coordinates from [`crate::plane`]) and a de-lit colour. The
-//! colours are splatted into a `size × size` texture with a tent kernel whose
-//! radius follows the pixel's footprint in the texture (so pixels seen from
-//! afar cover the texels between them), accumulating per-texel weights. The
+//! colours are splatted into a `size × size` texture with the pixel's own
+//! footprint: a tent one pixel wide on each pixel axis, mapped into the texture
+//! by the coordinates' Jacobian ([`Footprint`]: an oblique parallelogram for a
+//! surface seen at a grazing angle, so a pixel is spread along the direction it
+//! is stretched in and not across it; pixels seen from afar cover the texels
+//! between them), accumulating per-texel weights. The
 //! texel colour is the weighted mean; one reweighting pass downweights samples
 //! far from their texel's mean (Cauchy weights), which rejects misplaced UVs
 //! and highlights that survived de-lighting; [`BACK_PROJECTIONS`] rounds of
@@ -26,7 +29,8 @@ use rayon::prelude::*;
 /// Observation weight (tent weights per unit of footprint, whatever the
 /// pixels' confidence) from which a texel counts as known.
 pub const KNOWN_WEIGHT: f32 = 0.05;
-/// Largest splat radius in texels (very distant pixels are blurred, not spread further).
+/// Largest half-axis of a splat footprint in texels (very distant or very
+/// oblique pixels are blurred, not spread further); the smallest is one texel.
 pub const MAX_SPLAT_RADIUS: f32 = 4.0;
 
 /// Texture coordinates of pixels: per-pixel `(u, v)` on a `width × height`
@@ -69,6 +73,37 @@ impl Coords {
         let (uy, vy) = (self.delta(u0, self.u[i + w]), self.delta(v0, self.v[i + w]));
         let a = (ux * vy - uy * vx).abs();
         a.is_finite().then_some(a)
+    }
+
+    /// The coordinates' Jacobian at picked pixel `i`: how `(u, v)` move per
+    /// pixel step along `x` and along `y` (`(du/dx, dv/dx), (du/dy, dv/dy)`),
+    /// each by a forward difference to the next picked pixel, or a backward
+    /// one where that is not picked; `None` where `i` is not picked, a step
+    /// has no picked neighbour or a difference is not finite.
+    pub fn jacobian(&self, mask: &[bool], i: usize) -> Option<([f32; 2], [f32; 2])> {
+        let w = self.width;
+        let (x, y) = (i % w, i / w);
+        if !mask[i] {
+            return None;
+        }
+        let step = |fwd: Option<usize>, back: Option<usize>| {
+            let (a, b) = match (fwd.filter(|&j| mask[j]), back.filter(|&j| mask[j])) {
+                (Some(j), _) => (i, j),
+                (None, Some(j)) => (j, i),
+                (None, None) => return None,
+            };
+            let d = [
+                self.delta(self.u[a], self.u[b]),
+                self.delta(self.v[a], self.v[b]),
+            ];
+            d.iter().all(|t| t.is_finite()).then_some(d)
+        };
+        let jx = step((x + 1 < w).then_some(i + 1), (x > 0).then(|| i - 1))?;
+        let jy = step(
+            (y + 1 < self.height).then_some(i + w),
+            (y > 0).then(|| i - w),
+        )?;
+        Some((jx, jy))
     }
 
     /// The `q`-quantile (0 = smallest) of the texture-square area per picked pixel.
@@ -181,10 +216,153 @@ struct Sample {
     v: f32,
     colour: Vec3,
     weight: f32,
-    radius: f32,
+    /// Where the sample's tent reaches in the texture.
+    fp: Footprint,
     /// Photo pixels this sample stands for (1, or more for a merged block:
     /// [`merge_block`]); its observation weight counts each of them.
     count: f32,
+}
+
+/// Where a sample's tent reaches in the texture: the pixel's tent (one pixel
+/// wide on each pixel axis, `(1 − |a|)(1 − |b|)` at pixel offset `(a, b)`)
+/// mapped into texel units by a Jacobian `J` (texels per pixel step) whose
+/// singular values are clamped to `[1, MAX_SPLAT_RADIUS]` texels; a pixel
+/// finer than a texel on both axes gets the texel's axis-aligned tent.
+///
+/// A pixel of a surface seen at a grazing angle covers a long, thin
+/// parallelogram of the texture: this footprint spreads its colour along the
+/// stretched axis (where the pixel averaged the texture) and not across it
+/// (where it resolved it). The lower clamp keeps every texel between
+/// neighbouring samples reached (a pixel finer than a texel still spreads
+/// over one); the upper one limits the blur of very distant pixels. A
+/// frontal, axis-aligned view (`J = s·I`) gives the square tent of radius
+/// `clamp(s, 1, MAX_SPLAT_RADIUS)`.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct Footprint {
+    /// `J'⁻¹`, row-major: a texel offset `(dx, dy)` is pixel offset
+    /// `(inv[0]·dx + inv[1]·dy, inv[2]·dx + inv[3]·dy)`.
+    inv: [f32; 4],
+    /// Half-extents in texels of the footprint's bounding box along `x` and `y`.
+    ext: [f32; 2],
+    /// `|det J'|`: the footprint's area in texels, the integral of its tent.
+    area: f32,
+}
+
+impl Footprint {
+    /// The square tent of radius `r` texels (`r > 0`).
+    fn isotropic(r: f32) -> Self {
+        Footprint {
+            inv: [1.0 / r, 0.0, 0.0, 1.0 / r],
+            ext: [r, r],
+            area: r * r,
+        }
+    }
+
+    /// The footprint of a pixel whose coordinates move by `jx` texels per
+    /// pixel step along `x` and `jy` per step along `y` (the columns of
+    /// `J`), with `J`'s singular values clamped to `[1, MAX_SPLAT_RADIUS]`
+    /// and its singular vectors kept. When both are at most 1 (and for
+    /// non-finite input) it is the one-texel tent ([`Footprint::isotropic`]`(1)`); a
+    /// degenerate `J` (coordinates collapsed onto a line) keeps its one
+    /// direction and gets one texel across it.
+    fn from_jacobian(jx: [f32; 2], jy: [f32; 2]) -> Self {
+        let (a, b, c, d) = (
+            f64::from(jx[0]),
+            f64::from(jy[0]),
+            f64::from(jx[1]),
+            f64::from(jy[1]),
+        );
+        if ![a, b, c, d].iter().all(|v| v.is_finite()) {
+            return Footprint::isotropic(1.0);
+        }
+        // JᵀJ = [[p, q], [q, r]]: its eigenvectors are J's right singular
+        // vectors, its eigenvalues the squared singular values.
+        let (p, q, r) = (a * a + c * c, a * b + c * d, b * b + d * d);
+        let m = 0.5 * (p + r);
+        let h = (0.25 * (p - r) * (p - r) + q * q).sqrt();
+        let (l1, l2) = (m + h, (m - h).max(0.0));
+        let (s1, s2) = (l1.sqrt(), l2.sqrt());
+        if !(s1 > 1.0) {
+            // A pixel finer than a texel on both axes: the texel's own
+            // (axis-aligned, bilinear) tent, as for a merged pixel block.
+            return Footprint::isotropic(1.0);
+        }
+        // v1 from the better-conditioned row of (JᵀJ − λ₁I)v = 0.
+        let (vx, vy) = if h <= 1e-12 * m {
+            (1.0, 0.0)
+        } else if p >= r {
+            (l1 - r, q)
+        } else {
+            (q, l1 - p)
+        };
+        let nv = (vx * vx + vy * vy).sqrt();
+        let v1 = (vx / nv, vy / nv);
+        let v2 = (-v1.1, v1.0);
+        let apply = |v: (f64, f64)| (a * v.0 + b * v.1, c * v.0 + d * v.1);
+        let (j1, j2) = (apply(v1), apply(v2));
+        let u1 = (j1.0 / s1, j1.1 / s1);
+        let u2 = if s2 > 1e-9 * s1 {
+            (j2.0 / s2, j2.1 / s2)
+        } else {
+            (-u1.1, u1.0)
+        };
+        let max = f64::from(MAX_SPLAT_RADIUS);
+        let (t1, t2) = (s1.clamp(1.0, max), s2.clamp(1.0, max));
+        // J' = t1·u1·v1ᵀ + t2·u2·v2ᵀ and J'⁻¹ = v1·u1ᵀ/t1 + v2·u2ᵀ/t2.
+        let jp = [
+            t1 * u1.0 * v1.0 + t2 * u2.0 * v2.0,
+            t1 * u1.0 * v1.1 + t2 * u2.0 * v2.1,
+            t1 * u1.1 * v1.0 + t2 * u2.1 * v2.0,
+            t1 * u1.1 * v1.1 + t2 * u2.1 * v2.1,
+        ];
+        let inv = [
+            v1.0 * u1.0 / t1 + v2.0 * u2.0 / t2,
+            v1.0 * u1.1 / t1 + v2.0 * u2.1 / t2,
+            v1.1 * u1.0 / t1 + v2.1 * u2.0 / t2,
+            v1.1 * u1.1 / t1 + v2.1 * u2.1 / t2,
+        ];
+        Footprint {
+            inv: inv.map(|x| x as f32),
+            ext: [
+                (jp[0].abs() + jp[1].abs()) as f32,
+                (jp[2].abs() + jp[3].abs()) as f32,
+            ],
+            area: (t1 * t2) as f32,
+        }
+    }
+
+    /// The part of the pixel offsets that depends on the texel row offset
+    /// `dy` (shared by a row's texels: [`Footprint::weight`]).
+    #[inline]
+    fn row(&self, dy: f32) -> [f32; 2] {
+        [self.inv[1] * dy, self.inv[3] * dy]
+    }
+
+    /// The tent's value at texel offset `(dx, dy)` from the sample, `row`
+    /// being [`Footprint::row`]`(dy)`; 0 outside the footprint.
+    #[inline]
+    fn weight(&self, row: [f32; 2], dx: f32) -> f32 {
+        let a = 1.0 - (self.inv[0] * dx + row[0]).abs();
+        let b = 1.0 - (self.inv[2] * dx + row[1]).abs();
+        if a <= 0.0 || b <= 0.0 {
+            0.0
+        } else {
+            a * b
+        }
+    }
+
+    /// [`Footprint::weight`] written out for one offset (the references'
+    /// version: the same operations, so the same bits).
+    #[cfg(test)]
+    fn weight_at(&self, dx: f32, dy: f32) -> f32 {
+        let a = 1.0 - (self.inv[0] * dx + self.inv[1] * dy).abs();
+        let b = 1.0 - (self.inv[2] * dx + self.inv[3] * dy).abs();
+        if a > 0.0 && b > 0.0 {
+            a * b
+        } else {
+            0.0
+        }
+    }
 }
 
 /// Pixel `i`'s de-lit colour when it is picked with a positive confidence
@@ -264,7 +442,7 @@ pub const MERGE_QUANTILE: f32 = 0.1;
 /// sample sits at the confidence-weighted mean of the pixels' coordinates
 /// (unwrapped around the first pixel's when the coordinates wrap) with their
 /// confidence-weighted mean colour, the sum of their confidences as weight
-/// (each would have had its confidence: a one-texel tent), radius 1 and
+/// (each would have had its confidence: a one-texel tent), a one-texel tent and
 /// `count` the number of pixels. `px` is scratch space.
 fn block_samples(
     src: &Picked<'_>,
@@ -320,7 +498,7 @@ fn block_samples(
             v: cv / cw,
             colour: cc / cw,
             weight: cw,
-            radius: 1.0,
+            fp: Footprint::isotropic(1.0),
             count: k as f32,
         })
     });
@@ -360,7 +538,7 @@ struct Picked<'a> {
 }
 
 /// The picked pixels with a positive confidence and finite coordinates and
-/// colour ([`kept`]), in pixel order, with their splat radius and weight;
+/// colour ([`kept`]), in pixel order, with their footprint and weight;
 /// with `block > 1`, by `block × block` pixel blocks in row-major order,
 /// each merged into one sample where it is coherent ([`block_samples`]).
 ///
@@ -450,9 +628,21 @@ fn filled_in_parts(
     out
 }
 
-/// Pixel `i`'s sample of colour `c`: its splat radius is the side of the
-/// pixel's area in texels (clamped to `1..=MAX_SPLAT_RADIUS`), its weight the
-/// confidence spread over that footprint.
+/// Pixel `i`'s sample of colour `c`: its footprint is the pixel's tent
+/// mapped by the coordinates' Jacobian in texels ([`Coords::jacobian`],
+/// [`Footprint::from_jacobian`]; a one-texel tent where the Jacobian is
+/// unknown), its weight the confidence over the footprint's area `A`
+/// squared.
+///
+/// One factor `1/A` spreads the confidence over the footprint (the tent
+/// integrates to `A`); the other is an inverse-variance weight: a pixel
+/// that averaged `A` texels tells about each of them with an error that
+/// grows with `A` (the other texels under it), so where sharp and blurred
+/// pixels see the same texel (a floor's near and far repeats of one tile),
+/// the sharp ones decide. `picker eval` on ground-truth elements, mean
+/// aligned texture PSNR (seed 4242 / 9191, 40 scenes each): 38.78 / 38.84 dB
+/// with the former isotropic tent of radius `√A` and weight `1/A`; 38.88 /
+/// 39.05 with this footprint and `1/A`; 39.37 / 39.46 with `1/A²`.
 fn splat_sample(
     coords: &Coords,
     mask: &[bool],
@@ -461,17 +651,18 @@ fn splat_sample(
     i: usize,
     c: Vec3,
 ) -> Sample {
-    let side = coords
-        .pixel_area(mask, i)
-        .map(|a| a.sqrt() * size as f32)
-        .unwrap_or(1.0);
-    let radius = side.clamp(1.0, MAX_SPLAT_RADIUS);
+    let s = size as f32;
+    let fp = coords
+        .jacobian(mask, i)
+        .map_or(Footprint::isotropic(1.0), |(jx, jy)| {
+            Footprint::from_jacobian([jx[0] * s, jx[1] * s], [jy[0] * s, jy[1] * s])
+        });
     Sample {
         u: coords.u[i],
         v: coords.v[i],
         colour: c,
-        weight: confidence[i] / (radius * radius),
-        radius,
+        weight: confidence[i] / (fp.area * fp.area),
+        fp,
         count: 1.0,
     }
 }
@@ -558,7 +749,8 @@ fn wrap_i64(v: i64, n: i64) -> i64 {
 #[inline]
 fn sample_rows(s: &Sample, size: usize) -> (i64, i64) {
     let py = s.v * size as f32 - 0.5;
-    (ceil_i64(py - s.radius), floor_i64(py + s.radius))
+    let e = s.fp.ext[1];
+    (ceil_i64(py - e), floor_i64(py + e))
 }
 
 /// For every band of [`SPLAT_BAND_ROWS`] texture rows, the indices of the
@@ -660,24 +852,21 @@ fn splat(
                 let value = values.map_or(s.colour, |v| v[k as usize]);
                 let px = s.u * size as f32 - 0.5;
                 let py = s.v * size as f32 - 0.5;
-                let r = s.radius;
-                let per_area = s.count / (r * r);
-                let (x0, x1) = (ceil_i64(px - r), floor_i64(px + r));
-                let (y0, y1) = (ceil_i64(py - r), floor_i64(py + r));
+                let fp = &s.fp;
+                let per_area = s.count / fp.area;
+                let (x0, x1) = (ceil_i64(px - fp.ext[0]), floor_i64(px + fp.ext[0]));
+                let (y0, y1) = (ceil_i64(py - fp.ext[1]), floor_i64(py + fp.ext[1]));
                 for ty in y0..=y1 {
                     // (The band test first: both tests only skip the row.)
                     let yy = if wrap { wrap_i64(ty, n) } else { ty };
                     if yy < lo || yy >= hi {
                         continue;
                     }
-                    let wy = 1.0 - (ty as f32 - py).abs() / r;
-                    if wy <= 0.0 {
-                        continue;
-                    }
+                    let row_t = fp.row(ty as f32 - py);
                     let row = (yy - lo) as usize * size;
                     for tx in x0..=x1 {
-                        let wx = 1.0 - (tx as f32 - px).abs() / r;
-                        if wx <= 0.0 {
+                        let t = fp.weight(row_t, tx as f32 - px);
+                        if t <= 0.0 {
                             continue;
                         }
                         let xx = if wrap { wrap_i64(tx, n) } else { tx };
@@ -685,7 +874,7 @@ fn splat(
                             continue;
                         }
                         let lt = row + xx as usize;
-                        let mut w = s.weight * wx * wy;
+                        let mut w = s.weight * t;
                         if let Some(mean) = reference {
                             let d = (s.colour - mean[lt + lo as usize * size]).length() / scale;
                             w /= 1.0 + d * d;
@@ -693,7 +882,7 @@ fn splat(
                         bsum[lt] += value * w;
                         bw[lt] += w;
                         if track_seen {
-                            bseen[lt] += per_area * wx * wy;
+                            bseen[lt] += per_area * t;
                         }
                     }
                 }
@@ -725,23 +914,22 @@ fn predict(s: &Sample, tex: &[Vec3], size: usize, wrap: bool) -> Option<Vec3> {
     let n = size as i64;
     let px = s.u * size as f32 - 0.5;
     let py = s.v * size as f32 - 0.5;
-    let r = s.radius;
-    let (x0, x1) = (ceil_i64(px - r), floor_i64(px + r));
-    let (y0, y1) = (ceil_i64(py - r), floor_i64(py + r));
+    let fp = &s.fp;
+    let (x0, x1) = (ceil_i64(px - fp.ext[0]), floor_i64(px + fp.ext[0]));
+    let (y0, y1) = (ceil_i64(py - fp.ext[1]), floor_i64(py + fp.ext[1]));
     let (mut acc, mut wsum) = (Vec3::ZERO, 0.0f32);
     for ty in y0..=y1 {
-        let wy = 1.0 - (ty as f32 - py).abs() / r;
         let yy = if wrap { wrap_i64(ty, n) } else { ty };
-        if wy <= 0.0 || yy < 0 || yy >= n {
+        if yy < 0 || yy >= n {
             continue;
         }
+        let row_t = fp.row(ty as f32 - py);
         for tx in x0..=x1 {
-            let wx = 1.0 - (tx as f32 - px).abs() / r;
+            let w = fp.weight(row_t, tx as f32 - px);
             let xx = if wrap { wrap_i64(tx, n) } else { tx };
-            if wx <= 0.0 || xx < 0 || xx >= n {
+            if w <= 0.0 || xx < 0 || xx >= n {
                 continue;
             }
-            let w = wx * wy;
             acc += tex[yy as usize * size + xx as usize] * w;
             wsum += w;
         }
@@ -1062,21 +1250,17 @@ fn splat_reference(
         let value = values.map_or(s.colour, |v| v[k]);
         let px = s.u * size as f32 - 0.5;
         let py = s.v * size as f32 - 0.5;
-        let r = s.radius;
-        let (x0, x1) = ((px - r).ceil() as i64, (px + r).floor() as i64);
-        let (y0, y1) = ((py - r).ceil() as i64, (py + r).floor() as i64);
+        let [ex, ey] = s.fp.ext;
+        let (x0, x1) = ((px - ex).ceil() as i64, (px + ex).floor() as i64);
+        let (y0, y1) = ((py - ey).ceil() as i64, (py + ey).floor() as i64);
         for ty in y0..=y1 {
-            let wy = 1.0 - (ty as f32 - py).abs() / r;
-            if wy <= 0.0 {
-                continue;
-            }
             let yy = if wrap { ty.rem_euclid(n) } else { ty };
             if yy < 0 || yy >= n {
                 continue;
             }
             for tx in x0..=x1 {
-                let wx = 1.0 - (tx as f32 - px).abs() / r;
-                if wx <= 0.0 {
+                let k = s.fp.weight_at(tx as f32 - px, ty as f32 - py);
+                if k <= 0.0 {
                     continue;
                 }
                 let xx = if wrap { tx.rem_euclid(n) } else { tx };
@@ -1084,14 +1268,14 @@ fn splat_reference(
                     continue;
                 }
                 let t = yy as usize * size + xx as usize;
-                let mut w = s.weight * wx * wy;
+                let mut w = s.weight * k;
                 if let Some(mean) = reference {
                     let d = (s.colour - mean[t]).length() / scale;
                     w /= 1.0 + d * d;
                 }
                 sum[t] += value * w;
                 wsum[t] += w;
-                seen[t] += s.count / (r * r) * wx * wy;
+                seen[t] += s.count / s.fp.area * k;
             }
         }
     }
@@ -1265,6 +1449,228 @@ mod tests {
         assert!(r2 < 0.3, "{r2}");
     }
 
+    /// A footprint from a random Jacobian: isotropic, oblique, degenerate
+    /// (collapsed onto a line) or far beyond the clamps.
+    fn random_footprint(rng: &mut picker_tensor::Rng) -> Footprint {
+        let mut j = || rng.uniform(-6.0, 6.0);
+        let (jx, mut jy) = ([j(), j()], [j(), j()]);
+        match rng.range(0, 4) {
+            0 => Footprint::isotropic(rng.uniform(1.0, MAX_SPLAT_RADIUS * 3.0)),
+            1 => {
+                // Parallel columns: a degenerate Jacobian.
+                let t = rng.uniform(-2.0, 2.0);
+                jy = [jx[0] * t, jx[1] * t];
+                Footprint::from_jacobian(jx, jy)
+            }
+            _ => Footprint::from_jacobian(jx, jy),
+        }
+    }
+
+    /// `J'` of a footprint, recovered by inverting `inv`.
+    fn forward(fp: &Footprint) -> [f64; 4] {
+        let m = fp.inv.map(f64::from);
+        let det = m[0] * m[3] - m[1] * m[2];
+        [m[3] / det, -m[1] / det, -m[2] / det, m[0] / det]
+    }
+
+    /// Singular values (largest first) of a row-major 2×2 matrix.
+    fn singular_values(m: [f64; 4]) -> (f64, f64) {
+        let fro = m.iter().map(|x| x * x).sum::<f64>();
+        let det = (m[0] * m[3] - m[1] * m[2]).abs();
+        let disc = (fro * fro - 4.0 * det * det).max(0.0).sqrt();
+        (
+            ((fro + disc) / 2.0).sqrt(),
+            ((fro - disc) / 2.0).max(0.0).sqrt(),
+        )
+    }
+
+    #[test]
+    fn footprint_clamps_the_singular_values_and_keeps_the_rest() {
+        let mut rng = picker_tensor::Rng::new(5);
+        let max = f64::from(MAX_SPLAT_RADIUS);
+        for case in 0..2000 {
+            let scale = [0.05, 0.5, 1.0, 3.0, 20.0][case % 5];
+            let mut j = || rng.uniform(-1.0, 1.0) * scale;
+            let (jx, jy) = ([j(), j()], [j(), j()]);
+            let fp = Footprint::from_jacobian(jx, jy);
+            let jm = [jx[0], jy[0], jx[1], jy[1]].map(f64::from);
+            let (s1, s2) = singular_values(jm);
+            if s1 <= 1.0 {
+                // Finer than a texel: the texel's own tent.
+                assert_eq!(fp, Footprint::isotropic(1.0), "{case}");
+                continue;
+            }
+            let jp = forward(&fp);
+            let (t1, t2) = singular_values(jp);
+            let tol = 1e-4 * t1.max(1.0);
+            assert!(
+                (t1 - s1.clamp(1.0, max)).abs() < tol,
+                "{case}: {t1} vs {s1}"
+            );
+            assert!(
+                (t2 - s2.clamp(1.0, max)).abs() < tol,
+                "{case}: {t2} vs {s2}"
+            );
+            assert!((f64::from(fp.area) - t1 * t2).abs() < 1e-4 * t1 * t2);
+            // Unclamped singular values: J' is J itself.
+            if s2 >= 1.0 && s1 <= max {
+                for k in 0..4 {
+                    assert!(
+                        (jp[k] - jm[k]).abs() < 1e-4 * s1,
+                        "{case}: {jp:?} vs {jm:?}"
+                    );
+                }
+            }
+            // The bounding box holds the parallelogram's corners.
+            assert!((f64::from(fp.ext[0]) - (jp[0].abs() + jp[1].abs())).abs() < 1e-4 * t1);
+            assert!((f64::from(fp.ext[1]) - (jp[2].abs() + jp[3].abs())).abs() < 1e-4 * t1);
+            // Same singular vectors: J'⁻¹·J = V·S'⁻¹·S·Vᵀ is symmetric
+            // positive semi-definite.
+            let inv = fp.inv.map(f64::from);
+            let mj = [
+                inv[0] * jm[0] + inv[1] * jm[2],
+                inv[0] * jm[1] + inv[1] * jm[3],
+                inv[2] * jm[0] + inv[3] * jm[2],
+                inv[2] * jm[1] + inv[3] * jm[3],
+            ];
+            let big = mj.iter().fold(1.0f64, |m, x| m.max(x.abs()));
+            assert!((mj[1] - mj[2]).abs() < 1e-4 * big, "{case}: {mj:?}");
+            assert!(
+                mj[0] >= -1e-4 * big && mj[3] >= -1e-4 * big,
+                "{case}: {mj:?}"
+            );
+            assert!(
+                mj[0] * mj[3] - mj[1] * mj[2] >= -1e-4 * big * big,
+                "{case}: {mj:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn footprint_tent_follows_the_pixel_axes() {
+        // A pixel stretched 3× along a direction at 30° and 0.2× across it
+        // (clamped to 1): its tent is 1 at the centre, ½ a third of the way
+        // along the stretched axis (1.5 texels out of 3, times 1 − 0 across),
+        // 0 at a texel across, and symmetric.
+        let (c, s) = (30f32.to_radians().cos(), 30f32.to_radians().sin());
+        // J = R · diag(3, 0.2): columns are the texel steps of the pixel axes.
+        let fp = Footprint::from_jacobian([3.0 * c, 3.0 * s], [-0.2 * s, 0.2 * c]);
+        let at = |dx: f32, dy: f32| fp.weight(fp.row(dy), dx);
+        assert!((at(0.0, 0.0) - 1.0).abs() < 1e-6);
+        assert!((at(1.5 * c, 1.5 * s) - 0.5).abs() < 1e-5);
+        assert!((at(-1.5 * c, -1.5 * s) - 0.5).abs() < 1e-5);
+        assert!((at(-0.5 * s, 0.5 * c) - 0.5).abs() < 1e-5);
+        assert_eq!(at(-1.01 * s, 1.01 * c), 0.0);
+        assert_eq!(at(3.01 * c, 3.01 * s), 0.0);
+        assert!((fp.area - 3.0).abs() < 1e-5);
+        // The frontal case: the square tent of the old isotropic splat.
+        let iso = Footprint::from_jacobian([2.5, 0.0], [0.0, 2.5]);
+        for (dx, dy) in [(0.3f32, -1.2f32), (2.0, 0.5), (-2.4, 2.4)] {
+            let want = (1.0 - dx.abs() / 2.5) * (1.0 - dy.abs() / 2.5);
+            assert!((iso.weight(iso.row(dy), dx) - want).abs() < 1e-6);
+        }
+        assert_eq!(iso.ext, [2.5, 2.5]);
+        // Degenerate and non-finite Jacobians.
+        let line = Footprint::from_jacobian([2.0, 0.0], [4.0, 0.0]);
+        let (t1, t2) = singular_values(forward(&line));
+        assert!((t1 - f64::from(MAX_SPLAT_RADIUS)).abs() < 1e-4 && (t2 - 1.0).abs() < 1e-4);
+        assert_eq!(
+            Footprint::from_jacobian([f32::NAN, 0.0], [0.0, 1.0]),
+            Footprint::isotropic(1.0)
+        );
+        assert_eq!(
+            Footprint::from_jacobian([0.0, 0.0], [0.0, 0.0]),
+            Footprint::isotropic(1.0)
+        );
+    }
+
+    #[test]
+    fn sharp_pixels_outweigh_blurred_ones_on_the_same_texels() {
+        // Rows 0..16: the 16² texture square seen frontally, one texel per
+        // pixel, colour 1. Row 16: not picked. Rows 17..33: the same square
+        // seen from twice as far (two texels per pixel, wrapping four times
+        // over it), colour 0. Both halves splat the same total weight per
+        // texel under a plain `1/A` weight (texels near 0.5); the
+        // inverse-variance `1/A²` lets the sharp half decide.
+        let (w, h, size) = (16usize, 33usize, 16usize);
+        let mut coords = Coords {
+            width: w,
+            height: h,
+            u: vec![0.0; w * h],
+            v: vec![0.0; w * h],
+            wrap: true,
+        };
+        let mut img = Image::zeros(3, h, w);
+        let mut mask = vec![true; w * h];
+        for y in 0..h {
+            for x in 0..w {
+                let i = y * w + x;
+                let (step, row, c) = match y {
+                    0..=15 => (1.0, y, 1.0),
+                    16 => {
+                        mask[i] = false;
+                        continue;
+                    }
+                    _ => (2.0, y - 17, 0.0),
+                };
+                coords.u[i] = ((x as f32 + 0.5) * step / size as f32).fract();
+                coords.v[i] = ((row as f32 + 0.5) * step / size as f32).fract();
+                img.set_rgb(i, Vec3::splat(c));
+            }
+        }
+        let conf = vec![1.0; w * h];
+        let r = reproject_rounds(&coords, &mask, &img, &conf, size, 0, 1);
+        let mean = r.texture.data.iter().sum::<f32>() / r.texture.data.len() as f32;
+        assert!(mean > 0.7 && mean <= 1.0, "{mean}");
+        assert!(r.known.iter().all(|&k| k));
+    }
+
+    #[test]
+    fn oblique_pixels_keep_the_detail_across_their_stretch() {
+        // A plane seen obliquely: each pixel spans one texel along u and
+        // four along v. Stripes across u (period 4 texels) survive in the
+        // pixels (box averages over one texel); the footprint spreads each
+        // pixel along v only, so they survive reprojection exactly (RMSE
+        // 2e-7; an isotropic tent of the same area, radius 2, blurs them
+        // across: RMSE 0.051).
+        let (w, h, size) = (64usize, 64usize, 32usize);
+        let t = |u: f32| 0.5 + 0.4 * (std::f32::consts::TAU * 8.0 * u).sin();
+        let boxed = |u0: f32, du: f32| {
+            (0..16)
+                .map(|k| t(u0 + du * (k as f32 + 0.5) / 16.0))
+                .sum::<f32>()
+                / 16.0
+        };
+        let mut coords = Coords {
+            width: w,
+            height: h,
+            u: vec![0.0; w * h],
+            v: vec![0.0; w * h],
+            wrap: true,
+        };
+        let mut img = Image::zeros(3, h, w);
+        let px = 1.0 / size as f32;
+        for y in 0..h {
+            for x in 0..w {
+                let i = y * w + x;
+                coords.u[i] = ((x as f32 + 0.5) * px).fract();
+                coords.v[i] = ((y as f32 + 0.5) * 4.0 * px).fract();
+                img.set_rgb(i, Vec3::splat(boxed(x as f32 * px, px)));
+            }
+        }
+        let (mask, conf) = (vec![true; w * h], vec![1.0; w * h]);
+        let r = reproject(&coords, &mask, &img, &conf, size);
+        let mut e = 0.0f64;
+        for ty in 0..size {
+            for tx in 0..size {
+                let want = boxed(tx as f32 * px, px);
+                e += f64::from(r.texture.data[ty * size + tx] - want).powi(2);
+            }
+        }
+        let rmse = (e / (size * size) as f64).sqrt();
+        assert!(rmse < 0.01, "{rmse}");
+    }
+
     #[test]
     fn banded_splat_matches_reference() {
         let mut rng = picker_tensor::Rng::new(12);
@@ -1276,7 +1682,7 @@ mod tests {
                         v: rng.uniform(-0.2, 1.2),
                         colour: Vec3::new(rng.uniform(0.0, 1.0), rng.uniform(0.0, 1.0), 0.3),
                         weight: rng.uniform(0.01, 1.0),
-                        radius: rng.uniform(1.0, MAX_SPLAT_RADIUS * 3.0),
+                        fp: random_footprint(&mut rng),
                         count: rng.range(1, 64) as f32,
                     })
                     .collect();
