@@ -74,6 +74,11 @@ pub struct LineRefinement {
     pub snapped_to_axis: bool,
     /// True when the refined normal was used.
     pub applied: bool,
+    /// The best-supported vanishing direction of the region that lies in the
+    /// plane used (within [`crate::plane::MAX_AXIS_TILT_DEG`]): the
+    /// rectified texture's axes are turned to follow it
+    /// ([`crate::plane::plane_basis`]). `None` when there is none.
+    pub texture_axis: Option<[f32; 3]>,
     /// The focal length the photo's lines gave, when they gave one and it
     /// was used (else the plane mode's focal came from `--fov`, the view
     /// vectors or the default).
@@ -599,31 +604,65 @@ pub const MAX_BACKFACING: f32 = 0.02;
 /// without orthogonal structure).
 pub const MAX_SNAP_DEG: f32 = 60.0;
 
+/// An axis is the photo's vertical when it is within this many degrees of
+/// the image's up direction (camera `+y`): an upright camera, tilted or
+/// rolled by less than this.
+pub const MAX_VERTICAL_TILT_DEG: f32 = 30.0;
+
+/// The index of the scene axis that is the photo's vertical (within
+/// [`MAX_VERTICAL_TILT_DEG`] of camera `+y`, either sign), if one is.
+pub fn vertical_axis(axes: &[[f32; 3]; 3]) -> Option<usize> {
+    let cos = MAX_VERTICAL_TILT_DEG.to_radians().cos();
+    (0..3)
+        .map(|i| (i, Vec3::from(axes[i]).normalize_or_zero().y.abs()))
+        .filter(|&(_, y)| y >= cos)
+        .max_by(|a, b| a.1.total_cmp(&b.1))
+        .map(|(i, _)| i)
+}
+
 /// The scene axis to use as the region's normal, oriented like `n`: the
 /// region's lines point at the axes marked `in_plane`, so the normal is an
-/// axis that is not; of those, it must be the only one `feasible` (a plane
-/// with that normal can show every pixel of the region: it is not seen from
-/// behind anywhere), and within [`MAX_SNAP_DEG`] of `n`. `None` when no
-/// axis is in the plane, or the choice is not unique (a single line family
-/// on a region that could be a wall or a ceiling: the predicted normal is
-/// then all there is).
+/// axis that is not, and it must be `feasible` (a plane with that normal can
+/// show every pixel of the region: it is not seen from behind anywhere).
+///
+/// - One such axis: it, when within [`MAX_SNAP_DEG`] of `n`.
+/// - Two (a single horizontal line family on a region that could be a wall
+///   or a floor or ceiling): the `vertical` axis ([`vertical_axis`]) when
+///   it is one of them, whatever `n` says. Such a region lies wholly on one
+///   side of the horizon (else a floor or ceiling would be seen from
+///   behind), and its lines run level: in a photo taken upright indoors
+///   that is a floor or a ceiling far more often than the lower or upper
+///   part of a wall that shows no vertical line.
+///
+/// `None` when no axis is in the plane, or the choice is not made by the
+/// above (the predicted normal is then all there is).
 pub fn snap_to_axes(
     n: Vec3,
     axes: &[[f32; 3]; 3],
     in_plane: [bool; 3],
     feasible: [bool; 3],
+    vertical: Option<usize>,
 ) -> Option<Vec3> {
     if !in_plane.iter().any(|&b| b) {
         return None;
     }
-    let mut candidates = (0..3).filter(|&i| !in_plane[i] && feasible[i]);
-    let i = candidates.next()?;
-    if candidates.next().is_some() {
-        return None;
+    let candidates: Vec<usize> = (0..3).filter(|&i| !in_plane[i] && feasible[i]).collect();
+    let orient = |i: usize| {
+        let a = Vec3::from(axes[i]);
+        if a.dot(n) < 0.0 {
+            -a
+        } else {
+            a
+        }
+    };
+    match candidates[..] {
+        [i] => {
+            let a = orient(i);
+            (a.dot(n) >= MAX_SNAP_DEG.to_radians().cos()).then_some(a)
+        }
+        [i, j] => vertical.filter(|&v| v == i || v == j).map(orient),
+        _ => None,
     }
-    let a = Vec3::from(axes[i]);
-    let a = if a.dot(n) < 0.0 { -a } else { a };
-    (a.dot(n) >= MAX_SNAP_DEG.to_radians().cos()).then_some(a)
 }
 
 /// The whole refinement for the picked `mask` of a photo (full resolution)
@@ -687,12 +726,21 @@ pub fn refine_plane_normal(
                     .count();
                 (behind as f32) <= MAX_BACKFACING * cnt as f32
             });
-            snap_to_axes(r, axes, in_plane, feasible)
+            snap_to_axes(r, axes, in_plane, feasible, vertical_axis(axes))
                 .filter(|s| s.dot(view.normalize_or_zero()) < -0.05)
         }
         _ => None,
     };
     let used = snapped.or(refined).unwrap_or(n);
+    let max_out = crate::plane::MAX_AXIS_TILT_DEG.to_radians().sin();
+    let texture_axis = vanishing
+        .iter()
+        .filter(|v| Vec3::from(v.direction).dot(used).abs() <= max_out)
+        .fold(None::<&Vanishing>, |best, v| match best {
+            Some(b) if b.support >= v.support => Some(b),
+            _ => Some(v),
+        })
+        .map(|v| v.direction);
     (
         used,
         LineRefinement {
@@ -702,6 +750,7 @@ pub fn refine_plane_normal(
             normal: used.to_array(),
             normal_change_deg: n.dot(used).clamp(-1.0, 1.0).acos().to_degrees(),
             applied: refined.is_some(),
+            texture_axis,
             snapped_to_axis: snapped.is_some(),
             focal: None,
         },
@@ -865,34 +914,102 @@ mod tests {
     }
 
     #[test]
-    fn snapping_needs_a_unique_feasible_axis() {
+    fn snapping_needs_a_unique_feasible_axis_or_the_vertical() {
         let axes = [Vec3::X, Vec3::Y, Vec3::Z].map(|a| a.to_array());
         let n = Vec3::new(0.1, 0.3, 0.95).normalize();
-        // X in the plane, Y not feasible: Z, oriented like n.
-        let got = snap_to_axes(n, &axes, [true, false, false], [true, false, true]);
-        assert_eq!(got, Some(Vec3::Z));
-        let got = snap_to_axes(-n, &axes, [true, false, false], [true, false, true]);
-        assert_eq!(got, Some(-Vec3::Z));
-        // Two axes in the plane: the third, even far from a poor n (50°).
-        let poor = Vec3::new(0.0, 0.77, 0.64).normalize();
-        let got = snap_to_axes(poor, &axes, [true, false, true], [true, true, true]);
-        assert_eq!(got, Some(Vec3::Y));
-        // Ambiguous (Y and Z both possible), no line family, nothing
-        // feasible, or too far from n: no snap.
+        for vertical in [None, Some(1)] {
+            // X in the plane, Y not feasible: Z, oriented like n.
+            let got = snap_to_axes(
+                n,
+                &axes,
+                [true, false, false],
+                [true, false, true],
+                vertical,
+            );
+            assert_eq!(got, Some(Vec3::Z));
+            let got = snap_to_axes(
+                -n,
+                &axes,
+                [true, false, false],
+                [true, false, true],
+                vertical,
+            );
+            assert_eq!(got, Some(-Vec3::Z));
+            // Two axes in the plane: the third, even far from a poor n (50°).
+            let poor = Vec3::new(0.0, 0.77, 0.64).normalize();
+            let got = snap_to_axes(
+                poor,
+                &axes,
+                [true, false, true],
+                [true, true, true],
+                vertical,
+            );
+            assert_eq!(got, Some(Vec3::Y));
+            // No line family, nothing feasible, or too far from n: no snap.
+            assert_eq!(
+                snap_to_axes(n, &axes, [false; 3], [true; 3], vertical),
+                None
+            );
+            assert_eq!(
+                snap_to_axes(
+                    n,
+                    &axes,
+                    [true, false, false],
+                    [true, false, false],
+                    vertical
+                ),
+                None
+            );
+            let far = Vec3::new(0.0, 0.9, 0.3).normalize();
+            assert_eq!(
+                snap_to_axes(
+                    far,
+                    &axes,
+                    [true, false, false],
+                    [true, false, true],
+                    vertical
+                ),
+                None
+            );
+        }
+        // Y and Z both possible: ambiguous without a vertical; with Y the
+        // vertical, Y (a floor or ceiling), even where n is closer to Z.
         assert_eq!(
-            snap_to_axes(n, &axes, [true, false, false], [true; 3]),
+            snap_to_axes(n, &axes, [true, false, false], [true; 3], None),
             None
         );
-        assert_eq!(snap_to_axes(n, &axes, [false; 3], [true; 3]), None);
         assert_eq!(
-            snap_to_axes(n, &axes, [true, false, false], [true, false, false]),
+            snap_to_axes(n, &axes, [true, false, false], [true; 3], Some(1)),
+            Some(Vec3::Y)
+        );
+        assert_eq!(
+            snap_to_axes(-n, &axes, [true, false, false], [true; 3], Some(1)),
+            Some(-Vec3::Y)
+        );
+        // The vertical not among the two (a vertical line family: two walls
+        // possible), or the vertical in the plane: no snap.
+        assert_eq!(
+            snap_to_axes(n, &axes, [false, true, false], [true; 3], Some(1)),
             None
         );
-        let far = Vec3::new(0.0, 0.9, 0.3).normalize();
         assert_eq!(
-            snap_to_axes(far, &axes, [true, false, false], [true, false, true]),
+            snap_to_axes(n, &axes, [true, false, false], [true; 3], Some(0)),
             None
         );
+    }
+
+    #[test]
+    fn the_vertical_axis_is_the_one_near_image_up() {
+        let tilt = |deg: f32| {
+            let r = deg.to_radians();
+            [r.sin(), r.cos(), 0.0]
+        };
+        let axes = [[1.0, 0.0, 0.0], tilt(20.0), [0.0, 0.0, 1.0]];
+        assert_eq!(vertical_axis(&axes), Some(1));
+        let axes = [[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, -1.0, 0.0]];
+        assert_eq!(vertical_axis(&axes), Some(2));
+        let axes = [tilt(40.0), tilt(-50.0), [0.0, 0.0, 1.0]];
+        assert_eq!(vertical_axis(&axes), None);
     }
 
     #[test]

@@ -625,7 +625,7 @@ pub fn extract(
                 }
             };
             *diag_focal = Some(f);
-            let n = if opts.line_refine {
+            let (n, along) = if opts.line_refine {
                 let (n, mut found) = crate::lines::refine_plane_normal(
                     p.line_focal().0,
                     &full.data,
@@ -634,12 +634,13 @@ pub fn extract(
                     line_focal.map(|lf| &lf.axes),
                 );
                 found.focal = line_focal.cloned();
+                let along = found.texture_axis.map(Vec3::from);
                 *diag_lines = Some(found);
-                n
+                (n, along)
             } else {
-                n
+                (n, None)
             };
-            Some(plane::plane_coords(fw, fh, &full.data, n, f))
+            Some(plane::plane_coords(fw, fh, &full.data, n, f, along))
         };
         let mut focal = None;
         let mut lines = None;

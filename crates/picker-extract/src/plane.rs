@@ -10,7 +10,8 @@
 //! of the predicted normals. A pixel's ray `d` meets the plane `N·P = −1` at
 //! `P = −d/(N·d)` (the scale is unknowable from one image and irrelevant to a
 //! texture). With an in-plane basis `e₁` (the camera's x axis projected on the
-//! plane) and `e₂ = N × e₁`, the plane coordinates `(P·e₁, −P·e₂)` are a
+//! plane, or turned to follow the region's own lines: [`plane_basis`]) and
+//! `e₂ = N × e₁`, the plane coordinates `(P·e₁, −P·e₂)` are a
 //! homography of the pixel coordinates: the rectified view. The texture
 //! square is centred on the picked region's robust bounding box (2nd–98th
 //! percentiles) with the geometric mean of its sides.
@@ -108,23 +109,65 @@ pub fn normal_spread_deg(normals: &Image, mask: &[bool], n: Vec3) -> f32 {
     median(&mut ang).unwrap_or(180.0)
 }
 
+/// A direction `along` turns the texture axes only when it is within this
+/// many degrees of the plane (the plane's own lines are; a direction far
+/// out of it says nothing about the plane's axes).
+pub const MAX_AXIS_TILT_DEG: f32 = 10.0;
+
 /// The in-plane axes for normal `n`: `e1` is the photo's x axis projected
 /// onto the plane (its y axis when x is nearly along `n`), `e2 = n × e1`.
-fn plane_basis(n: Vec3) -> (Vec3, Vec3) {
+///
+/// With `along`, a direction in the plane that its texture's lines follow
+/// (a floor's planks, a wall's brick courses: [`crate::lines`]), the axes
+/// are turned by the smallest angle that puts `e1` or `e2` along it, so the
+/// pattern comes out parallel to the texture's edges instead of at the
+/// angle it happens to make with the camera. Ignored when it is more than
+/// [`MAX_AXIS_TILT_DEG`] out of the plane or not finite.
+pub fn plane_basis(n: Vec3, along: Option<Vec3>) -> (Vec3, Vec3) {
     let x = Vec3::X - Vec3::X.dot(n) * n;
     let e1 = if x.length() > 1e-3 {
         x.normalize()
     } else {
         (Vec3::Y - Vec3::Y.dot(n) * n).normalize()
     };
+    let max_out = MAX_AXIS_TILT_DEG.to_radians().sin();
+    let turned = along
+        .map(Vec3::normalize_or_zero)
+        .filter(|d| d.is_finite() && d.length() > 0.5 && d.dot(n).abs() <= max_out)
+        .map(|d| {
+            let a = (d - d.dot(n) * n).normalize();
+            let b = n.cross(a);
+            // Of ±a and ±b, the one closest to the untouched e1 (ties keep
+            // the first).
+            [a, b, -a, -b]
+                .into_iter()
+                .fold((a, f32::NEG_INFINITY), |best, c| {
+                    let dot = c.dot(e1);
+                    if dot > best.1 {
+                        (c, dot)
+                    } else {
+                        best
+                    }
+                })
+                .0
+        });
+    let e1 = turned.unwrap_or(e1);
     (e1, n.cross(e1))
 }
 
 /// The rectified plane coordinates of the picked pixels of a `w×h` photo
 /// (focal `focal` in photo pixels), mapped into the texture square; pixels
-/// whose ray misses the plane's front get `NaN`.
-pub fn plane_coords(w: usize, h: usize, mask: &[bool], n: Vec3, focal: f32) -> Coords {
-    let (e1, e2) = plane_basis(n);
+/// whose ray misses the plane's front get `NaN`. The texture's axes follow
+/// `along` when given ([`plane_basis`]).
+pub fn plane_coords(
+    w: usize,
+    h: usize,
+    mask: &[bool],
+    n: Vec3,
+    focal: f32,
+    along: Option<Vec3>,
+) -> Coords {
+    let (e1, e2) = plane_basis(n, along);
     let (cx, cy) = (w as f32 / 2.0, h as f32 / 2.0);
     let mut s = vec![f32::NAN; w * h];
     let mut t = vec![f32::NAN; w * h];
@@ -204,8 +247,15 @@ pub fn plane_coords(w: usize, h: usize, mask: &[bool], n: Vec3, focal: f32) -> C
 
 /// The plain, sequential implementation of [`plane_coords`] (the reference
 /// its parallel version is tested against).
-pub fn plane_coords_reference(w: usize, h: usize, mask: &[bool], n: Vec3, focal: f32) -> Coords {
-    let (e1, e2) = plane_basis(n);
+pub fn plane_coords_reference(
+    w: usize,
+    h: usize,
+    mask: &[bool],
+    n: Vec3,
+    focal: f32,
+    along: Option<Vec3>,
+) -> Coords {
+    let (e1, e2) = plane_basis(n, along);
     let (cx, cy) = (w as f32 / 2.0, h as f32 / 2.0);
     let mut s = vec![f32::NAN; w * h];
     let mut t = vec![f32::NAN; w * h];
@@ -276,8 +326,12 @@ mod tests {
                 );
                 let n = if k == 5 { Vec3::X } else { n.normalize() };
                 let focal = rng.uniform(5.0, 200.0);
-                let a = plane_coords(w, h, &mask, n, focal);
-                let b = plane_coords_reference(w, h, &mask, n, focal);
+                let along = (k % 2 == 1).then(|| {
+                    let d = Vec3::new(rng.uniform(-1.0, 1.0), rng.uniform(-1.0, 1.0), 0.3);
+                    d - d.dot(n) * n
+                });
+                let a = plane_coords(w, h, &mask, n, focal, along);
+                let b = plane_coords_reference(w, h, &mask, n, focal, along);
                 let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
                 assert_eq!(bits(&a.u), bits(&b.u), "{w}x{h} k{k}");
                 assert_eq!(bits(&a.v), bits(&b.v), "{w}x{h} k{k}");
@@ -313,7 +367,7 @@ mod tests {
     fn a_frontal_plane_is_an_affine_grid() {
         // Normal towards the camera: plane coordinates are proportional to pixels.
         let (w, h) = (40, 30);
-        let c = plane_coords(w, h, &vec![true; w * h], Vec3::Z, 50.0);
+        let c = plane_coords(w, h, &vec![true; w * h], Vec3::Z, 50.0, None);
         let mid = (h / 2) * w + w / 2;
         let du = c.u[mid + 1] - c.u[mid];
         assert!(du > 0.0);
@@ -330,6 +384,69 @@ mod tests {
     }
 
     #[test]
+    fn texture_axes_follow_the_plane_lines() {
+        // A floor (normal up, seen from above at an angle) whose planks run
+        // at 30° to the camera's x axis: the coordinates of points along a
+        // plank keep their v (e1 along the planks), and the turn is the
+        // smallest one (e1 within 45° of the camera's x axis projected).
+        let n = Vec3::new(0.0, 1.0, 0.3).normalize();
+        let x0 = (Vec3::X - Vec3::X.dot(n) * n).normalize();
+        let z0 = n.cross(x0);
+        let (c, s) = (30f32.to_radians().cos(), 30f32.to_radians().sin());
+        let plank = c * x0 + s * z0;
+        for along in [plank, -plank, n.cross(plank), plank + 0.1 * n] {
+            let (e1, e2) = plane_basis(n, Some(along));
+            assert!((e1.dot(plank).abs() - 1.0).abs() < 0.01 || e1.dot(plank).abs() < 0.01);
+            assert!(e1.dot(x0) > 45f32.to_radians().cos() - 1e-4, "{e1} {x0}");
+            assert!(e1.dot(n).abs() < 1e-5 && (e2 - n.cross(e1)).length() < 1e-6);
+        }
+        let (e1, _) = plane_basis(n, Some(plank));
+        assert!((e1 - plank).length() < 1e-5);
+        // Out of the plane, not finite or zero: the untouched basis.
+        let plain = plane_basis(n, None);
+        for bad in [n, plank + 0.5 * n, Vec3::NAN, Vec3::ZERO] {
+            assert_eq!(plane_basis(n, Some(bad)), plain);
+        }
+        // The rectified view: photo points on one plank share their v.
+        let (w, h, f) = (64usize, 48usize, 50.0f32);
+        // (A mask around the plank, so the texture square holds it.)
+        let mask: Vec<bool> = (0..w * h)
+            .map(|i| (18..34).contains(&(i / w)) && (8..56).contains(&(i % w)))
+            .collect();
+        let coords = plane_coords(w, h, &mask, n, f, Some(plank));
+        let pix = |p: Vec3| {
+            // The pixel at which plane point p (camera space) is seen.
+            let (x, y) = (
+                -p.x / p.z * f + w as f32 / 2.0,
+                p.y / p.z * f + h as f32 / 2.0,
+            );
+            (x as usize, y as usize)
+        };
+        // A point on the plane N·P = −1, about 3 units ahead.
+        let ahead = Vec3::new(0.0, 0.0, -3.0);
+        let p0 = ahead - (ahead.dot(n) + 1.0) * n;
+        let mut vs = Vec::new();
+        for k in -4..=4 {
+            let (x, y) = pix(p0 + plank * (k as f32 * 0.15));
+            if x < w && y < h {
+                let i = y * w + x;
+                if coords.v[i].is_finite() {
+                    vs.push((coords.u[i], coords.v[i]));
+                }
+            }
+        }
+        assert!(vs.len() >= 5, "{vs:?}");
+        let (umin, umax) = vs
+            .iter()
+            .fold((f32::MAX, f32::MIN), |m, p| (m.0.min(p.0), m.1.max(p.0)));
+        let (vmin, vmax) = vs
+            .iter()
+            .fold((f32::MAX, f32::MIN), |m, p| (m.0.min(p.1), m.1.max(p.1)));
+        // Along the plank u moves, v stays within the pixel rounding.
+        assert!(umax - umin > 5.0 * (vmax - vmin), "{vs:?}");
+    }
+
+    #[test]
     fn a_receding_floor_is_rectified() {
         // A floor seen at an angle: equal steps on the floor are unequal in the
         // image; after rectification, the texel density along a column
@@ -342,7 +459,7 @@ mod tests {
             }
         }
         let n = Vec3::new(0.0, 1.0, 0.2).normalize();
-        let c = plane_coords(w, h, &mask, n, 60.0);
+        let c = plane_coords(w, h, &mask, n, 60.0, None);
         let col: Vec<f32> = (40..h)
             .map(|y| c.v[y * w + w / 2])
             .filter(|v| v.is_finite())
