@@ -28,7 +28,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{anyhow, bail, Context, Result};
 use picker_extract::eval as metrics;
 use picker_extract::mask::Mask;
-use picker_extract::{pipeline, Inputs, Prepared, UvChoice, UvMode};
+use picker_extract::{pipeline, Inputs, Prepared, UvMode};
 use picker_inpaint::{seam_score, PatchMatchInpainter};
 use picker_render::io as rio;
 use picker_render::{ElementImages, EnvMap};
@@ -59,6 +59,13 @@ pub struct Args {
     /// Do not refine the plane mode's focal and normal with the photo's lines (`extract --no-lines`).
     #[arg(long)]
     pub no_lines: bool,
+    /// Do not fold a periodic plane-mode texture into one tile (`extract --no-fold`).
+    #[arg(long)]
+    pub no_fold: bool,
+    /// Texture coordinates, as `extract --uv`: `plane` with the ground-truth elements measures the
+    /// plane mode alone (true normals, masks and albedo, rectified instead of the true UVs).
+    #[arg(long, value_enum, default_value_t = crate::extract::UvArg::Auto)]
+    pub uv: crate::extract::UvArg,
 }
 
 /// One evaluated material.
@@ -260,11 +267,12 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
     let inpainter = PatchMatchInpainter::default();
     let opts = pipeline::Options {
         mask: Default::default(),
-        uv: UvChoice::Auto,
+        uv: a.uv.choice(),
         size: None,
         max_size: pipeline::DEFAULT_MAX_SIZE,
         fov_deg: None,
         line_refine: !a.no_lines,
+        fold_period: !a.no_fold,
         tileable: true,
         seamless: false,
         seed: 0,

@@ -40,6 +40,17 @@ pub enum UvArg {
     Auto,
 }
 
+impl UvArg {
+    /// The pipeline's choice for this flag.
+    pub fn choice(self) -> UvChoice {
+        match self {
+            UvArg::Net => UvChoice::Net,
+            UvArg::Plane => UvChoice::Plane,
+            UvArg::Auto => UvChoice::Auto,
+        }
+    }
+}
+
 /// How materials are extracted: the flags `picker extract` and `picker batch` share.
 #[derive(Clone, Debug, clap::Args)]
 pub struct Flags {
@@ -69,6 +80,10 @@ pub struct Flags {
     /// directions of the photo's straight lines in the picked region.
     #[arg(long)]
     pub no_lines: bool,
+    /// Keep the whole rectified region for --uv plane: do not fold a texture that repeats along
+    /// both axes (tiles, bricks, a checker) into one tile of whole periods.
+    #[arg(long)]
+    pub no_fold: bool,
     /// Texture side in texels (default: the observed texel density, capped by --max-size).
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=8192))]
     pub size: Option<u32>,
@@ -126,15 +141,12 @@ impl Flags {
     pub fn options<'a>(&self, inpainter: &'a dyn Inpainter) -> pipeline::Options<'a> {
         pipeline::Options {
             mask: self.mask_options(),
-            uv: match self.uv {
-                UvArg::Net => UvChoice::Net,
-                UvArg::Plane => UvChoice::Plane,
-                UvArg::Auto => UvChoice::Auto,
-            },
+            uv: self.uv.choice(),
             size: self.size.map(|s| s as usize),
             max_size: self.max_size as usize,
             fov_deg: self.fov,
             line_refine: !self.no_lines,
+            fold_period: !self.no_fold,
             tileable: !self.no_tile,
             seamless: self.seamless,
             seed: self.seed,

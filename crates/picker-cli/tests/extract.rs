@@ -631,6 +631,16 @@ fn embedded_weights_find_the_wall_of_the_readme_example() {
     );
     let off = normal_error_deg(lines, [-0.632, 0.192, 0.750]);
     assert!(off < 5.0, "wall normal {off:.1}° from the truth: {lines}");
+    // The bricks repeat: the rectified wall is folded into one tile. The
+    // true texture repeats every 25.6 texels along the courses and every 16
+    // across them (two courses of the running bond), a ratio of 1.6
+    // (fixtures/examples/README.md); measured when added: 1.57.
+    let period = &uv["period"];
+    let ratio = period["period"][0].as_f64().unwrap() / period["period"][1].as_f64().unwrap();
+    assert!(
+        (ratio / 1.6 - 1.0).abs() < 0.1,
+        "period ratio {ratio}: {period}"
+    );
 }
 
 /// The angle in degrees between `lines.normal` of a `material.json` and

@@ -6,7 +6,7 @@
 //! - [`resample`], [`guided`]: the network outputs at the working resolution
 //!   are brought to the photo's resolution guided by the photo.
 //! - [`mask`]: pick → mask from the segmentation colour.
-//! - [`plane`], [`reproject`]: texture coordinates (predicted UVs or a
+//! - [`plane`], [`period`], [`reproject`]: texture coordinates (predicted UVs or a
 //!   rectified plane) and the scatter into the texture square with coverage.
 //! - inpainting ([`picker_inpaint`]) fills the unobserved texels, tileably.
 //! - [`select`]: order statistics (quantiles, medians) of photo-resolution
@@ -23,6 +23,7 @@ pub mod guided;
 pub mod lines;
 pub mod mask;
 pub mod material;
+pub mod period;
 pub mod photo;
 pub mod pipeline;
 pub mod plane;

@@ -101,6 +101,9 @@ pub struct Options<'a> {
     /// Refine the plane mode's normal with the vanishing directions of the
     /// photo's straight lines in the mask ([`crate::lines`]).
     pub line_refine: bool,
+    /// In the plane mode, fold the repeats of a texture that repeats along
+    /// both of its axes into one tile ([`crate::period`]).
+    pub fold_period: bool,
     /// Make the texture tileable (toroidal inpainting).
     pub tileable: bool,
     /// Also remove colour jumps across the wrap edges when they show (see
@@ -385,6 +388,9 @@ pub struct UvDecision {
     pub focal_px: Option<f32>,
     /// The plane mode's line refinement, when it ran.
     pub lines: Option<crate::lines::LineRefinement>,
+    /// The plane mode's fold of a periodic texture into one tile, when one
+    /// was found ([`crate::period`]).
+    pub period: Option<crate::period::Fold>,
 }
 
 /// Diagnostics of one extraction, beyond the [`Material`].
@@ -705,6 +711,26 @@ pub fn extract(
                     }
                 }
             };
+        // A rectified plane that repeats along both axes: every repeat
+        // folded into one tile (found on a quick splat at most
+        // period::MAX_SIDE texels wide).
+        let mut fold = None;
+        let coords = if mode == UvMode::Plane && opts.fold_period {
+            let probe = reproject::texture_size(coords.sizing_area(&full.data), observed_cap)
+                .min(crate::period::MAX_SIDE);
+            let r0 =
+                reproject::reproject_unsharpened(&coords, &full.data, &delit, &confidence, probe);
+            match crate::period::detect(&r0.texture, &r0.known) {
+                (Some(px), Some(py)) => {
+                    let f = crate::period::fold_tile(px, py, probe);
+                    fold = Some(f);
+                    crate::period::fold_coords(&coords, &f)
+                }
+                _ => coords,
+            }
+        } else {
+            coords
+        };
         diag.uv = Some(UvDecision {
             mode,
             requested: opts.uv,
@@ -713,11 +739,21 @@ pub fn extract(
             plane_spread_deg: spread,
             focal_px: focal,
             lines,
+            period: fold,
         });
         lap("coordinates", &mut timings);
-        let size = opts.size.unwrap_or_else(|| {
-            reproject::texture_size(coords.sizing_area(&full.data), observed_cap)
-        });
+        // A folded tile sees each texel in every repeat, so the observed-
+        // pixel cap does not apply; half of --max-size does, so that a
+        // 12-megapixel photo's pixels merge into blocks instead of each
+        // being splatted (~2× faster reprojection there).
+        let cap = if fold.is_some() {
+            (opts.max_size / 2).max(16)
+        } else {
+            observed_cap
+        };
+        let size = opts
+            .size
+            .unwrap_or_else(|| reproject::texture_size(coords.sizing_area(&full.data), cap));
         diag.texture_size = Some(size);
         let r = reproject::reproject(&coords, &full.data, &delit, &confidence, size);
         lap("reproject", &mut timings);

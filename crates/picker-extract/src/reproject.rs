@@ -4,7 +4,7 @@
 //! UVs, or plane coordinates from [`crate::plane`]) and a de-lit colour. The
 //! colours are splatted into a `size × size` texture with the pixel's own
 //! footprint: a tent one pixel wide on each pixel axis, mapped into the texture
-//! by the coordinates' Jacobian ([`Footprint`]: an oblique parallelogram for a
+//! by the coordinates' Jacobian (`Footprint`: an oblique parallelogram for a
 //! surface seen at a grazing angle, so a pixel is spread along the direction it
 //! is stretched in and not across it; pixels seen from afar cover the texels
 //! between them), accumulating per-texel weights. The
@@ -1111,6 +1111,19 @@ pub fn reproject(
         BACK_PROJECTIONS,
         block,
     )
+}
+
+/// [`reproject`] without the back-projection rounds: the plain robust
+/// splat, for a quick look at the texture (the plane mode's period search).
+pub fn reproject_unsharpened(
+    coords: &Coords,
+    mask: &[bool],
+    colour: &Image,
+    confidence: &[f32],
+    size: usize,
+) -> Reprojected {
+    let block = merge_block(coords, mask, size);
+    reproject_rounds(coords, mask, colour, confidence, size, 0, block)
 }
 
 /// [`reproject`] with `rounds` of back-projection and pixel blocks of side

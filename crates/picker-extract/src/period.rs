@@ -1,0 +1,554 @@
+//! The repeat of a periodic texture (tiles, bricks, planks, a checker) in a
+//! rectified plane, so that the plane mode can fold every repeat it sees into
+//! one tile, as the networks' wrapped UVs do.
+//!
+//! The plane mode rectifies the whole picked region: a tiled floor comes out
+//! as a picture of the floor, dozens of tiles across, its far tiles blurred.
+//! When the rectified texture repeats along both of its axes (the axes follow
+//! the region's lines, [`crate::plane::plane_basis`], so a tile grid is
+//! aligned with them), [`detect`] measures the two periods and the pipeline
+//! wraps the plane coordinates by them: every observed repeat then lands in
+//! the same tile, which comes out sharp, complete and tileable by
+//! construction.
+//!
+//! **Method.** On the luma of the reprojected texture's known texels (box-
+//! downsampled to at most [`MAX_SIDE`] texels), each row's mean removed for
+//! the `x` axis (each column's for `y`: a grid's lines across the axis
+//! would correlate at every shift), the normalised autocorrelation along
+//! the axis, `r(d)` for shifts `d` up to half the side in steps of
+//! 1/[`SUBSTEPS`] texel: the Pearson correlation of the known texel pairs
+//! `d` apart, both sides interpolated by half the fractional shift so they
+//! are equally smooth. The period is the first local maximum of `r` that
+//! reaches [`MIN_WEAK_PEAK`] after `r` has fallen at least [`MIN_DIP`] below
+//! it (a repeat, not the slow decay of a smooth texture) and is at least
+//! [`FIRST_PEAK_SHARE`] of the highest such maximum (the fundamental, not a
+//! subharmonic of a weaker in-between repeat). It is refined to a fraction
+//! of a shift step by a parabola through its neighbours, then by the
+//! farthest multiple `k·p` whose peak still reaches [`HARMONIC_SHARE`] of
+//! the period's (`p = d_k / k`: the error of one peak divided by `k`). A
+//! peak below [`MIN_PEAK`] (tiles or bricks of varied colour, whose grout
+//! alone repeats exactly) counts only with its multiple at `2·p`. A shift
+//! needs [`MIN_PAIR_SHARE`] of the known texels paired.
+//!
+//! Measured with `picker eval DIR --uv plane` (ground-truth elements, the
+//! plane mode alone), mean aligned texture PSNR of the textured materials:
+//! seed 4242 25.67 → 26.91 dB (16 of 76 folded, none worse by more than
+//! 1 dB), seed 9191 +1.53 dB (22 of 78 folded, none worse by more than
+//! 1 dB); a folded brick wall went from 15.7 to 33.3 dB.
+
+use picker_render::io::Image;
+
+use crate::reproject::Coords;
+
+/// Largest side the autocorrelation is measured on (the texture is box-
+/// downsampled by a whole factor to fit).
+pub const MAX_SIDE: usize = 256;
+/// Normalised autocorrelation from which a period's peak stands alone.
+pub const MIN_PEAK: f32 = 0.5;
+/// Least normalised autocorrelation of a period's peak: below
+/// [`MIN_PEAK`] (tiles or bricks of varied colour, whose grout or mortar
+/// alone repeats exactly) it needs a peak at twice the shift too.
+pub const MIN_WEAK_PEAK: f32 = 0.25;
+/// A multiple `k·p` of the period confirms or refines it when its peak
+/// reaches this share of the period's.
+pub const HARMONIC_SHARE: f32 = 0.5;
+/// Least fall of the autocorrelation between shift 0 and the peak.
+pub const MIN_DIP: f32 = 0.2;
+/// The period's peak is at least this share of the highest qualifying peak.
+pub const FIRST_PEAK_SHARE: f32 = 0.85;
+/// Least share of the known texels paired at a shift for it to count.
+pub const MIN_PAIR_SHARE: f32 = 0.2;
+/// Shortest period, in texels of the measured (downsampled) texture.
+pub const MIN_PERIOD: usize = 3;
+/// Shifts per texel at which the autocorrelation is measured (the shifted
+/// side interpolated linearly): a period that is not a whole number of
+/// texels still lines a sharp pattern up with itself at some shift.
+pub const SUBSTEPS: usize = 4;
+
+/// A repeat along one axis of a texture.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct AxisPeriod {
+    /// The period in texels of the texture given to [`detect`].
+    pub texels: f32,
+    /// The normalised autocorrelation at the period's peak.
+    pub strength: f32,
+}
+
+/// The periods of `tex` (any channels, the first three as linear RGB, one as
+/// grey) along `x` and along `y`, measured on its `known` texels; `None` for
+/// an axis without a clear repeat (see the module docs).
+///
+/// # Panics
+/// When `known` is not one flag per texel.
+pub fn detect(tex: &Image, known: &[bool]) -> (Option<AxisPeriod>, Option<AxisPeriod>) {
+    let (w, h) = (tex.width, tex.height);
+    assert_eq!(
+        known.len(),
+        w * h,
+        "period::detect: one known flag per texel"
+    );
+    if w == 0 || h == 0 || tex.channels == 0 {
+        return (None, None);
+    }
+    let f = w.max(h).div_ceil(MAX_SIDE).max(1);
+    let (sw, sh) = (w / f, h / f);
+    if sw == 0 || sh == 0 {
+        return (None, None);
+    }
+    // Box-downsampled luma; a block is known when all its texels are.
+    let mut luma = vec![0.0f32; sw * sh];
+    let mut ok = vec![false; sw * sh];
+    for by in 0..sh {
+        for bx in 0..sw {
+            let (mut sum, mut all) = (0.0f32, true);
+            for y in by * f..(by + 1) * f {
+                for x in bx * f..(bx + 1) * f {
+                    let i = y * w + x;
+                    all &= known[i];
+                    sum += texel_luma(tex, i);
+                }
+            }
+            luma[by * sw + bx] = sum / (f * f) as f32;
+            ok[by * sw + bx] = all;
+        }
+    }
+    let scale = f as f32 / SUBSTEPS as f32;
+    let along = |dx: usize, dy: usize, n: usize| {
+        // What does not vary along the axis (a tile grid's grout lines
+        // across it) correlates at every shift: each line's mean is removed.
+        let v = without_line_means(&luma, &ok, sw, sh, dy);
+        let r = autocorrelation(&v, &ok, sw, sh, dx, dy, n * SUBSTEPS);
+        period_of(&r).map(|p| AxisPeriod {
+            texels: p.texels * scale,
+            strength: p.strength,
+        })
+    };
+    (along(1, 0, sw / 2), along(0, 1, sh / 2))
+}
+
+/// `v` with the mean of the known values of its row (`by_column == 0`) or of
+/// its column (`by_column == 1`) subtracted (on a `w × h` grid).
+fn without_line_means(v: &[f32], ok: &[bool], w: usize, h: usize, by_column: usize) -> Vec<f32> {
+    let (lines, along) = if by_column == 1 { (w, h) } else { (h, w) };
+    let index = |line: usize, k: usize| {
+        if by_column == 1 {
+            k * w + line
+        } else {
+            line * w + k
+        }
+    };
+    let mut out = v.to_vec();
+    for line in 0..lines {
+        let (mut sum, mut n) = (0.0f64, 0usize);
+        for k in 0..along {
+            let i = index(line, k);
+            if ok[i] {
+                sum += f64::from(v[i]);
+                n += 1;
+            }
+        }
+        let mean = if n > 0 { (sum / n as f64) as f32 } else { 0.0 };
+        for k in 0..along {
+            out[index(line, k)] -= mean;
+        }
+    }
+    out
+}
+
+/// Luma of texel `i` (Rec. 709 weights on the first three channels; the
+/// first channel when there are fewer).
+fn texel_luma(tex: &Image, i: usize) -> f32 {
+    if tex.channels >= 3 {
+        let c = tex.rgb(i);
+        0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
+    } else {
+        tex.data[i]
+    }
+}
+
+/// `r[d]` for `d = 0 … n` along the step `(dx, dy)` (one of them 1, the
+/// other 0) on a `w × h` grid: the Pearson correlation of the known pairs
+/// `(p, p + (d / SUBSTEPS)·step)`, both sides interpolated linearly (the
+/// texels used all known); NaN where fewer than
+/// [`MIN_PAIR_SHARE`] of the known texels are paired or either side is
+/// constant.
+fn autocorrelation(
+    v: &[f32],
+    ok: &[bool],
+    w: usize,
+    h: usize,
+    dx: usize,
+    dy: usize,
+    n: usize,
+) -> Vec<f32> {
+    let known = ok.iter().filter(|&&k| k).count();
+    let least = ((MIN_PAIR_SHARE * known as f32).ceil() as usize).max(8);
+    (0..=n)
+        .map(|d| {
+            let (whole, part) = (d / SUBSTEPS, (d % SUBSTEPS) as f32 / SUBSTEPS as f32);
+            // Both sides are interpolated by half the fractional shift, in
+            // opposite directions (`a` at `p − part/2`, `b` at `p + whole +
+            // part/2`), so they are equally smooth: a sharp pattern aligned
+            // with itself still correlates fully at any fractional shift.
+            let t = 0.5 * part;
+            let frac = usize::from(part > 0.0);
+            // `a` needs its texel and, when fractional, the one before; `b`
+            // its texel and the one after.
+            let span = whole + frac;
+            if (dx > 0 && span + frac >= w) || (dy > 0 && span + frac >= h) {
+                return f32::NAN;
+            }
+            let step = dy * w + dx;
+            let (x0, y0) = (frac * dx, frac * dy);
+            let (x1, y1) = (w - span * dx, h - span * dy);
+            let (mut cnt, mut sa, mut sb) = (0usize, 0.0f64, 0.0f64);
+            let (mut saa, mut sbb, mut sab) = (0.0f64, 0.0f64, 0.0f64);
+            for y in y0..y1 {
+                for x in x0..x1 {
+                    let i = y * w + x;
+                    let j = i + whole * step;
+                    if !(ok[i] && ok[j]) {
+                        continue;
+                    }
+                    let (a, b) = if frac == 0 {
+                        (v[i], v[j])
+                    } else {
+                        if !(ok[i - step] && ok[j + step]) {
+                            continue;
+                        }
+                        (
+                            (1.0 - t) * v[i] + t * v[i - step],
+                            (1.0 - t) * v[j] + t * v[j + step],
+                        )
+                    };
+                    let (a, b) = (f64::from(a), f64::from(b));
+                    cnt += 1;
+                    sa += a;
+                    sb += b;
+                    saa += a * a;
+                    sbb += b * b;
+                    sab += a * b;
+                }
+            }
+            if cnt < least {
+                return f32::NAN;
+            }
+            let k = cnt as f64;
+            let (va, vb) = (saa - sa * sa / k, sbb - sb * sb / k);
+            let cov = sab - sa * sb / k;
+            if va <= 1e-12 * k || vb <= 1e-12 * k {
+                return f32::NAN;
+            }
+            (cov / (va * vb).sqrt()) as f32
+        })
+        .collect()
+}
+
+/// The period in an autocorrelation `r` (index = shift), see the module docs.
+fn period_of(r: &[f32]) -> Option<AxisPeriod> {
+    let at = |d: usize| r.get(d).copied().filter(|v| v.is_finite());
+    let is_peak = |d: usize| match (at(d - 1), at(d), at(d + 1)) {
+        (Some(a), Some(b), Some(c)) => b >= a && b >= c,
+        _ => false,
+    };
+    // Qualifying peaks: high enough, after a deep enough dip.
+    let mut peaks = Vec::new();
+    let mut low = f32::INFINITY;
+    for d in 1..r.len().saturating_sub(1) {
+        let Some(v) = at(d) else {
+            continue;
+        };
+        low = low.min(v);
+        if d >= MIN_PERIOD * SUBSTEPS && v >= MIN_WEAK_PEAK && v - low >= MIN_DIP && is_peak(d) {
+            peaks.push((d, v));
+        }
+    }
+    let best = peaks.iter().map(|p| p.1).fold(f32::NEG_INFINITY, f32::max);
+    let &(d, v) = peaks.iter().find(|p| p.1 >= FIRST_PEAK_SHARE * best)?;
+    let refine = |d: usize| -> f32 {
+        match (at(d - 1), at(d), at(d + 1)) {
+            (Some(a), Some(b), Some(c)) => {
+                let den = a - 2.0 * b + c;
+                let off = if den < 0.0 { 0.5 * (a - c) / den } else { 0.0 };
+                d as f32 + off.clamp(-0.5, 0.5)
+            }
+            _ => d as f32,
+        }
+    };
+    let mut p = refine(d);
+    // The farthest multiple still seen refines it: the peak nearest k·p
+    // (within a quarter period), when it is a peak and reaches
+    // HARMONIC_SHARE of the period's. A weak peak needs the one at 2·p.
+    let least = HARMONIC_SHARE * v;
+    let mut k = 2;
+    loop {
+        let target = k as f32 * p;
+        let c = target.round() as usize;
+        if c + 1 >= r.len() {
+            break;
+        }
+        let reach = ((p / 4.0).floor() as usize).max(1);
+        let found = (c.saturating_sub(reach)..=c + reach)
+            .filter(|&e| e >= 1 && e + 1 < r.len() && is_peak(e))
+            .filter(|&e| at(e).is_some_and(|x| x >= least))
+            .min_by(|&a, &b| {
+                (a as f32 - target)
+                    .abs()
+                    .total_cmp(&(b as f32 - target).abs())
+            });
+        match found {
+            Some(e) => {
+                p = refine(e) / k as f32;
+                k += 1;
+            }
+            None => break,
+        }
+    }
+    if v < MIN_PEAK && k == 2 {
+        return None;
+    }
+    Some(AxisPeriod {
+        texels: p,
+        strength: v,
+    })
+}
+
+/// Most periods along one axis of a folded tile.
+pub const MAX_PERIODS_PER_TILE: usize = 8;
+
+/// How the plane mode folds a periodic texture into one tile
+/// (`material.json`, `diagnostics.uv.period`).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct Fold {
+    /// The periods along the rectified texture's `u` and `v`, as fractions
+    /// of the rectified square.
+    pub period: [f32; 2],
+    /// Periods per tile along `u` and `v`: a tile holds whole periods, as
+    /// many as make it closest to square.
+    pub periods_per_tile: [usize; 2],
+    /// The tile's sides, as fractions of the rectified square.
+    pub tile: [f32; 2],
+    /// The tile's width over its height on the plane (the texture square
+    /// stretches it to 1 when this is not 1).
+    pub aspect: f32,
+    /// The autocorrelation at each period ([`AxisPeriod::strength`]).
+    pub strength: [f32; 2],
+}
+
+/// The tile for periods `px` and `py` measured on a texture of side `size`:
+/// `kx·px × ky·py` with `kx, ky ≤ MAX_PERIODS_PER_TILE` and each side at
+/// most half the texture (two tiles seen), the closest to square (ties: the
+/// smaller tile).
+pub fn fold_tile(px: AxisPeriod, py: AxisPeriod, size: usize) -> Fold {
+    let half = size as f32 / 2.0;
+    let mut best = (1usize, 1usize, f32::INFINITY);
+    for ky in 1..=MAX_PERIODS_PER_TILE {
+        for kx in 1..=MAX_PERIODS_PER_TILE {
+            let (tx, ty) = (kx as f32 * px.texels, ky as f32 * py.texels);
+            if (tx > half || ty > half) && (kx, ky) != (1, 1) {
+                continue;
+            }
+            let err = (tx / ty).ln().abs();
+            if err < best.2 - 1e-6 {
+                best = (kx, ky, err);
+            }
+        }
+    }
+    let (kx, ky, _) = best;
+    let s = size.max(1) as f32;
+    Fold {
+        period: [px.texels / s, py.texels / s],
+        periods_per_tile: [kx, ky],
+        tile: [kx as f32 * px.texels / s, ky as f32 * py.texels / s],
+        aspect: (kx as f32 * px.texels) / (ky as f32 * py.texels),
+        strength: [px.strength, py.strength],
+    }
+}
+
+/// The coordinates `coords` (the rectified square's, not wrapping) folded
+/// by `fold`'s tile: `u' = frac(u / tile_u)`, `v' = frac(v / tile_v)`,
+/// wrapping. Pixels without coordinates keep none.
+pub fn fold_coords(coords: &Coords, fold: &Fold) -> Coords {
+    let f = |t: f32, side: f32| {
+        let x = t / side;
+        x - x.floor()
+    };
+    Coords {
+        width: coords.width,
+        height: coords.height,
+        u: coords.u.iter().map(|&u| f(u, fold.tile[0])).collect(),
+        v: coords.v.iter().map(|&v| f(v, fold.tile[1])).collect(),
+        wrap: true,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec3;
+
+    /// A `w × h` texture of `f(x, y)` grey, each texel the mean of 4×4
+    /// samples over its area (as a camera or a renderer's filter gives).
+    fn texture(w: usize, h: usize, f: impl Fn(f32, f32) -> f32) -> Image {
+        let mut t = Image::zeros(3, h, w);
+        for y in 0..h {
+            for x in 0..w {
+                let mut acc = 0.0;
+                for sy in 0..4 {
+                    for sx in 0..4 {
+                        acc += f(
+                            x as f32 + (sx as f32 + 0.5) / 4.0,
+                            y as f32 + (sy as f32 + 0.5) / 4.0,
+                        );
+                    }
+                }
+                t.set_rgb(y * w + x, Vec3::splat(acc / 16.0));
+            }
+        }
+        t
+    }
+
+    /// A grid of tiles `px × py` with grout lines `g` wide, and brightness
+    /// jitter per tile from a hash.
+    fn tiles(px: f32, py: f32, g: f32) -> impl Fn(f32, f32) -> f32 {
+        move |x, y| {
+            let (tx, ty) = ((x / px).floor(), (y / py).floor());
+            let (fx, fy) = (x - tx * px, y - ty * py);
+            if fx < g || fy < g {
+                0.9
+            } else {
+                // A little brightness per tile, from a hash of the tile.
+                let mut z = (tx as i64 as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+                    ^ (ty as i64 as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F);
+                z ^= z >> 31;
+                z = z.wrapping_mul(0xBF58_476D_1CE4_E5B9);
+                z ^= z >> 29;
+                0.3 + 0.05 * (z % 1000) as f32 / 1000.0
+            }
+        }
+    }
+
+    #[test]
+    fn the_periods_of_a_tile_grid_are_found_to_a_fraction_of_a_texel() {
+        for &(px, py, w, h) in &[
+            (12.5f32, 20.0f32, 200usize, 160usize),
+            (7.3, 7.3, 100, 90),
+            (31.0, 9.25, 300, 120),
+            // Larger than MAX_SIDE: measured downsampled, reported full size.
+            (40.4, 26.0, 700, 500),
+        ] {
+            let t = texture(w, h, tiles(px, py, 2.0));
+            let (x, y) = detect(&t, &vec![true; w * h]);
+            let (x, y) = (x.expect("x period"), y.expect("y period"));
+            assert!((x.texels - px).abs() < 0.02 * px, "{px}: {x:?}");
+            assert!((y.texels - py).abs() < 0.02 * py, "{py}: {y:?}");
+            assert!(x.strength >= MIN_PEAK && y.strength >= MIN_PEAK);
+        }
+    }
+
+    #[test]
+    fn running_bond_bricks_repeat_every_two_courses() {
+        // Bricks 24 × 10 with every other course shifted by half a brick:
+        // along y the pattern repeats after two courses (20), along x after
+        // one brick (24).
+        let f = |x: f32, y: f32| {
+            let course = (y / 10.0).floor();
+            let x = x + if course as i64 % 2 == 1 { 12.0 } else { 0.0 };
+            let (fx, fy) = (x.rem_euclid(24.0), y.rem_euclid(10.0));
+            if fx < 2.0 || fy < 2.0 {
+                0.85
+            } else {
+                0.35
+            }
+        };
+        let (w, h) = (240, 200);
+        let (x, y) = detect(&texture(w, h, f), &vec![true; w * h]);
+        assert!((x.unwrap().texels - 24.0).abs() < 0.3, "{x:?}");
+        assert!((y.unwrap().texels - 20.0).abs() < 0.3, "{y:?}");
+    }
+
+    #[test]
+    fn holes_do_not_hide_the_period() {
+        // 40% of the texels unknown (blocks, like a mask's gaps), set to a
+        // wrong value that must not count.
+        let (w, h, px, py) = (160usize, 160usize, 16.0f32, 11.0f32);
+        let mut t = texture(w, h, tiles(px, py, 2.0));
+        let mut rng = picker_tensor::Rng::new(3);
+        let mut known = vec![true; w * h];
+        for _ in 0..40 {
+            let (x0, y0) = (rng.range(0, w - 1), rng.range(0, h - 1));
+            for y in y0..(y0 + 20).min(h) {
+                for x in x0..(x0 + 20).min(w) {
+                    known[y * w + x] = false;
+                    t.set_rgb(y * w + x, Vec3::splat(5.0));
+                }
+            }
+        }
+        let (x, y) = detect(&t, &known);
+        assert!((x.unwrap().texels - px).abs() < 0.3, "{x:?}");
+        assert!((y.unwrap().texels - py).abs() < 0.3, "{y:?}");
+    }
+
+    #[test]
+    fn no_period_in_noise_a_gradient_or_a_single_repeat() {
+        let (w, h) = (128usize, 96usize);
+        let mut rng = picker_tensor::Rng::new(7);
+        let noise: Vec<f32> = (0..w * h).map(|_| rng.uniform(0.0, 1.0)).collect();
+        let t = texture(w, h, |x, y| {
+            noise[(y as usize).min(h - 1) * w + (x as usize).min(w - 1)]
+        });
+        assert_eq!(detect(&t, &vec![true; w * h]), (None, None));
+        // Smooth: a gradient and a slow wave (its period, 200, is longer
+        // than half the texture).
+        let t = texture(w, h, |x, y| 0.01 * x + 0.3 * (y / 200.0 * 6.283).sin());
+        assert_eq!(detect(&t, &vec![true; w * h]), (None, None));
+        // Nothing known, a constant, an empty image.
+        let t = texture(w, h, tiles(10.0, 10.0, 2.0));
+        assert_eq!(detect(&t, &vec![false; w * h]), (None, None));
+        let c = texture(w, h, |_, _| 0.5);
+        assert_eq!(detect(&c, &vec![true; w * h]), (None, None));
+        assert_eq!(detect(&Image::zeros(3, 0, 0), &[]), (None, None));
+    }
+
+    #[test]
+    fn tiles_hold_whole_periods_and_are_closest_to_square() {
+        let p = |texels: f32| AxisPeriod {
+            texels,
+            strength: 0.9,
+        };
+        let f = fold_tile(p(10.0), p(40.0), 200);
+        assert_eq!(f.periods_per_tile, [4, 1]);
+        assert!((f.aspect - 1.0).abs() < 1e-6 && (f.tile[0] - 0.2).abs() < 1e-6);
+        assert_eq!(fold_tile(p(10.0), p(25.0), 200).periods_per_tile, [5, 2]);
+        // Each side at most half the texture: two tiles seen.
+        let f = fold_tile(p(60.0), p(45.0), 128);
+        assert_eq!(f.periods_per_tile, [1, 1]);
+        assert!((f.aspect - 60.0 / 45.0).abs() < 1e-6);
+        assert!((f.period[0] - 60.0 / 128.0).abs() < 1e-6);
+        // Folded coordinates: the fraction of the tile, wrapping; none stays none.
+        let c = Coords {
+            width: 3,
+            height: 1,
+            u: vec![0.05, 0.45, f32::NAN],
+            v: vec![0.1, 0.9, 0.5],
+            wrap: false,
+        };
+        let fold = fold_tile(p(40.0), p(40.0), 200);
+        let g = fold_coords(&c, &fold);
+        assert!(g.wrap);
+        assert!((g.u[0] - 0.25).abs() < 1e-5 && (g.u[1] - 0.25).abs() < 1e-5);
+        assert!((g.v[0] - 0.5).abs() < 1e-5 && (g.v[1] - 0.5).abs() < 1e-5);
+        assert!(g.u[2].is_nan());
+    }
+
+    #[test]
+    fn the_fundamental_wins_over_its_multiples() {
+        // A checker of 8-texel squares: r peaks at 16, 32, 48 …; the period
+        // is 16, not a multiple.
+        let f = |x: f32, y: f32| (((x / 8.0).floor() + (y / 8.0).floor()) as i64 & 1) as f32;
+        let (w, h) = (128, 128);
+        let (x, y) = detect(&texture(w, h, f), &vec![true; w * h]);
+        assert!((x.unwrap().texels - 16.0).abs() < 0.2, "{x:?}");
+        assert!((y.unwrap().texels - 16.0).abs() < 0.2, "{y:?}");
+    }
+}
