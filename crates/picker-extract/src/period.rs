@@ -37,6 +37,7 @@
 //! 1 dB); a folded brick wall went from 15.7 to 33.3 dB.
 
 use picker_render::io::Image;
+use rayon::prelude::*;
 
 use crate::reproject::Coords;
 
@@ -183,7 +184,9 @@ fn autocorrelation(
 ) -> Vec<f32> {
     let known = ok.iter().filter(|&&k| k).count();
     let least = ((MIN_PAIR_SHARE * known as f32).ceil() as usize).max(8);
+    // Shifts in parallel, each summed alone: the same bits for any thread count.
     (0..=n)
+        .into_par_iter()
         .map(|d| {
             let (whole, part) = (d / SUBSTEPS, (d % SUBSTEPS) as f32 / SUBSTEPS as f32);
             // Both sides are interpolated by half the fractional shift, in
