@@ -471,6 +471,22 @@ mod tests {
     }
 
     #[test]
+    fn the_same_periods_on_any_number_of_threads() {
+        let (w, h) = (150usize, 130usize);
+        let t = texture(w, h, tiles(13.3, 9.7, 2.0));
+        let known = vec![true; w * h];
+        let one = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap();
+        let a = one.install(|| detect(&t, &known));
+        let b = detect(&t, &known);
+        assert!(a.0.is_some() && a.1.is_some());
+        let bits = |p: Option<AxisPeriod>| p.map(|p| (p.texels.to_bits(), p.strength.to_bits()));
+        assert_eq!((bits(a.0), bits(a.1)), (bits(b.0), bits(b.1)));
+    }
+
+    #[test]
     fn holes_do_not_hide_the_period() {
         // 40% of the texels unknown (blocks, like a mask's gaps), set to a
         // wrong value that must not count.
