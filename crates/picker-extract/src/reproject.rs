@@ -1597,6 +1597,17 @@ mod tests {
         );
     }
 
+    /// Wrapping coordinates of a `w × h` photo, all 0 (to fill in).
+    fn wrapping_zeros(w: usize, h: usize) -> Coords {
+        Coords {
+            width: w,
+            height: h,
+            u: vec![0.0; w * h],
+            v: vec![0.0; w * h],
+            wrap: true,
+        }
+    }
+
     #[test]
     fn sharp_pixels_outweigh_blurred_ones_on_the_same_texels() {
         // Rows 0..16: the 16² texture square seen frontally, one texel per
@@ -1606,14 +1617,7 @@ mod tests {
         // texel under a plain `1/A` weight (texels near 0.5); the
         // inverse-variance `1/A²` lets the sharp half decide.
         let (w, h, size) = (16usize, 33usize, 16usize);
-        let mut coords = Coords {
-            width: w,
-            height: h,
-            u: vec![0.0; w * h],
-            v: vec![0.0; w * h],
-            wrap: true,
-        };
-        let mut img = Image::zeros(3, h, w);
+        let (mut coords, mut img) = (wrapping_zeros(w, h), Image::zeros(3, h, w));
         let mut mask = vec![true; w * h];
         for y in 0..h {
             for x in 0..w {
@@ -1654,14 +1658,7 @@ mod tests {
                 .sum::<f32>()
                 / 16.0
         };
-        let mut coords = Coords {
-            width: w,
-            height: h,
-            u: vec![0.0; w * h],
-            v: vec![0.0; w * h],
-            wrap: true,
-        };
-        let mut img = Image::zeros(3, h, w);
+        let (mut coords, mut img) = (wrapping_zeros(w, h), Image::zeros(3, h, w));
         let px = 1.0 / size as f32;
         for y in 0..h {
             for x in 0..w {
