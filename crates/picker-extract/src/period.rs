@@ -385,6 +385,29 @@ pub fn fold_coords(coords: &Coords, fold: &Fold) -> Coords {
     }
 }
 
+/// The plane mode's fold: `coords` (the rectified square's) folded into one
+/// tile when the picked pixels (`mask`, de-lit `colour`, `confidence`)
+/// splatted at `size` texels (at most [`MAX_SIDE`]; a quick splat without
+/// back-projection) repeat along both axes ([`detect`], [`fold_tile`],
+/// [`fold_coords`]); else `coords` unchanged and no fold.
+pub fn fold_if_periodic(
+    coords: Coords,
+    mask: &[bool],
+    colour: &Image,
+    confidence: &[f32],
+    size: usize,
+) -> (Coords, Option<Fold>) {
+    let probe = size.clamp(1, MAX_SIDE);
+    let r = crate::reproject::reproject_unsharpened(&coords, mask, colour, confidence, probe);
+    match detect(&r.texture, &r.known) {
+        (Some(px), Some(py)) => {
+            let f = fold_tile(px, py, probe);
+            (fold_coords(&coords, &f), Some(f))
+        }
+        _ => (coords, None),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -558,6 +581,49 @@ mod tests {
         assert!((g.u[0] - 0.25).abs() < 1e-5 && (g.u[1] - 0.25).abs() < 1e-5);
         assert!((g.v[0] - 0.5).abs() < 1e-5 && (g.v[1] - 0.5).abs() < 1e-5);
         assert!(g.u[2].is_nan());
+    }
+
+    #[test]
+    fn a_frontal_tiled_square_folds_into_its_tile() {
+        // A 160² photo of the rectified square (u = x/160, not wrapping)
+        // showing tiles 20 × 16 pixels: folded by a tile of whole periods,
+        // close to square, the coordinates wrap and every repeat lands in the
+        // same place.
+        let (w, h) = (160usize, 160usize);
+        let img = texture(w, h, tiles(20.0, 16.0, 2.0));
+        let coords = Coords {
+            width: w,
+            height: h,
+            u: (0..w * h)
+                .map(|i| ((i % w) as f32 + 0.5) / w as f32)
+                .collect(),
+            v: (0..w * h)
+                .map(|i| ((i / w) as f32 + 0.5) / h as f32)
+                .collect(),
+            wrap: false,
+        };
+        let (mask, conf) = (vec![true; w * h], vec![1.0; w * h]);
+        let (folded, fold) = fold_if_periodic(coords, &mask, &img, &conf, 160);
+        let fold = fold.expect("a fold");
+        assert!((fold.period[0] - 20.0 / 160.0).abs() < 0.01, "{fold:?}");
+        assert!((fold.period[1] - 16.0 / 160.0).abs() < 0.01, "{fold:?}");
+        assert!((fold.aspect - 1.0).abs() < 0.1, "{fold:?}");
+        assert!(folded.wrap);
+        // Pixels one tile apart share their folded coordinates.
+        let [kx, ky] = fold.periods_per_tile;
+        let (i, j) = (30 * w + 7, (30 + 16 * ky) * w + 7 + 20 * kx);
+        assert!(
+            (folded.u[i] - folded.u[j]).abs() < 0.02 && (folded.v[i] - folded.v[j]).abs() < 0.02
+        );
+        // Noise does not fold.
+        let mut rng = picker_tensor::Rng::new(2);
+        let noise: Vec<f32> = (0..w * h).map(|_| rng.uniform(0.0, 1.0)).collect();
+        let img = texture(w, h, |x, y| {
+            noise[(y as usize).min(h - 1) * w + (x as usize).min(w - 1)]
+        });
+        let c = folded.clone();
+        let (same, none) = fold_if_periodic(c, &mask, &img, &conf, 160);
+        assert!(none.is_none() && same.u == folded.u);
     }
 
     #[test]

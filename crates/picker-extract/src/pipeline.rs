@@ -712,24 +712,12 @@ pub fn extract(
                 }
             };
         // A rectified plane that repeats along both axes: every repeat
-        // folded into one tile (found on a quick splat at most
-        // period::MAX_SIDE texels wide).
-        let mut fold = None;
-        let coords = if mode == UvMode::Plane && opts.fold_period {
-            let probe = reproject::texture_size(coords.sizing_area(&full.data), observed_cap)
-                .min(crate::period::MAX_SIDE);
-            let r0 =
-                reproject::reproject_unsharpened(&coords, &full.data, &delit, &confidence, probe);
-            match crate::period::detect(&r0.texture, &r0.known) {
-                (Some(px), Some(py)) => {
-                    let f = crate::period::fold_tile(px, py, probe);
-                    fold = Some(f);
-                    crate::period::fold_coords(&coords, &f)
-                }
-                _ => coords,
-            }
+        // folded into one tile.
+        let (coords, fold) = if mode == UvMode::Plane && opts.fold_period {
+            let probe = reproject::texture_size(coords.sizing_area(&full.data), observed_cap);
+            crate::period::fold_if_periodic(coords, &full.data, &delit, &confidence, probe)
         } else {
-            coords
+            (coords, None)
         };
         diag.uv = Some(UvDecision {
             mode,
