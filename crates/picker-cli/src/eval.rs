@@ -101,6 +101,9 @@ pub struct Row {
     plane_error_deg: Option<f64>,
     /// Plane mode: |focal used / true focal − 1|.
     focal_rel_error: Option<f64>,
+    /// Plane mode: the periods per tile when the texture was folded into
+    /// one tile (`diagnostics.uv.period`), else `None`.
+    folded: Option<[usize; 2]>,
 }
 
 fn scene_dirs(dir: &Path) -> Result<Vec<PathBuf>> {
@@ -336,6 +339,11 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
             plane_predicted_error_deg: None,
             plane_error_deg: None,
             focal_rel_error: None,
+            folded: diag
+                .uv
+                .as_ref()
+                .and_then(|u| u.period)
+                .map(|f| f.periods_per_tile),
         };
         if let Some(uv) = diag.uv.as_ref().filter(|u| u.mode == UvMode::Plane) {
             let truth_n = picker_extract::plane::plane_normal(&truth.normals, &true_mask);
@@ -488,6 +496,7 @@ pub fn run(a: Args) -> Result<()> {
         "mean_normal_error_deg": mean(rows.iter().map(|r| r.normal_error_deg)),
         "mean_colour_rmse_single_colour": mean(rows.iter().filter_map(|r| r.colour_rmse)),
         "plane_rows": rows.iter().filter(|r| r.plane_error_deg.is_some()).count(),
+        "folded_rows": rows.iter().filter(|r| r.folded.is_some()).count(),
         "mean_plane_predicted_error_deg": mean(rows.iter().filter_map(|r| r.plane_predicted_error_deg)),
         "mean_plane_error_deg": mean(rows.iter().filter_map(|r| r.plane_error_deg)),
         "median_plane_error_deg": median(rows.iter().filter_map(|r| r.plane_error_deg).collect()),

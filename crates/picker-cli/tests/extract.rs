@@ -102,6 +102,33 @@ fn ground_truth_extraction_recovers_masks_and_textures() {
         let e = row["colour_rmse"].as_f64().unwrap();
         assert!(e < 0.01, "single-colour material colour error {e}: {row}");
     }
+    // The plane mode alone on the same truth: every textured row rectified,
+    // with its plane error measured, and the fold reported.
+    let plane = tmp.path().join("eval-plane.json");
+    ok(&[
+        "eval",
+        scenes.to_str().unwrap(),
+        "--uv",
+        "plane",
+        "--json-out",
+        plane.to_str().unwrap(),
+    ]);
+    let r = json_file(&plane);
+    let textured: Vec<&Value> = r["rows"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|r| r["textured_extracted"].as_bool().unwrap())
+        .collect();
+    assert!(!textured.is_empty());
+    for row in &textured {
+        assert_eq!(row["uv_mode"], "plane", "{row}");
+        assert!(row["plane_error_deg"].is_number(), "{row}");
+        assert!(row.get("folded").is_some(), "{row}");
+    }
+    let folded = r["aggregate"]["folded_rows"].as_u64().unwrap() as usize;
+    let listed = textured.iter().filter(|r| !r["folded"].is_null()).count();
+    assert_eq!(folded, listed);
 }
 
 /// Compares two images value by value (8-bit PNGs: ±1 code value).
