@@ -104,6 +104,11 @@ pub struct Row {
     /// Plane mode: the periods per tile when the texture was folded into
     /// one tile (`diagnostics.uv.period`), else `None`.
     folded: Option<[usize; 2]>,
+    /// Networks' UV mode: the whole repeats found inside the texture square
+    /// (`diagnostics.uv.repeats`), else `None`.
+    uv_repeats: Option<[usize; 2]>,
+    /// Networks' UV mode: share of the square filled from another repeat.
+    repeat_filled: Option<f64>,
 }
 
 fn scene_dirs(dir: &Path) -> Result<Vec<PathBuf>> {
@@ -344,6 +349,8 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
                 .as_ref()
                 .and_then(|u| u.period)
                 .map(|f| f.periods_per_tile),
+            uv_repeats: diag.uv.as_ref().and_then(|u| u.repeats).map(|r| r.repeats),
+            repeat_filled: diag.uv.as_ref().and_then(|u| u.repeats).map(|r| r.filled),
         };
         if let Some(uv) = diag.uv.as_ref().filter(|u| u.mode == UvMode::Plane) {
             let truth_n = picker_extract::plane::plane_normal(&truth.normals, &true_mask);
@@ -497,6 +504,7 @@ pub fn run(a: Args) -> Result<()> {
         "mean_colour_rmse_single_colour": mean(rows.iter().filter_map(|r| r.colour_rmse)),
         "plane_rows": rows.iter().filter(|r| r.plane_error_deg.is_some()).count(),
         "folded_rows": rows.iter().filter(|r| r.folded.is_some()).count(),
+        "uv_repeat_rows": rows.iter().filter(|r| r.uv_repeats.is_some()).count(),
         "mean_plane_predicted_error_deg": mean(rows.iter().filter_map(|r| r.plane_predicted_error_deg)),
         "mean_plane_error_deg": mean(rows.iter().filter_map(|r| r.plane_error_deg)),
         "median_plane_error_deg": median(rows.iter().filter_map(|r| r.plane_error_deg).collect()),

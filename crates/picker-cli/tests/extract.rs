@@ -95,6 +95,17 @@ fn ground_truth_extraction_recovers_masks_and_textures() {
         "only {good} of {} textures reach 25 dB: {psnr:?}",
         psnr.len()
     );
+    // Every row says whether the net-UV square was found to repeat; the
+    // aggregate counts them.
+    let repeats = rows.iter().filter(|r| !r["uv_repeats"].is_null()).count();
+    assert_eq!(
+        r["aggregate"]["uv_repeat_rows"].as_u64().unwrap() as usize,
+        repeats
+    );
+    for row in rows.iter().filter(|r| !r["uv_repeats"].is_null()) {
+        let f = row["repeat_filled"].as_f64().unwrap();
+        assert!((0.0..=1.0).contains(&f), "{row}");
+    }
     for row in rows
         .iter()
         .filter(|r| !r["textured_truth"].as_bool().unwrap())

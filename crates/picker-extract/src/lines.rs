@@ -293,7 +293,7 @@ fn vanishing_search(
     min_support: f32,
 ) -> Vec<Vanishing> {
     let total: f32 = segs.iter().map(Segment::length).sum();
-    if segs.len() < MIN_SEGMENTS || total <= 0.0 || !(f > 0.0) {
+    if segs.len() < MIN_SEGMENTS || total <= 0.0 || f.is_nan() || f <= 0.0 {
         return Vec::new();
     }
     // Interpretation-plane normals: a segment's 3-D direction is orthogonal

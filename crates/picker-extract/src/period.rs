@@ -76,6 +76,11 @@ pub struct AxisPeriod {
     pub texels: f32,
     /// The normalised autocorrelation at the period's peak.
     pub strength: f32,
+    /// The normalised autocorrelation at the peak of twice the period,
+    /// when there is one (it confirms a weak period; far above the
+    /// period's own, it says the true period is the double: a running bond
+    /// measured across its courses).
+    pub double: Option<f32>,
 }
 
 /// The periods of `tex` (any channels, the first three as linear RGB, one as
@@ -127,7 +132,7 @@ pub fn detect(tex: &Image, known: &[bool]) -> (Option<AxisPeriod>, Option<AxisPe
             let r = autocorrelation(&v, &ok, sw, sh, dx, dy, n * SUBSTEPS);
             period_of(&r).map(|p| AxisPeriod {
                 texels: p.texels * scale,
-                strength: p.strength,
+                ..p
             })
         })
     };
@@ -314,6 +319,7 @@ fn period_of(r: &[f32]) -> Option<AxisPeriod> {
     // HARMONIC_SHARE of the period's. A weak peak needs the one at 2·p.
     let least = HARMONIC_SHARE * v;
     let mut k = 2;
+    let mut double = None;
     loop {
         let target = k as f32 * p;
         let c = target.round() as usize;
@@ -331,6 +337,9 @@ fn period_of(r: &[f32]) -> Option<AxisPeriod> {
             });
         match found {
             Some(e) => {
+                if k == 2 {
+                    double = at(e);
+                }
                 p = refine(e) / k as f32;
                 k += 1;
             }
@@ -343,6 +352,7 @@ fn period_of(r: &[f32]) -> Option<AxisPeriod> {
     Some(AxisPeriod {
         texels: p,
         strength: v,
+        double,
     })
 }
 
@@ -436,6 +446,238 @@ pub fn fold_if_periodic(
         }
         _ => (coords, None),
     }
+}
+
+/// Largest drift, in periods, between `n` measured periods and the side of
+/// the texture square for the square to count as `n` whole repeats
+/// ([`whole_repeats`]).
+pub const UV_REPEAT_TOLERANCE: f32 = 0.15;
+/// Most whole repeats along one axis of the texture square that
+/// [`fold_uv_if_periodic`] folds.
+pub const MAX_UV_REPEATS: usize = 32;
+
+/// How many times a period `p` (texels of a texture square of side `side`)
+/// fits along the square when it fits a whole number `n ≥ 2` of times, to
+/// within [`UV_REPEAT_TOLERANCE`] of a period over the whole side; else
+/// `None`. A texture that tiles the square and repeats inside it repeats a
+/// whole number of times.
+pub fn whole_repeats(p: AxisPeriod, side: usize) -> Option<usize> {
+    if p.texels.is_nan() || p.texels <= 0.0 || side == 0 {
+        return None;
+    }
+    let exact = side as f32 / p.texels;
+    let n = exact.round();
+    let drift = (n * p.texels - side as f32).abs() / p.texels;
+    (n >= 2.0 && n <= MAX_UV_REPEATS as f32 && drift <= UV_REPEAT_TOLERANCE).then_some(n as usize)
+}
+
+/// The repeats found inside the wrapped texture square of the networks'
+/// UVs (`material.json`, `diagnostics.uv.repeats`).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct UvRepeats {
+    /// Whole repeats along `u` and `v` (1: none found along that axis).
+    pub repeats: [usize; 2],
+    /// The measured periods, as fractions of the square (`None`: no
+    /// period along that axis, or not a whole number of them).
+    pub period: [Option<f32>; 2],
+    /// The autocorrelation at each period ([`AxisPeriod::strength`]).
+    pub strength: [Option<f32>; 2],
+    /// The autocorrelation at twice each period ([`AxisPeriod::double`]).
+    pub double: [Option<f32>; 2],
+    /// Share of the square's texels that no picked pixel reached and that
+    /// were filled from another repeat (the rest of the holes is inpainted).
+    pub filled: f64,
+}
+
+impl UvRepeats {
+    /// The tile the square folds into: `1/repeats` of it along each axis.
+    pub fn tile(&self) -> [f32; 2] {
+        [1.0 / self.repeats[0] as f32, 1.0 / self.repeats[1] as f32]
+    }
+}
+
+/// Least margin by which the autocorrelation at twice a period must exceed
+/// the period's own for the double to be taken as the period
+/// ([`fold_uv_if_periodic`]).
+pub const DOUBLE_MARGIN: f32 = 0.1;
+
+/// `p`, or its double when that correlates at least [`DOUBLE_MARGIN`]
+/// better (its strength then the double's, no double measured).
+fn prefer_double(p: AxisPeriod) -> AxisPeriod {
+    match p.double {
+        Some(d) if d >= p.strength + DOUBLE_MARGIN => AxisPeriod {
+            texels: 2.0 * p.texels,
+            strength: d,
+            double: None,
+        },
+        _ => p,
+    }
+}
+
+/// The networks' UV mode's counterpart of [`fold_if_periodic`]: when the
+/// picked pixels (`mask`, de-lit `colour`, `confidence`) splatted through
+/// the wrapped UVs `coords` at `size` texels (at most [`MAX_SIDE`], a quick
+/// splat) repeat a whole number of times along an axis of the texture
+/// square ([`detect`], [`whole_repeats`]), the UVs folded by those repeats
+/// (`u' = frac(n_u·u)`, `v' = frac(n_v·v)`: every observed repeat lands in
+/// one tile) and the repeats; else `None`. The pipeline fills the holes of
+/// the square that another repeat showed from that tile ([`unfold`])
+/// instead of having the inpainter invent them.
+pub fn fold_uv_if_periodic(
+    coords: &Coords,
+    mask: &[bool],
+    colour: &Image,
+    confidence: &[f32],
+    size: usize,
+) -> Option<(Coords, UvRepeats)> {
+    // The square wraps: measured on it and half of it again, so that
+    // shifts reach three quarters of the side (twice a period of a quarter).
+    let probe = size.clamp(1, MAX_SIDE * 2 / 3);
+    let r = crate::reproject::reproject_unsharpened(coords, mask, colour, confidence, probe);
+    let ext = probe + probe / 2;
+    let mut tex = Image::zeros(r.texture.channels, ext, ext);
+    let mut known = vec![false; ext * ext];
+    for y in 0..ext {
+        for x in 0..ext {
+            let (i, j) = (y * ext + x, (y % probe) * probe + x % probe);
+            known[i] = r.known[j];
+            for c in 0..tex.channels {
+                tex.data[c * ext * ext + i] = r.texture.data[c * probe * probe + j];
+            }
+        }
+    }
+    let (px, py) = detect(&tex, &known);
+    // A period whose double correlates far better is half of the true one
+    // (a running bond measured across its courses): the double is taken
+    // when it still fits the square a whole number of times.
+    let px = px.map(prefer_double);
+    let py = py.map(prefer_double);
+    let n = |p: Option<AxisPeriod>| p.and_then(|p| whole_repeats(p, probe));
+    let (nx, ny) = (n(px), n(py));
+    if nx.is_none() && ny.is_none() {
+        return None;
+    }
+    let keep = |p: Option<AxisPeriod>, n: Option<usize>| n.and(p);
+    let (px, py) = (keep(px, nx), keep(py, ny));
+    let rep = UvRepeats {
+        repeats: [nx.unwrap_or(1), ny.unwrap_or(1)],
+        period: [px, py].map(|p| p.map(|p| p.texels / probe as f32)),
+        strength: [px, py].map(|p| p.map(|p| p.strength)),
+        double: [px, py].map(|p| p.and_then(|p| p.double)),
+        filled: 0.0,
+    };
+    let tile = rep.tile();
+    let f = |t: f32, side: f32| {
+        let x = t / side;
+        x - x.floor()
+    };
+    let folded = Coords {
+        width: coords.width,
+        height: coords.height,
+        u: coords.u.iter().map(|&u| f(u, tile[0])).collect(),
+        v: coords.v.iter().map(|&v| f(v, tile[1])).collect(),
+        wrap: true,
+    };
+    Some((folded, rep))
+}
+
+/// The texture square of side `side` made of `repeats[0] × repeats[1]`
+/// copies of `tile` (any size and channels): the copies are laid side by
+/// side and resampled to the square with wrap-around (area average along an
+/// axis that shrinks, bilinear along one that grows; no resampling where
+/// `repeats · tile side == side`).
+pub fn unfold(tile: &Image, repeats: [usize; 2], side: usize) -> Image {
+    let (c, th, tw) = (tile.channels, tile.height, tile.width);
+    let (nx, ny) = (repeats[0].max(1), repeats[1].max(1));
+    crate::report::resize_rows((c, th * ny, tw * nx), side, side, true, |ch, r, out| {
+        let src = &tile.plane(ch)[(r % th) * tw..(r % th + 1) * tw];
+        for (x, o) in out.iter_mut().enumerate() {
+            *o = src[x % tw];
+        }
+    })
+}
+
+/// Least distance, in periods (the shorter of the square's two), from the
+/// nearest observed texel for a hole to be filled from another repeat
+/// ([`fill_from_repeats`]); nearer holes are left to the inpainter.
+pub const REPEAT_FILL_MIN_DISTANCE: f32 = 0.5;
+
+/// The holes of a reprojected square (`tex`, its `known` texels) that
+/// another repeat showed, filled from `over` (the tile of every repeat laid
+/// over the square, [`unfold`]) where `over_seen` (the tile's known flags
+/// laid over the same way, 1 = observed) is 1: the texture and its known
+/// flags after filling, and how many texels were filled.
+///
+/// Only holes at least `min_distance` texels (chessboard, wrapping around)
+/// from every observed texel are filled. A repeat is not an exact copy
+/// (tiles and bricks of varied colour, a drift the de-lighting left): near
+/// what was seen, the inpainter's continuation of the same tile or brick is
+/// closer to the truth than another repeat's, and it blends the two where
+/// they meet; far from it, only the repeats know where the grout runs.
+///
+/// # Panics
+/// When the sizes disagree.
+pub fn fill_from_repeats(
+    tex: &Image,
+    known: &[bool],
+    over: &Image,
+    over_seen: &Image,
+    min_distance: usize,
+) -> (Image, Vec<bool>, usize) {
+    let (w, h) = (tex.width, tex.height);
+    let n = w * h;
+    assert!(
+        known.len() == n
+            && (over.width, over.height) == (w, h)
+            && (over_seen.width, over_seen.height) == (w, h),
+        "fill_from_repeats: sizes differ"
+    );
+    let far = distance_at_least(known, w, h, min_distance);
+    let mut out = tex.clone();
+    let mut k = known.to_vec();
+    let mut filled = 0;
+    for i in 0..n {
+        if far[i] && over_seen.data[i] > 1.0 - 1e-4 {
+            out.set_rgb(i, over.rgb(i));
+            k[i] = true;
+            filled += 1;
+        }
+    }
+    (out, k, filled)
+}
+
+/// Per texel of a `w × h` grid that wraps around: whether its chessboard
+/// distance to the nearest `set` texel is at least `d` (all `true` when no
+/// texel is set; `d = 0`: every texel).
+fn distance_at_least(set: &[bool], w: usize, h: usize, d: usize) -> Vec<bool> {
+    // Breadth-first from every set texel, 8-connected, `d − 1` steps.
+    let mut near = set.to_vec();
+    if d == 0 {
+        return vec![true; w * h];
+    }
+    let mut front: Vec<usize> = (0..w * h).filter(|&i| set[i]).collect();
+    for _ in 1..d {
+        let mut next = Vec::new();
+        for &i in &front {
+            let (x, y) = ((i % w) as i64, (i / w) as i64);
+            for dy in -1..=1i64 {
+                for dx in -1..=1i64 {
+                    let xx = (x + dx).rem_euclid(w as i64) as usize;
+                    let yy = (y + dy).rem_euclid(h as i64) as usize;
+                    let j = yy * w + xx;
+                    if !near[j] {
+                        near[j] = true;
+                        next.push(j);
+                    }
+                }
+            }
+        }
+        if next.is_empty() {
+            break;
+        }
+        front = next;
+    }
+    near.into_iter().map(|b| !b).collect()
 }
 
 #[cfg(test)]
@@ -593,7 +835,9 @@ mod tests {
         assert_eq!(detect(&t, &vec![true; w * h]), (None, None));
         // Smooth: a gradient and a slow wave (its period, 200, is longer
         // than half the texture).
-        let t = texture(w, h, |x, y| 0.01 * x + 0.3 * (y / 200.0 * 6.283).sin());
+        let t = texture(w, h, |x, y| {
+            0.01 * x + 0.3 * (y / 200.0 * std::f32::consts::TAU).sin()
+        });
         assert_eq!(detect(&t, &vec![true; w * h]), (None, None));
         // Nothing known, a constant, an empty image.
         let t = texture(w, h, tiles(10.0, 10.0, 2.0));
@@ -608,6 +852,7 @@ mod tests {
         let p = |texels: f32| AxisPeriod {
             texels,
             strength: 0.9,
+            double: None,
         };
         let f = fold_tile(p(10.0), p(40.0), 200);
         assert_eq!(f.periods_per_tile, [4, 1]);
@@ -686,5 +931,221 @@ mod tests {
         let (x, y) = detect(&texture(w, h, f), &vec![true; w * h]);
         assert!((x.unwrap().texels - 16.0).abs() < 0.2, "{x:?}");
         assert!((y.unwrap().texels - 16.0).abs() < 0.2, "{y:?}");
+    }
+
+    #[test]
+    fn whole_repeats_need_a_whole_number_within_the_tolerance() {
+        let p = |texels: f32| AxisPeriod {
+            texels,
+            strength: 0.9,
+            double: None,
+        };
+        assert_eq!(whole_repeats(p(25.0), 100), Some(4));
+        // 4 periods drift 0.1 of a period from the side: still 4.
+        assert_eq!(whole_repeats(p(25.6), 100), Some(4));
+        // 3.5 periods: not whole.
+        assert_eq!(whole_repeats(p(100.0 / 3.5), 100), None);
+        // One period (the square itself), too many, none.
+        assert_eq!(whole_repeats(p(100.0), 100), None);
+        assert_eq!(whole_repeats(p(3.0), 3 * (MAX_UV_REPEATS + 1)), None);
+        assert_eq!(
+            whole_repeats(p(3.0), 3 * MAX_UV_REPEATS),
+            Some(MAX_UV_REPEATS)
+        );
+        for bad in [0.0, -4.0, f32::NAN] {
+            assert_eq!(whole_repeats(p(bad), 100), None);
+        }
+        assert_eq!(whole_repeats(p(10.0), 0), None);
+    }
+
+    #[test]
+    fn a_double_that_correlates_far_better_is_the_period() {
+        let p = AxisPeriod {
+            texels: 12.0,
+            strength: 0.4,
+            double: Some(0.55),
+        };
+        let d = prefer_double(p);
+        assert_eq!((d.texels, d.strength, d.double), (24.0, 0.55, None));
+        let close = AxisPeriod {
+            double: Some(0.45),
+            ..p
+        };
+        assert_eq!(prefer_double(close), close);
+        let none = AxisPeriod { double: None, ..p };
+        assert_eq!(prefer_double(none), none);
+    }
+
+    #[test]
+    fn unfold_lays_whole_copies_and_resamples_by_area() {
+        let mut rng = picker_tensor::Rng::new(5);
+        let mut tile = Image::zeros(2, 4, 6);
+        tile.data
+            .iter_mut()
+            .for_each(|v| *v = rng.uniform(0.0, 1.0));
+        // 2 × 3 copies of a 6 × 4 tile fill a 12² square exactly.
+        let sq = unfold(&tile, [2, 3], 12);
+        assert_eq!((sq.channels, sq.width, sq.height), (2, 12, 12));
+        for c in 0..2 {
+            for y in 0..12 {
+                for x in 0..12 {
+                    let want = tile.data[c * 24 + (y % 4) * 6 + x % 6];
+                    assert_eq!(sq.data[c * 144 + y * 12 + x], want);
+                }
+            }
+        }
+        // Three copies of a 6-wide tile into 9 texels: each texel the area
+        // mean of two texels of the copies laid side by side.
+        let one = Image {
+            channels: 1,
+            height: 1,
+            width: 6,
+            data: (0..6).map(|i| i as f32).collect(),
+        };
+        let sq = unfold(&one, [3, 1], 9);
+        let row: Vec<f32> = (0..18).map(|i| (i % 6) as f32).collect();
+        for x in 0..9 {
+            let want = 0.5 * (row[2 * x] + row[2 * x + 1]);
+            assert!(
+                (sq.data[x] - want).abs() < 1e-5,
+                "{x}: {} vs {want}",
+                sq.data[x]
+            );
+        }
+        assert_eq!(
+            unfold(&Image::zeros(3, 0, 0), [2, 2], 8).data,
+            vec![0.0; 3 * 64]
+        );
+    }
+
+    #[test]
+    fn distance_at_least_matches_brute_force_on_a_torus() {
+        let mut rng = picker_tensor::Rng::new(9);
+        for &(w, h, share) in &[
+            (17usize, 11usize, 0.05f32),
+            (8, 8, 0.0),
+            (5, 13, 0.3),
+            (1, 1, 1.0),
+        ] {
+            let set: Vec<bool> = (0..w * h).map(|_| rng.uniform(0.0, 1.0) < share).collect();
+            for d in 0..6 {
+                let got = distance_at_least(&set, w, h, d);
+                for (i, &g) in got.iter().enumerate() {
+                    let (x, y) = ((i % w) as i64, (i / w) as i64);
+                    let dist = (0..w * h)
+                        .filter(|&j| set[j])
+                        .map(|j| {
+                            let dx = (x - (j % w) as i64).rem_euclid(w as i64);
+                            let dy = (y - (j / w) as i64).rem_euclid(h as i64);
+                            dx.min(w as i64 - dx).max(dy.min(h as i64 - dy)) as usize
+                        })
+                        .min();
+                    let want = dist.is_none_or(|e| e >= d);
+                    assert_eq!(g, want, "{w}x{h} d {d} texel {i}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn fill_from_repeats_fills_far_holes_only() {
+        let (w, h) = (10usize, 10usize);
+        let mut tex = Image::zeros(3, h, w);
+        let mut known = vec![false; w * h];
+        for y in 0..h {
+            for x in 0..3 {
+                known[y * w + x] = true;
+                tex.set_rgb(y * w + x, Vec3::splat(0.25));
+            }
+        }
+        let mut over = Image::zeros(3, h, w);
+        over.data.iter_mut().for_each(|v| *v = 0.75);
+        let mut seen = Image::zeros(1, h, w);
+        seen.data.iter_mut().for_each(|v| *v = 1.0);
+        // Unseen by the repeats at column 6.
+        for y in 0..h {
+            seen.data[y * w + 6] = 0.5;
+        }
+        let (out, k, filled) = fill_from_repeats(&tex, &known, &over, &seen, 3);
+        for y in 0..h {
+            for x in 0..w {
+                let i = y * w + x;
+                // Columns 0–2 observed; 3, 4 (and 9, 0 wrapping: 9 is 1
+                // away from 0) too near; 6 unseen by the repeats.
+                let far = matches!(x, 5 | 7);
+                if x < 3 {
+                    assert!(k[i] && out.rgb(i) == Vec3::splat(0.25));
+                } else if far {
+                    assert!(k[i] && out.rgb(i) == Vec3::splat(0.75), "{x}");
+                } else {
+                    assert!(!k[i] && out.rgb(i) == Vec3::ZERO, "{x}");
+                }
+            }
+        }
+        assert_eq!(filled, 2 * h);
+    }
+
+    #[test]
+    fn a_square_that_repeats_folds_and_its_unseen_repeats_are_filled() {
+        // A frontal square with wrapped UVs (u = x/120) showing a grid of
+        // 4 × 3 tiles, of which the photo sees only the left 40% and the
+        // top 55%: the repeats are found, and the unseen tiles filled from
+        // the seen ones match the truth.
+        let (w, h) = (120usize, 120usize);
+        let truth = texture(w, h, tiles(30.0, 40.0, 3.0));
+        let coords = Coords {
+            width: w,
+            height: h,
+            u: (0..w * h)
+                .map(|i| ((i % w) as f32 + 0.5) / w as f32)
+                .collect(),
+            v: (0..w * h)
+                .map(|i| ((i / w) as f32 + 0.5) / h as f32)
+                .collect(),
+            wrap: true,
+        };
+        let mask: Vec<bool> = (0..w * h).map(|i| i % w < 48 && i / w < 66).collect();
+        let conf = vec![1.0; w * h];
+        let (folded, rep) =
+            fold_uv_if_periodic(&coords, &mask, &truth, &conf, 120).expect("repeats");
+        assert_eq!(rep.repeats, [4, 3], "{rep:?}");
+        // Pixels one tile apart share their folded coordinates.
+        let (i, j) = (10 * w + 5, 50 * w + 35);
+        assert!(
+            (folded.u[i] - folded.u[j]).abs() < 1e-4 && (folded.v[i] - folded.v[j]).abs() < 1e-4
+        );
+        let size = 120;
+        let own = crate::reproject::reproject(&coords, &mask, &truth, &conf, size);
+        let side = size.div_ceil(3);
+        let t = crate::reproject::reproject(&folded, &mask, &truth, &conf, side);
+        let seen = Image {
+            channels: 1,
+            height: side,
+            width: side,
+            data: t.known.iter().map(|&k| f32::from(u8::from(k))).collect(),
+        };
+        let over = unfold(&t.texture, rep.repeats, size);
+        let over_seen = unfold(&seen, rep.repeats, size);
+        let (out, known, filled) =
+            fill_from_repeats(&own.texture, &own.known, &over, &over_seen, 15);
+        assert!(filled > size * size / 3, "{filled}");
+        // The filled texels hold the grid: small error against the truth
+        // (its tiles differ a little in brightness, the grout does not move).
+        let (mut se, mut n) = (0.0f64, 0usize);
+        for (i, (&k, &o)) in known.iter().zip(&own.known).enumerate() {
+            if k && !o {
+                se += f64::from((out.rgb(i) - truth.rgb(i)).length_squared());
+                n += 1;
+            }
+        }
+        let rmse = (se / n as f64 / 3.0).sqrt();
+        assert!(rmse < 0.03, "rmse {rmse}");
+        // A texture that does not repeat does not fold.
+        let mut rng = picker_tensor::Rng::new(4);
+        let noise: Vec<f32> = (0..w * h).map(|_| rng.uniform(0.0, 1.0)).collect();
+        let img = texture(w, h, |x, y| {
+            noise[(y as usize).min(h - 1) * w + (x as usize).min(w - 1)]
+        });
+        assert!(fold_uv_if_periodic(&coords, &mask, &img, &conf, 120).is_none());
     }
 }

@@ -102,7 +102,9 @@ pub struct Options<'a> {
     /// photo's straight lines in the mask ([`crate::lines`]).
     pub line_refine: bool,
     /// In the plane mode, fold the repeats of a texture that repeats along
-    /// both of its axes into one tile ([`crate::period`]).
+    /// both of its axes into one tile; in the networks' UV mode, fold the
+    /// whole repeats inside the texture square into one tile and lay it over
+    /// the square ([`crate::period`]).
     pub fold_period: bool,
     /// Make the texture tileable (toroidal inpainting).
     pub tileable: bool,
@@ -391,6 +393,9 @@ pub struct UvDecision {
     /// The plane mode's fold of a periodic texture into one tile, when one
     /// was found ([`crate::period`]).
     pub period: Option<crate::period::Fold>,
+    /// The networks' UV mode: the whole repeats found inside the texture
+    /// square, by which the UVs were folded ([`crate::period::fold_uv_if_periodic`]).
+    pub repeats: Option<crate::period::UvRepeats>,
 }
 
 /// Diagnostics of one extraction, beyond the [`Material`].
@@ -712,12 +717,35 @@ pub fn extract(
                 }
             };
         // A rectified plane that repeats along both axes: every repeat
-        // folded into one tile.
-        let (coords, fold) = if mode == UvMode::Plane && opts.fold_period {
+        // folded into one tile. The networks' square that repeats a whole
+        // number of times along an axis: folded by its repeats, and the
+        // tile unfolded over the square after inpainting.
+        let (coords, fold, mut uv_fold) = if opts.fold_period {
             let probe = reproject::texture_size(coords.sizing_area(&full.data), observed_cap);
-            crate::period::fold_if_periodic(coords, &full.data, &delit, &confidence, probe)
+            match mode {
+                UvMode::Plane => {
+                    let (c, f) = crate::period::fold_if_periodic(
+                        coords,
+                        &full.data,
+                        &delit,
+                        &confidence,
+                        probe,
+                    );
+                    (c, f, None)
+                }
+                UvMode::Net => {
+                    let r = crate::period::fold_uv_if_periodic(
+                        &coords,
+                        &full.data,
+                        &delit,
+                        &confidence,
+                        probe,
+                    );
+                    (coords, None, r)
+                }
+            }
         } else {
-            (coords, None)
+            (coords, None, None)
         };
         diag.uv = Some(UvDecision {
             mode,
@@ -728,6 +756,7 @@ pub fn extract(
             focal_px: focal,
             lines,
             period: fold,
+            repeats: None,
         });
         lap("coordinates", &mut timings);
         // A folded tile sees each texel in every repeat, so the observed-
@@ -751,15 +780,49 @@ pub fn extract(
                 "no picked pixel landed in the texture square (texture coordinates unusable); try --uv plane or --uv net".into(),
             ));
         }
-        let final_tex = opts.inpainter.inpaint(
-            &r.texture,
-            &r.known,
-            &InpaintOptions {
-                toroidal: opts.tileable,
-                seed: opts.seed,
-                ..InpaintOptions::default()
-            },
-        )?;
+        let inpaint = |t: &Image, known: &[bool]| {
+            opts.inpainter.inpaint(
+                t,
+                known,
+                &InpaintOptions {
+                    toroidal: opts.tileable,
+                    seed: opts.seed,
+                    ..InpaintOptions::default()
+                },
+            )
+        };
+        let final_tex = match uv_fold.as_mut() {
+            // A square that repeats: a hole that another repeat showed is
+            // filled from the tile of every repeat seen; the observed texels
+            // are kept (they hold each repeat's own variation) and what no
+            // repeat showed is inpainted as usual.
+            Some((folded, rep)) => {
+                let side = size.div_ceil(rep.repeats[0].min(rep.repeats[1])).max(1);
+                let t = reproject::reproject(folded, &full.data, &delit, &confidence, side);
+                let seen = Image {
+                    channels: 1,
+                    height: side,
+                    width: side,
+                    data: t.known.iter().map(|&k| f32::from(u8::from(k))).collect(),
+                };
+                let over = crate::period::unfold(&t.texture, rep.repeats, size);
+                let over_seen = crate::period::unfold(&seen, rep.repeats, size);
+                let period = size as f32 / rep.repeats[0].max(rep.repeats[1]) as f32;
+                let (tex, known, filled) = crate::period::fill_from_repeats(
+                    &r.texture,
+                    &r.known,
+                    &over,
+                    &over_seen,
+                    (crate::period::REPEAT_FILL_MIN_DISTANCE * period).round() as usize,
+                );
+                rep.filled = filled as f64 / known.len().max(1) as f64;
+                inpaint(&tex, &known)?
+            }
+            None => inpaint(&r.texture, &r.known)?,
+        };
+        if let Some(d) = diag.uv.as_mut() {
+            d.repeats = uv_fold.as_ref().map(|f| f.1);
+        }
         // The observed texels at opposite edges need not match (imperfect
         // de-lighting, a rectified region that is not one period): on
         // request, remove the colour jumps across the wrap edges when they

@@ -282,7 +282,7 @@ impl Footprint {
         let h = (0.25 * (p - r) * (p - r) + q * q).sqrt();
         let (l1, l2) = (m + h, (m - h).max(0.0));
         let (s1, s2) = (l1.sqrt(), l2.sqrt());
-        if !(s1 > 1.0) {
+        if s1.is_nan() || s1 <= 1.0 {
             // A pixel finer than a texel on both axes: the texel's own
             // (axis-aligned, bilinear) tent, as for a merged pixel block.
             return Footprint::isotropic(1.0);
