@@ -134,10 +134,6 @@ impl PixelTiles {
             _ => tile::<4>,
         };
         let kc_block = PIXTILE_KC.max(1);
-        // The scatter's lane offsets (up to 15 planes) must fit an i32.
-        let scatter_ok = (oh * ow)
-            .checked_mul(16)
-            .is_some_and(|v| v <= i32::MAX as usize);
         (0..oh).into_par_iter().for_each_init(
             || (Vec::new(), vec![0.0f32; tiles_x * PX * CO]),
             |(windows, accs), oy| {
@@ -199,33 +195,31 @@ impl PixelTiles {
                         }
                         k0 += kc;
                     }
+                    let rows = CO.min(self.c_out - p * CO);
+                    if residual.is_none() && matches!(act, Activation::None | Activation::Relu) {
+                        // SAFETY: AVX-512F (as above); `accs` holds the sums
+                        // of `tiles_x · PX ≥ ow` pixels, and the `rows`
+                        // channels of the panel at (oy, 0..ow) are inside
+                        // `out` and belong to this task.
+                        unsafe {
+                            store_row(
+                                &accs[..tiles_x * PX * CO],
+                                ow,
+                                rows,
+                                bias.map(|b| &b[p * CO..p * CO + rows]),
+                                act == Activation::Relu,
+                                optr.0.add((p * CO * oh + oy) * ow),
+                                oh * ow,
+                            )
+                        };
+                        continue;
+                    }
                     for tx in 0..tiles_x {
                         let ox0 = tx * PX;
                         let acc: &[f32; PX * CO] = accs[tx * PX * CO..(tx + 1) * PX * CO]
                             .try_into()
                             .expect("tile sums");
                         let px = PX.min(ow - ox0);
-                        let rows = CO.min(self.c_out - p * CO);
-                        if scatter_ok
-                            && residual.is_none()
-                            && matches!(act, Activation::None | Activation::Relu)
-                        {
-                            // SAFETY: AVX-512F (as above); the `rows` channels of
-                            // the panel at (oy, ox0..ox0 + px) are inside `out`
-                            // and belong to this task.
-                            unsafe {
-                                store_tile(
-                                    acc,
-                                    px,
-                                    rows,
-                                    bias.map(|b| &b[p * CO..p * CO + rows]),
-                                    act == Activation::Relu,
-                                    optr.0.add((p * CO * oh + oy) * ow + ox0),
-                                    oh * ow,
-                                )
-                            };
-                            continue;
-                        }
                         for j in 0..rows {
                             let co = p * CO + j;
                             let b = bias.map_or(0.0, |b| b[co]);
@@ -266,9 +260,18 @@ fn fill_window(
     win_w: usize,
     dst: &mut [f32],
 ) {
-    let cols: Vec<Option<usize>> = (0..win_w)
-        .map(|c| padded_source(qx + c, pad, w, wp, fill))
-        .collect();
+    // The window's columns as runs: `(first column, its source column or
+    // zero, length)`, consecutive source columns in one run, so that a row
+    // is a few slice copies (the padding columns alone break a run).
+    let mut runs: Vec<(usize, Option<usize>, usize)> = Vec::with_capacity(4);
+    for c in 0..win_w {
+        let src = padded_source(qx + c, pad, w, wp, fill);
+        match runs.last_mut() {
+            Some((_, Some(s0), len)) if src == Some(*s0 + *len) => *len += 1,
+            Some((_, None, len)) if src.is_none() => *len += 1,
+            _ => runs.push((c, src, 1)),
+        }
+    }
     for ky in 0..kh {
         let sy = padded_source(qy + ky, pad, h, hp, fill);
         for ci in 0..c_in {
@@ -277,8 +280,12 @@ fn fill_window(
                 None => d.fill(0.0),
                 Some(y) => {
                     let row = &x[(ci * h + y) * w..][..w];
-                    for (v, c) in d.iter_mut().zip(&cols) {
-                        *v = c.map_or(0.0, |xx| row[xx]);
+                    for &(c0, src, len) in &runs {
+                        let d = &mut d[c0..c0 + len];
+                        match src {
+                            Some(s0) => d.copy_from_slice(&row[s0..s0 + len]),
+                            None => d.fill(0.0),
+                        }
                     }
                 }
             }
@@ -286,18 +293,21 @@ fn fill_window(
     }
 }
 
-/// Writes a tile's sums (`acc`, `PX × CO` pixel-major) to its `px` pixels of
-/// `rows` output channels: channel `j` of pixel `r` goes to
-/// `out[j·plane + r]`, plus `bias[j]`, through ReLU when `relu`.
+/// Writes a row's sums (`accs`: pixel `x` at `accs[x·CO..]`, its `CO`
+/// channels side by side; at least `ow` pixels) to the `ow` pixels of
+/// `rows` output channels: channel `j` of pixel `x` goes to
+/// `out[j·plane + x]`, plus `bias[j]`, through ReLU when `relu`. Blocks of
+/// 16 pixels × 16 channels are transposed in registers, so every channel's
+/// pixels are written as whole vectors.
 ///
 /// # Safety
-/// The CPU has AVX-512F; every `out[j·plane + r]` (`j < rows`, `r < px`) is
-/// writable and `j·plane` fits an `i32`.
+/// The CPU has AVX-512F; every `out[j·plane + x]` (`j < rows ≤ CO`,
+/// `x < ow`) is writable.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f")]
-unsafe fn store_tile(
-    acc: &[f32; PX * CO],
-    px: usize,
+unsafe fn store_row(
+    accs: &[f32],
+    ow: usize,
     rows: usize,
     bias: Option<&[f32]>,
     relu: bool,
@@ -305,31 +315,90 @@ unsafe fn store_tile(
     plane: usize,
 ) {
     use std::arch::x86_64::*;
-    let step = _mm512_set1_epi32(plane as i32);
-    let lane = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
-    for j in 0..rows.div_ceil(16) {
-        let n = (rows - 16 * j).min(16);
-        let mask: __mmask16 = if n == 16 { !0 } else { (1u16 << n) - 1 };
+    let px_avail = accs.len() / CO;
+    assert!(px_avail >= ow && rows <= CO, "store_row: sizes");
+    for jb in 0..rows.div_ceil(16) {
+        let n = (rows - 16 * jb).min(16);
+        let cmask: __mmask16 = if n == 16 { !0 } else { (1u16 << n) - 1 };
         let b = match bias {
-            Some(b) => _mm512_maskz_loadu_ps(mask, b.as_ptr().add(16 * j)),
+            Some(b) => _mm512_maskz_loadu_ps(cmask, b.as_ptr().add(16 * jb)),
             None => _mm512_setzero_ps(),
         };
-        let idx = _mm512_mullo_epi32(lane, step);
-        let base = out.add(16 * j * plane);
-        for r in 0..px {
-            let mut v = _mm512_add_ps(_mm512_loadu_ps(acc.as_ptr().add(r * CO + 16 * j)), b);
-            if relu {
-                v = _mm512_max_ps(v, _mm512_setzero_ps());
+        let mut x0 = 0;
+        while x0 < ow {
+            let m = (ow - x0).min(16);
+            let r: [__m512; 16] = std::array::from_fn(|i| {
+                if i < m {
+                    let mut v = _mm512_add_ps(
+                        _mm512_loadu_ps(accs.as_ptr().add((x0 + i) * CO + 16 * jb)),
+                        b,
+                    );
+                    if relu {
+                        v = _mm512_max_ps(v, _mm512_setzero_ps());
+                    }
+                    v
+                } else {
+                    _mm512_setzero_ps()
+                }
+            });
+            let t = transpose16(r);
+            let pmask: __mmask16 = if m == 16 { !0 } else { (1u16 << m) - 1 };
+            for (j, tj) in t.iter().enumerate().take(n) {
+                _mm512_mask_storeu_ps(out.add((16 * jb + j) * plane + x0), pmask, *tj);
             }
-            _mm512_mask_i32scatter_ps::<4>(base.add(r), mask, idx, v);
+            x0 += 16;
         }
     }
 }
 
+/// The transpose of a 16 × 16 block: lane `i` of result `j` is lane `j` of
+/// `r[i]` (unpacks within 128-bit lanes, then 128-bit lane shuffles).
+///
+/// # Safety
+/// The CPU has AVX-512F.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+unsafe fn transpose16(r: [std::arch::x86_64::__m512; 16]) -> [std::arch::x86_64::__m512; 16] {
+    use std::arch::x86_64::*;
+    // t[2k], t[2k + 1]: rows 2k and 2k + 1 interleaved, low and high pairs.
+    let t: [__m512; 16] = std::array::from_fn(|i| {
+        let (a, b) = (r[i & !1], r[i | 1]);
+        if i & 1 == 0 {
+            _mm512_unpacklo_ps(a, b)
+        } else {
+            _mm512_unpackhi_ps(a, b)
+        }
+    });
+    // u[4k + m], 128-bit lane L: column 4L + m of rows 4k … 4k + 3.
+    let pd = _mm512_castps_pd;
+    let u: [__m512; 16] = std::array::from_fn(|i| {
+        let (k, m) = (i / 4, i % 4);
+        let (a, b) = (pd(t[4 * k + m / 2]), pd(t[4 * k + 2 + m / 2]));
+        _mm512_castpd_ps(if m % 2 == 0 {
+            _mm512_unpacklo_pd(a, b)
+        } else {
+            _mm512_unpackhi_pd(a, b)
+        })
+    });
+    // Column 4L + m: lane L of u[m], u[4 + m], u[8 + m], u[12 + m].
+    let mut out = [_mm512_setzero_ps(); 16];
+    for m in 0..4 {
+        let v0 = _mm512_shuffle_f32x4::<0x44>(u[m], u[4 + m]);
+        let v1 = _mm512_shuffle_f32x4::<0xee>(u[m], u[4 + m]);
+        let v2 = _mm512_shuffle_f32x4::<0x44>(u[8 + m], u[12 + m]);
+        let v3 = _mm512_shuffle_f32x4::<0xee>(u[8 + m], u[12 + m]);
+        out[m] = _mm512_shuffle_f32x4::<0x88>(v0, v2);
+        out[4 + m] = _mm512_shuffle_f32x4::<0xdd>(v0, v2);
+        out[8 + m] = _mm512_shuffle_f32x4::<0x88>(v1, v3);
+        out[12 + m] = _mm512_shuffle_f32x4::<0xdd>(v1, v3);
+    }
+    out
+}
+
 /// Not x86-64: never called.
 #[cfg(not(target_arch = "x86_64"))]
-unsafe fn store_tile(
-    _: &[f32; PX * CO],
+unsafe fn store_row(
+    _: &[f32],
     _: usize,
     _: usize,
     _: Option<&[f32]>,
@@ -403,4 +472,56 @@ unsafe fn tile<const S: usize>(
     _: bool,
 ) {
     unreachable!("PixelTiles needs AVX-512")
+}
+
+#[cfg(all(test, target_arch = "x86_64"))]
+mod tests {
+    use super::*;
+
+    /// `store_row` against the plain loop it stands for, on every width of
+    /// the last block of pixels and channels, with and without bias and ReLU.
+    #[test]
+    fn store_row_matches_the_plain_loop() {
+        if !std::arch::is_x86_feature_detected!("avx512f") {
+            eprintln!("SKIPPED: store_row needs AVX-512F, which this CPU lacks");
+            return;
+        }
+        let mut rng = crate::Rng::new(17);
+        for &(ow, rows) in &[
+            (1usize, 1usize),
+            (6, 64),
+            (16, 16),
+            (17, 33),
+            (35, 64),
+            (40, 5),
+        ] {
+            let px = ow.div_ceil(PX) * PX;
+            let accs = rng.normal_vec(px * CO, 1.0);
+            let bias = rng.normal_vec(rows, 1.0);
+            for (b, relu) in [
+                (None, false),
+                (Some(&bias[..]), true),
+                (Some(&bias[..]), false),
+            ] {
+                let plane = ow + 3;
+                let mut out = vec![f32::NAN; rows * plane];
+                // SAFETY: AVX-512F is present; `out` holds `rows` planes of `ow`.
+                unsafe { store_row(&accs, ow, rows, b, relu, out.as_mut_ptr(), plane) };
+                for j in 0..rows {
+                    for x in 0..plane {
+                        let got = out[j * plane + x];
+                        if x >= ow {
+                            assert!(got.is_nan(), "wrote past the row: {ow} {rows} {j} {x}");
+                            continue;
+                        }
+                        let mut v = accs[x * CO + j] + b.map_or(0.0, |b| b[j]);
+                        if relu {
+                            v = v.max(0.0);
+                        }
+                        assert_eq!(got, v, "ow {ow} rows {rows} channel {j} pixel {x}");
+                    }
+                }
+            }
+        }
+    }
 }
