@@ -2,8 +2,8 @@
 //! networks' 7×7 → 3-channel output convs), vectorised along the output row.
 //!
 //! A GEMM would waste most of each `MR`-row tile on such layers. Here one task
-//! computes [`ROWS`] output rows: for each input channel it copies the
-//! `ROWS + kh − 1` input rows it needs into a small buffer, with the zero or
+//! computes a strip of [`STRIP_STEPS`] × [`ROWS`] output rows: for each input
+//! channel it copies the strip's `rows + kh − 1` input rows into a small buffer, with the zero or
 //! reflection padding filled in (so no padded copy of the whole input is
 //! made), and then every block of output columns keeps `ROWS × c_out`
 //! vector accumulators in registers while each input row is loaded once per
@@ -25,6 +25,10 @@ pub(crate) const MAX_CO: usize = 4;
 const ROWS: usize = 2;
 /// Output columns per block: four 16-lane vectors.
 const XB: usize = 64;
+/// Kernel steps ([`ROWS`] output rows each) per task: the task copies the
+/// padded input rows of its strip once for all of them (a task of one step
+/// copied each input row `(ROWS + kh − 1) / ROWS` times: 4× for a 7×7 layer).
+const STRIP_STEPS: usize = 4;
 
 /// Geometry of one direct convolution (stride 1): the input `[c_in, h, w]`,
 /// extended by `pad` on every side as `fill` says.
@@ -261,7 +265,9 @@ pub(crate) fn conv_direct(
     let (h, w, pad) = (p.h, p.w, p.pad);
     let (hp, wp) = (h + 2 * pad, w + 2 * pad);
     let aw = ow.next_multiple_of(XB);
-    let nrows = ROWS + kh - 1;
+    // A task's strip of output rows, in whole kernel steps of ROWS.
+    let strip = (STRIP_STEPS * ROWS).min(oh.next_multiple_of(ROWS));
+    let nrows = strip + kh - 1;
     // A padded row, plus the columns a full last block reads past it.
     let rs = (aw + kw - 1 + XB).max(wp);
     let kk = kh * kw;
@@ -271,11 +277,11 @@ pub(crate) fn conv_direct(
         .collect();
     let out_ptr = SharedPtr(out.as_mut_ptr());
     let out_ptr = &out_ptr;
-    let tasks = oh.div_ceil(ROWS);
+    let tasks = oh.div_ceil(strip);
     (0..tasks).into_par_iter().for_each_init(
-        || (vec![0.0f32; nrows * rs], vec![0.0f32; ROWS * c_out * aw]),
+        || (vec![0.0f32; nrows * rs], vec![0.0f32; strip * c_out * aw]),
         |(rows, acc), t| {
-            let oy0 = t * ROWS;
+            let oy0 = t * strip;
             acc.fill(0.0);
             for ci in 0..p.c_in {
                 let src = &p.x[ci * h * w..(ci + 1) * h * w];
@@ -292,19 +298,23 @@ pub(crate) fn conv_direct(
                         }
                     }
                 }
-                channel(
-                    isa,
-                    c_out,
-                    rows,
-                    rs,
-                    kh,
-                    kw,
-                    &wt[ci * kk * c_out..][..kk * c_out],
-                    acc,
-                    aw,
-                );
+                // Each kernel step: ROWS output rows from the strip's
+                // rows, copied once for all of them.
+                for q in 0..strip / ROWS {
+                    channel(
+                        isa,
+                        c_out,
+                        &rows[q * ROWS * rs..],
+                        rs,
+                        kh,
+                        kw,
+                        &wt[ci * kk * c_out..][..kk * c_out],
+                        &mut acc[q * ROWS * c_out * aw..][..ROWS * c_out * aw],
+                        aw,
+                    );
+                }
             }
-            for o in 0..ROWS.min(oh - oy0) {
+            for o in 0..strip.min(oh - oy0) {
                 let oy = oy0 + o;
                 for co in 0..c_out {
                     let i0 = co * plane + oy * ow;

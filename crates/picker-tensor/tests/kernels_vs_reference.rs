@@ -166,6 +166,7 @@ fn named_conv_problems() -> Vec<ConvProblem> {
         conv(1, 8, 70, 5, 2, 5, 1, 0),          // folded, two outputs, rows across panels
         tanh(conv(1, 7, 130, 9, 1, 7, 1, 3)),   // direct: one output, zero pad, 3 column blocks
         relu(conv(1, 1, 3, 2, 4, 3, 1, 1)),     // direct: one output row (half a row pair)
+        tanh(conv(1, 25, 40, 6, 3, 7, 1, 3)),   // direct: three whole strips and one row
         relu(conv(1, 19, 21, 3, 10, 7, 2, 3)),  // shifted via phase planes, 7x7 stride 2
         conv(1, 23, 17, 9, 11, 3, 3, 1),        // phase planes, stride 3
         res(conv(1, 14, 28, 16, 16, 3, 1, 0)),  // Winograd: 28 tiles, one narrow panel (2 zmm)
@@ -663,6 +664,7 @@ fn conv2d_reflect_forward() {
         (1, 30, 41, 32, 32, 3, 1, 1, true), // Winograd, several tile rows, odd width
         (1, 4, 9, 3, 9, 7, 1, 3, false),    // encoder input conv (shifted)
         (1, 9, 11, 6, 3, 7, 1, 3, false),   // decoder output conv (folded)
+        (1, 21, 30, 6, 3, 7, 1, 3, true),   // decoder output conv, strips of rows
         (1, 11, 13, 3, 8, 7, 2, 3, false),  // EnvMap input conv (phase planes)
         (1, 6, 5, 5, 7, 3, 1, 2, true),     // pad 2 with a 3x3 kernel
         (1, 6, 133, 8, 5, 3, 1, 1, true),   // Winograd, tile rows of 34 tiles
