@@ -398,6 +398,24 @@ fn interleave_finish_body<'a>(
         let (a, b) = (src(0), src(1));
         let pairs = dst.len() / 2;
         let (a, b) = (&a[..pairs + dst.len() % 2], &b[..pairs]);
+        // The bias and ReLU in the same pass (the same operations as
+        // `finish_run`, so the same values): the decoders' layers.
+        #[inline(always)]
+        fn fused(a: &[f32], b: &[f32], dst: &mut [f32], f: impl Fn(f32) -> f32) {
+            let pairs = dst.len() / 2;
+            for ((o, &x), &y) in dst.chunks_exact_mut(2).zip(a).zip(b) {
+                o[0] = f(x);
+                o[1] = f(y);
+            }
+            if dst.len() % 2 == 1 {
+                dst[2 * pairs] = f(a[pairs]);
+            }
+        }
+        match (act, res) {
+            (Activation::Relu, None) => return fused(a, b, dst, |v| (v + bias).max(0.0)),
+            (Activation::None, None) => return fused(a, b, dst, |v| v + bias),
+            _ => {}
+        }
         for (k, o) in dst.chunks_exact_mut(2).enumerate() {
             o[0] = a[k];
             o[1] = b[k];
