@@ -156,7 +156,7 @@ pub(crate) fn shifted_gemm(
                             let i0 = map.at(row0 + r, y, x);
                             let dst = std::slice::from_raw_parts_mut(out_ptr.0.add(i0), nr);
                             let res = epi.residual.map(|rs| &rs[i0..i0 + nr]);
-                            finish_run(dst, bias_of(epi, row0 + r), epi.act, res);
+                            finish_run_isa(a.kernel.isa, dst, bias_of(epi, row0 + r), epi.act, res);
                         }
                     } else {
                         // Runs of the panel that stay in one output row.
@@ -177,9 +177,8 @@ pub(crate) fn shifted_gemm(
                                             out_ptr.0.add(i0),
                                             valid,
                                         );
-                                        dst.copy_from_slice(src);
                                         let res = epi.residual.map(|rs| &rs[i0..i0 + valid]);
-                                        finish_run(dst, bias, epi.act, res);
+                                        copy_finish(a.kernel.isa, src, dst, bias, epi.act, res);
                                     } else {
                                         for (k, &v) in src.iter().enumerate() {
                                             let i = i0 + k * map.xs;
@@ -474,6 +473,50 @@ fn finish(v: f32, co: usize, i: usize, epi: &Epilogue<'_>) -> f32 {
 #[inline(always)]
 fn bias_of(epi: &Epilogue<'_>, co: usize) -> f32 {
     epi.bias.map_or(0.0, |b| b[co])
+}
+
+crate::isa::per_isa! {
+    /// [`finish_run`] compiled for `isa` (the epilogue of every panel).
+    fn finish_run_isa<'a>(
+        dst: &'a mut [f32],
+        bias: f32,
+        act: Activation,
+        res: Option<&'a [f32]>,
+    ) => finish_run
+}
+
+crate::isa::per_isa! {
+    /// [`copy_finish_body`] compiled for `isa`.
+    fn copy_finish<'a>(
+        src: &'a [f32],
+        dst: &'a mut [f32],
+        bias: f32,
+        act: Activation,
+        res: Option<&'a [f32]>,
+    ) => copy_finish_body
+}
+
+/// `dst = act(src + bias) [+ res]`, element-wise: a copy and
+/// [`finish_run`] in one pass (the same operations, the same values).
+#[inline(always)]
+fn copy_finish_body(src: &[f32], dst: &mut [f32], bias: f32, act: Activation, res: Option<&[f32]>) {
+    let src = &src[..dst.len()];
+    match (act, res) {
+        (Activation::Relu, None) => {
+            for (d, &v) in dst.iter_mut().zip(src) {
+                *d = (v + bias).max(0.0);
+            }
+        }
+        (Activation::None, None) => {
+            for (d, &v) in dst.iter_mut().zip(src) {
+                *d = v + bias;
+            }
+        }
+        _ => {
+            dst.copy_from_slice(src);
+            finish_run(dst, bias, act, res);
+        }
+    }
 }
 
 /// `dst = act(dst + bias) [+ res]`, element-wise.
