@@ -59,7 +59,8 @@ pub struct Args {
     /// Do not refine the plane mode's focal and normal with the photo's lines (`extract --no-lines`).
     #[arg(long)]
     pub no_lines: bool,
-    /// Do not fold a periodic plane-mode texture into one tile (`extract --no-fold`).
+    /// Do not use a texture's repeats: no plane-mode fold, no net-UV fill from other repeats
+    /// (`extract --no-fold`).
     #[arg(long)]
     pub no_fold: bool,
     /// Texture coordinates, as `extract --uv`: `plane` with the ground-truth elements measures the

@@ -80,8 +80,10 @@ pub struct Flags {
     /// directions of the photo's straight lines in the picked region.
     #[arg(long)]
     pub no_lines: bool,
-    /// Keep the whole rectified region for --uv plane: do not fold a texture that repeats along
-    /// both axes (tiles, bricks, a checker) into one tile of whole periods.
+    /// Do not use a texture's repeats: keep the whole rectified region for --uv plane (no fold of
+    /// a texture that repeats along both axes into one tile of whole periods), and do not fill the
+    /// holes of a net-UV texture square that repeats a whole number of times from its other
+    /// repeats (the inpainter fills them all).
     #[arg(long)]
     pub no_fold: bool,
     /// Texture side in texels (default: the observed texel density, capped by --max-size).
