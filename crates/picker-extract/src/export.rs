@@ -392,7 +392,7 @@ fn conventions() -> Value {
     );
     put(
         "texture.coverage_fraction",
-        "fraction of texels observed in the photo (coverage > 0)",
+        "fraction of texels observed in the photo (coverage > 0), counting those filled from another repeat of a texture square that repeats (diagnostics.uv.repeats.filled)",
     );
     put(
         "texture.seam",
@@ -408,7 +408,7 @@ fn conventions() -> Value {
     );
     put(
         "coverage_png",
-        "per-texel coverage/confidence in [0,1], grey, 0 = never observed",
+        "per-texel coverage/confidence in [0,1], grey, 0 = never observed; a texel filled from another repeat of a repeating texture square has that repeat's coverage",
     );
     put(
         "mask_png",

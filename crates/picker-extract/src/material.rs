@@ -44,11 +44,14 @@ impl MaterialParams {
 pub struct TextureResult {
     /// The final tileable diffuse texture, linear RGB, `size × size`.
     pub texture: Image,
-    /// The reprojected texture before inpainting (unknown texels 0), linear RGB.
+    /// The reprojected texture before inpainting (unknown texels 0), linear
+    /// RGB, with the texels filled from another repeat of a repeating
+    /// square ([`crate::period::fill_from_repeats`]).
     pub raw: Image,
-    /// Per-texel coverage/confidence in `[0, 1]` (1 channel): 0 = never observed.
+    /// Per-texel coverage/confidence in `[0, 1]` (1 channel): 0 = never
+    /// observed; a texel filled from another repeat has the repeats' tile's.
     pub coverage: Image,
-    /// Fraction of texels observed (coverage > 0).
+    /// Fraction of texels observed (coverage > 0), the repeat-filled ones included.
     pub coverage_fraction: f64,
     /// How the coordinates were obtained.
     pub uv_mode: UvMode,

@@ -791,7 +791,10 @@ pub fn extract(
                 },
             )
         };
-        let final_tex = match uv_fold.as_mut() {
+        // What the report and coverage.png show as observed: the
+        // reprojection, with the texels filled from other repeats (at the
+        // tile's coverage there) when the square repeats.
+        let (final_tex, raw, coverage, known_fraction) = match uv_fold.as_mut() {
             // A square that repeats: a hole that another repeat showed is
             // filled from the tile of every repeat seen; the observed texels
             // are kept (they hold each repeat's own variation) and what no
@@ -816,9 +819,23 @@ pub fn extract(
                     (crate::period::REPEAT_FILL_MIN_DISTANCE * period).round() as usize,
                 );
                 rep.filled = filled as f64 / known.len().max(1) as f64;
-                inpaint(&tex, &known)?
+                let mut coverage = r.coverage.clone();
+                let tile_coverage = crate::period::unfold(&t.coverage, rep.repeats, size);
+                for (i, (&k, &own)) in known.iter().zip(&r.known).enumerate() {
+                    if k && !own {
+                        coverage.data[i] = tile_coverage.data[i];
+                    }
+                }
+                let fraction =
+                    known.iter().filter(|&&k| k).count() as f64 / known.len().max(1) as f64;
+                (inpaint(&tex, &known)?, tex, coverage, fraction)
             }
-            None => inpaint(&r.texture, &r.known)?,
+            None => (
+                inpaint(&r.texture, &r.known)?,
+                r.texture,
+                r.coverage,
+                known_fraction,
+            ),
         };
         if let Some(d) = diag.uv.as_mut() {
             d.repeats = uv_fold.as_ref().map(|f| f.1);
@@ -849,8 +866,8 @@ pub fn extract(
             seam: seam_score(&final_tex),
             seam_corrected,
             texture: final_tex,
-            raw: r.texture,
-            coverage: r.coverage,
+            raw,
+            coverage,
             coverage_fraction: known_fraction,
             uv_mode: mode,
             inpainter: opts.inpainter.name().to_string(),
