@@ -412,6 +412,12 @@ pub fn fold_tile(px: AxisPeriod, py: AxisPeriod, size: usize) -> Fold {
 /// by `fold`'s tile: `u' = frac(u / tile_u)`, `v' = frac(v / tile_v)`,
 /// wrapping. Pixels without coordinates keep none.
 pub fn fold_coords(coords: &Coords, fold: &Fold) -> Coords {
+    wrap_by_tile(coords, fold.tile)
+}
+
+/// `coords` wrapped by a tile of sides `tile` (fractions of the square):
+/// `u' = frac(u / tile_u)`, `v' = frac(v / tile_v)`, wrapping; NaN stays NaN.
+fn wrap_by_tile(coords: &Coords, tile: [f32; 2]) -> Coords {
     let f = |t: f32, side: f32| {
         let x = t / side;
         x - x.floor()
@@ -419,8 +425,8 @@ pub fn fold_coords(coords: &Coords, fold: &Fold) -> Coords {
     Coords {
         width: coords.width,
         height: coords.height,
-        u: coords.u.iter().map(|&u| f(u, fold.tile[0])).collect(),
-        v: coords.v.iter().map(|&v| f(v, fold.tile[1])).collect(),
+        u: coords.u.iter().map(|&u| f(u, tile[0])).collect(),
+        v: coords.v.iter().map(|&v| f(v, tile[1])).collect(),
         wrap: true,
     }
 }
@@ -566,19 +572,7 @@ pub fn fold_uv_if_periodic(
         double: [px, py].map(|p| p.and_then(|p| p.double)),
         filled: 0.0,
     };
-    let tile = rep.tile();
-    let f = |t: f32, side: f32| {
-        let x = t / side;
-        x - x.floor()
-    };
-    let folded = Coords {
-        width: coords.width,
-        height: coords.height,
-        u: coords.u.iter().map(|&u| f(u, tile[0])).collect(),
-        v: coords.v.iter().map(|&v| f(v, tile[1])).collect(),
-        wrap: true,
-    };
-    Some((folded, rep))
+    Some((wrap_by_tile(coords, rep.tile()), rep))
 }
 
 /// The texture square of side `side` made of `repeats[0] × repeats[1]`
@@ -704,6 +698,22 @@ mod tests {
             }
         }
         t
+    }
+
+    /// The coordinates of a frontal `w × h` photo of the square: pixel
+    /// centre `(x, y)` at `((x + ½)/w, (y + ½)/h)`.
+    fn frontal(w: usize, h: usize, wrap: bool) -> Coords {
+        Coords {
+            width: w,
+            height: h,
+            u: (0..w * h)
+                .map(|i| ((i % w) as f32 + 0.5) / w as f32)
+                .collect(),
+            v: (0..w * h)
+                .map(|i| ((i / w) as f32 + 0.5) / h as f32)
+                .collect(),
+            wrap,
+        }
     }
 
     /// A grid of tiles `px × py` with grout lines `g` wide, and brightness
@@ -887,17 +897,7 @@ mod tests {
         // same place.
         let (w, h) = (160usize, 160usize);
         let img = texture(w, h, tiles(20.0, 16.0, 2.0));
-        let coords = Coords {
-            width: w,
-            height: h,
-            u: (0..w * h)
-                .map(|i| ((i % w) as f32 + 0.5) / w as f32)
-                .collect(),
-            v: (0..w * h)
-                .map(|i| ((i / w) as f32 + 0.5) / h as f32)
-                .collect(),
-            wrap: false,
-        };
+        let coords = frontal(w, h, false);
         let (mask, conf) = (vec![true; w * h], vec![1.0; w * h]);
         let (folded, fold) = fold_if_periodic(coords, &mask, &img, &conf, 160);
         let fold = fold.expect("a fold");
@@ -1093,17 +1093,7 @@ mod tests {
         // the seen ones match the truth.
         let (w, h) = (120usize, 120usize);
         let truth = texture(w, h, tiles(30.0, 40.0, 3.0));
-        let coords = Coords {
-            width: w,
-            height: h,
-            u: (0..w * h)
-                .map(|i| ((i % w) as f32 + 0.5) / w as f32)
-                .collect(),
-            v: (0..w * h)
-                .map(|i| ((i / w) as f32 + 0.5) / h as f32)
-                .collect(),
-            wrap: true,
-        };
+        let coords = frontal(w, h, true);
         let mask: Vec<bool> = (0..w * h).map(|i| i % w < 48 && i / w < 66).collect();
         let conf = vec![1.0; w * h];
         let (folded, rep) =
