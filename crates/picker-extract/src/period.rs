@@ -640,6 +640,69 @@ pub fn fill_from_repeats(
     (out, k, filled)
 }
 
+/// A reprojected square completed from its repeats
+/// ([`complete_from_repeats`]).
+#[derive(Clone, Debug)]
+pub struct Completed {
+    /// The texture, with the filled texels (linear RGB; 0 where still unknown).
+    pub texture: Image,
+    /// Known texels: observed, or filled from another repeat.
+    pub known: Vec<bool>,
+    /// Per-texel coverage: the square's own, or the repeats' tile's where filled.
+    pub coverage: Image,
+    /// How many texels were filled.
+    pub filled: usize,
+}
+
+/// The square `own` (reprojected through the unfolded UVs, side `n`)
+/// completed from its repeats: the picked pixels (`mask`, de-lit `colour`,
+/// `confidence`) reprojected through the UVs `folded` by `rep`
+/// ([`fold_uv_if_periodic`]) into one tile of side `n` over the fewest
+/// repeats, laid over the square ([`unfold`]), and its holes at least
+/// [`REPEAT_FILL_MIN_DISTANCE`] of the shorter period from every observed
+/// texel filled from it ([`fill_from_repeats`]).
+pub fn complete_from_repeats(
+    own: &crate::reproject::Reprojected,
+    folded: &Coords,
+    rep: &UvRepeats,
+    mask: &[bool],
+    colour: &Image,
+    confidence: &[f32],
+) -> Completed {
+    let size = own.texture.width;
+    let side = size.div_ceil(rep.repeats[0].min(rep.repeats[1])).max(1);
+    let t = crate::reproject::reproject(folded, mask, colour, confidence, side);
+    let seen = Image {
+        channels: 1,
+        height: side,
+        width: side,
+        data: t.known.iter().map(|&k| f32::from(u8::from(k))).collect(),
+    };
+    let over = unfold(&t.texture, rep.repeats, size);
+    let over_seen = unfold(&seen, rep.repeats, size);
+    let period = size as f32 / rep.repeats[0].max(rep.repeats[1]) as f32;
+    let (texture, known, filled) = fill_from_repeats(
+        &own.texture,
+        &own.known,
+        &over,
+        &over_seen,
+        (REPEAT_FILL_MIN_DISTANCE * period).round() as usize,
+    );
+    let mut coverage = own.coverage.clone();
+    let tile_coverage = unfold(&t.coverage, rep.repeats, size);
+    for (i, (&k, &was)) in known.iter().zip(&own.known).enumerate() {
+        if k && !was {
+            coverage.data[i] = tile_coverage.data[i];
+        }
+    }
+    Completed {
+        texture,
+        known,
+        coverage,
+        filled,
+    }
+}
+
 /// Per texel of a `w × h` grid that wraps around: whether its chessboard
 /// distance to the nearest `set` texel is at least `d` (all `true` when no
 /// texel is set; `d = 0`: every texel).
@@ -1106,19 +1169,17 @@ mod tests {
         );
         let size = 120;
         let own = crate::reproject::reproject(&coords, &mask, &truth, &conf, size);
-        let side = size.div_ceil(3);
-        let t = crate::reproject::reproject(&folded, &mask, &truth, &conf, side);
-        let seen = Image {
-            channels: 1,
-            height: side,
-            width: side,
-            data: t.known.iter().map(|&k| f32::from(u8::from(k))).collect(),
-        };
-        let over = unfold(&t.texture, rep.repeats, size);
-        let over_seen = unfold(&seen, rep.repeats, size);
-        let (out, known, filled) =
-            fill_from_repeats(&own.texture, &own.known, &over, &over_seen, 15);
+        let c = complete_from_repeats(&own, &folded, &rep, &mask, &truth, &conf);
+        let (out, known, filled) = (&c.texture, &c.known, c.filled);
         assert!(filled > size * size / 3, "{filled}");
+        // Filled texels take the tile's coverage; observed ones keep theirs.
+        for (i, (&k, &o)) in known.iter().zip(&own.known).enumerate() {
+            if o {
+                assert_eq!(c.coverage.data[i], own.coverage.data[i]);
+            } else if k {
+                assert!(c.coverage.data[i] > 0.0);
+            }
+        }
         // The filled texels hold the grid: small error against the truth
         // (its tiles differ a little in brightness, the grout does not move).
         let (mut se, mut n) = (0.0f64, 0usize);

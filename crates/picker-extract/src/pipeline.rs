@@ -718,8 +718,8 @@ pub fn extract(
             };
         // A rectified plane that repeats along both axes: every repeat
         // folded into one tile. The networks' square that repeats a whole
-        // number of times along an axis: folded by its repeats, and the
-        // tile unfolded over the square after inpainting.
+        // number of times along an axis: folded by its repeats, so that the
+        // holes another repeat showed are filled from it before inpainting.
         let (coords, fold, mut uv_fold) = if opts.fold_period {
             let probe = reproject::texture_size(coords.sizing_area(&full.data), observed_cap);
             match mode {
@@ -800,35 +800,23 @@ pub fn extract(
             // are kept (they hold each repeat's own variation) and what no
             // repeat showed is inpainted as usual.
             Some((folded, rep)) => {
-                let side = size.div_ceil(rep.repeats[0].min(rep.repeats[1])).max(1);
-                let t = reproject::reproject(folded, &full.data, &delit, &confidence, side);
-                let seen = Image {
-                    channels: 1,
-                    height: side,
-                    width: side,
-                    data: t.known.iter().map(|&k| f32::from(u8::from(k))).collect(),
-                };
-                let over = crate::period::unfold(&t.texture, rep.repeats, size);
-                let over_seen = crate::period::unfold(&seen, rep.repeats, size);
-                let period = size as f32 / rep.repeats[0].max(rep.repeats[1]) as f32;
-                let (tex, known, filled) = crate::period::fill_from_repeats(
-                    &r.texture,
-                    &r.known,
-                    &over,
-                    &over_seen,
-                    (crate::period::REPEAT_FILL_MIN_DISTANCE * period).round() as usize,
+                let c = crate::period::complete_from_repeats(
+                    &r,
+                    folded,
+                    rep,
+                    &full.data,
+                    &delit,
+                    &confidence,
                 );
-                rep.filled = filled as f64 / known.len().max(1) as f64;
-                let mut coverage = r.coverage.clone();
-                let tile_coverage = crate::period::unfold(&t.coverage, rep.repeats, size);
-                for (i, (&k, &own)) in known.iter().zip(&r.known).enumerate() {
-                    if k && !own {
-                        coverage.data[i] = tile_coverage.data[i];
-                    }
-                }
+                rep.filled = c.filled as f64 / c.known.len().max(1) as f64;
                 let fraction =
-                    known.iter().filter(|&&k| k).count() as f64 / known.len().max(1) as f64;
-                (inpaint(&tex, &known)?, tex, coverage, fraction)
+                    c.known.iter().filter(|&&k| k).count() as f64 / c.known.len().max(1) as f64;
+                (
+                    inpaint(&c.texture, &c.known)?,
+                    c.texture,
+                    c.coverage,
+                    fraction,
+                )
             }
             None => (
                 inpaint(&r.texture, &r.known)?,
