@@ -720,8 +720,11 @@ pub fn extract(
         // folded into one tile. The networks' square that repeats a whole
         // number of times along an axis: folded by its repeats, so that the
         // holes another repeat showed are filled from it before inpainting.
+        // The observed density, measured once: the coordinates keep it
+        // unless the plane mode folds them.
+        let sizing_area = coords.sizing_area(&full.data);
         let (coords, fold, mut uv_fold) = if opts.fold_period {
-            let probe = reproject::texture_size(coords.sizing_area(&full.data), observed_cap);
+            let probe = reproject::texture_size(sizing_area, observed_cap);
             match mode {
                 UvMode::Plane => {
                     let (c, f) = crate::period::fold_if_periodic(
@@ -768,9 +771,14 @@ pub fn extract(
         } else {
             observed_cap
         };
-        let size = opts
-            .size
-            .unwrap_or_else(|| reproject::texture_size(coords.sizing_area(&full.data), cap));
+        let size = opts.size.unwrap_or_else(|| {
+            let area = if fold.is_some() {
+                coords.sizing_area(&full.data)
+            } else {
+                sizing_area
+            };
+            reproject::texture_size(area, cap)
+        });
         diag.texture_size = Some(size);
         let r = reproject::reproject(&coords, &full.data, &delit, &confidence, size);
         lap("reproject", &mut timings);
