@@ -81,6 +81,10 @@ pub struct Row {
     textured_truth: bool,
     textured_extracted: bool,
     iou: f64,
+    /// Share of the extracted mask inside the true mask (1: no leak).
+    mask_precision: f64,
+    /// Share of the true mask the extracted mask covers (1: nothing missed).
+    mask_recall: f64,
     /// IoU of the flood-fill baseline, one per [`FLOOD_TOLERANCES`] entry.
     flood_iou: Vec<f64>,
     albedo_rmse: f64,
@@ -94,9 +98,10 @@ pub struct Row {
     coverage: Option<f64>,
     uv_mode: Option<String>,
     colour_rmse: Option<f64>,
-    /// Plane mode: the angle (degrees) between the true plane normal (the
-    /// per-component median of the true normals over the true mask) and the
-    /// plane the predicted normals give.
+    /// Plane mode: the angle (degrees) between the true plane normal at the
+    /// pick ([`picker_extract::plane::coplanar_part`] of the true normals and
+    /// mask, else the per-component median of the true normals over the true
+    /// mask) and the plane the predicted normals give.
     plane_predicted_error_deg: Option<f64>,
     /// Plane mode: the same for the normal used (refined by the lines).
     plane_error_deg: Option<f64>,
@@ -129,6 +134,18 @@ fn scene_dirs(dir: &Path) -> Result<Vec<PathBuf>> {
         );
     }
     Ok(v)
+}
+
+/// The share of `a`'s pixels that are also in `b` (1 for an empty `a`):
+/// with `a` the extracted mask and `b` the truth, the mask's precision;
+/// swapped, its recall.
+fn share_inside(a: &[bool], b: &[bool]) -> f64 {
+    let n = a.iter().filter(|&&x| x).count();
+    if n == 0 {
+        return 1.0;
+    }
+    let both = a.iter().zip(b).filter(|&(&x, &y)| x && y).count();
+    both as f64 / n as f64
 }
 
 /// Chamfer (3-4) distance of every pixel of `mask` to the nearest pixel outside it (image border counts as outside).
@@ -324,6 +341,8 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
             textured_truth,
             textured_extracted: mat.textured,
             iou: metrics::mask_iou(&got.data, &true_mask),
+            mask_precision: share_inside(&got.data, &true_mask),
+            mask_recall: share_inside(&true_mask, &got.data),
             flood_iou: FLOOD_TOLERANCES
                 .iter()
                 .map(|&t| metrics::mask_iou(&flood_fill(&photo.data, w, h, pick, t), &true_mask))
@@ -354,7 +373,21 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
             repeat_filled: diag.uv.as_ref().and_then(|u| u.repeats).map(|r| r.filled),
         };
         if let Some(uv) = diag.uv.as_ref().filter(|u| u.mode == UvMode::Plane) {
-            let truth_n = picker_extract::plane::plane_normal(&truth.normals, &true_mask);
+            // The true plane at the pick (the same rule as the extraction's:
+            // a material of several planes is rectified from the one picked),
+            // else the whole material's.
+            let anchor = (pick[0] as usize, pick[1] as usize);
+            let truth_n = picker_extract::plane::coplanar_part(
+                &truth.normals,
+                &true_mask,
+                w,
+                h,
+                anchor,
+                picker_extract::pipeline::AUTO_MAX_PLANE_SPREAD_DEG,
+            )
+            .map(|p| p.normal)
+            .filter(|&n| picker_extract::plane::faces_camera(n, anchor, w, h))
+            .or_else(|| picker_extract::plane::plane_normal(&truth.normals, &true_mask));
             let angle = |a: glam::Vec3, b: glam::Vec3| {
                 f64::from(
                     a.normalize()
@@ -364,7 +397,10 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
                         .to_degrees(),
                 )
             };
-            let predicted = picker_extract::plane::plane_normal(&el.normals, &got.data);
+            let predicted = uv
+                .plane_normal
+                .map(glam::Vec3::from)
+                .or_else(|| picker_extract::plane::plane_normal(&el.normals, &got.data));
             let used = uv
                 .lines
                 .as_ref()
@@ -487,6 +523,8 @@ pub fn run(a: Args) -> Result<()> {
         "textured": tex.len(),
         "mean_iou": mean(rows.iter().map(|r| r.iou)),
         "min_iou": min(rows.iter().map(|r| r.iou)),
+        "mean_mask_precision": mean(rows.iter().map(|r| r.mask_precision)),
+        "mean_mask_recall": mean(rows.iter().map(|r| r.mask_recall)),
         "fraction_iou_at_least_0_8": mean(rows.iter().map(|r| f64::from(u8::from(r.iou >= 0.8)))),
         "flood_fill_mean_iou": FLOOD_TOLERANCES.iter().enumerate().map(|(k, t)| json!({
             "tolerance": (f64::from(*t) * 1e4).round() / 1e4,

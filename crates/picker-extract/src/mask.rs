@@ -5,14 +5,23 @@
 //! reference, and the pick colour is the per-channel median of the pixels of
 //! a 5×5 window within [`PICK_NEIGHBOUR_DISTANCE`] of that reference (so a
 //! noisy pixel, or a pick next to an edge, does not decide the colour). The
-//! spread of those pixels around the pick colour (1.4826·MAD) sets the
-//! tolerance: `τ = clamp(τ_min + 3σ, τ_min, τ_max)` unless given. A pixel
-//! belongs to the material when it has a surface and its segmentation colour
-//! is within `τ` (Euclidean, RGB in `[0, 1]`) of the pick colour. Without
-//! `connected`, every region of that colour counts (a floor split by a table
-//! is one material) and specks smaller than [`MIN_SPECK_FRACTION`] of the
-//! image are dropped; with `connected`, only the 8-connected region at the
-//! pick (or nearest to it) is kept.
+//! spread σ of those pixels around the pick colour (1.4826·MAD) sets the
+//! pick's own tolerance `τ₀ = clamp(τ_min + 3σ, τ_min, τ_max)`. Unless a
+//! tolerance is given, the mask then follows the segmentation as it is
+//! ([`auto_tolerance`]): `τ` rises to the first valley of the histogram of
+//! colour distances to the pick colour (a soft segmentation spreads one
+//! material's colours wider than σ says: shading leaks into an undertrained
+//! network's output) and falls to the first empty band of distances (two
+//! clean, close colours stay apart). A pixel belongs to the material when it
+//! has a surface and its segmentation colour is within `τ` (Euclidean, RGB
+//! in `[0, 1]`) of the pick colour, and, where `τ` grew beyond `τ₀`, its
+//! region holds a pixel within [`CORE_SHARE`]`·τ₀` ([`hysteresis`]: a
+//! separate object of a merely similar colour stays out). Without
+//! `connected`, every such region counts (a floor split by a table is one
+//! material) and specks smaller than [`MIN_SPECK_FRACTION`] of the image are
+//! dropped; with `connected`, only the 8-connected region at the pick (or
+//! nearest to it) is kept. The pixels within `τ₀` are the mask's surest part
+//! ([`PickMask::sure`]), which the texture is taken from.
 
 use picker_render::io::Image;
 
@@ -108,6 +117,12 @@ pub struct PickMask {
     pub colour: [f32; 3],
     /// The tolerance used.
     pub tolerance: f32,
+    /// The pixels of the mask within the pick's own colour spread `τ₀`
+    /// ([`auto_tolerance`]): where the valley grew the mask, its surest
+    /// part, from which the texture is taken (a pixel of another material
+    /// that the growth took in would land in the texture). The whole mask
+    /// when it did not grow or the tolerance was given.
+    pub sure: Vec<bool>,
 }
 
 fn median(v: &mut [f32]) -> f32 {
@@ -173,28 +188,127 @@ pub fn pick_colour(seg: &Image, valid: &[bool], x: usize, y: usize) -> Option<([
     Some((pick, sigma))
 }
 
-/// The automatic tolerance: `τ = clamp(τ_min + 3σ, τ_min, τ_max)`, lowered
-/// to the middle of the first empty band of colour distances beyond the
-/// pick's own spread (at least [`GAP_MIN`] wide), so two materials whose
-/// segmentation colours are close but distinct (as in clean segmentations)
-/// stay apart.
-fn gap_tolerance(seg: &Image, valid: &[bool], c: [f32; 3], sigma: f32) -> f32 {
-    let tau = (TOLERANCE_MIN + 3.0 * sigma).clamp(TOLERANCE_MIN, TOLERANCE_MAX);
-    let mut d: Vec<f32> = (0..seg.plane_len())
-        .filter(|&i| valid[i])
-        .map(|i| dist(colour(seg, i), c))
-        .filter(|&x| x <= tau)
-        .collect();
-    d.sort_by(|a, b| a.total_cmp(b));
+/// The automatic tolerance, from the pick colour `c`, its spread `sigma` and
+/// `d`, the colour distances of the valid pixels to `c`:
+///
+/// 1. `τ₀ = clamp(τ_min + 3σ, τ_min, τ_max)`, the pick's own spread;
+/// 2. raised to the first valley of the distances' histogram beyond the
+///    mode the pick's material makes near 0 ([`valley_tolerance`]): a soft
+///    segmentation (an undertrained or blurry network, shading that leaks
+///    into it) spreads one material's colours wider than the spread around
+///    the pick, and this follows them up to the dip before the next material;
+/// 3. lowered to the middle of the first empty band of distances beyond the
+///    pick's own spread (at least [`GAP_MIN`] wide), so two materials whose
+///    segmentation colours are close but distinct (as in clean
+///    segmentations) stay apart.
+///
+/// Returns `(τ₀, τ)`.
+fn auto_tolerance(d: &[f32], sigma: f32) -> (f32, f32) {
+    let tau0 = (TOLERANCE_MIN + 3.0 * sigma).clamp(TOLERANCE_MIN, TOLERANCE_MAX);
+    let tau = valley_tolerance(d, tau0);
+    let mut within: Vec<f32> = d.iter().copied().filter(|&x| x <= tau).collect();
+    within.sort_by(|a, b| a.total_cmp(b));
     let own = 3.0 * sigma;
     let gap = GAP_MIN.max(sigma);
-    for p in d.windows(2) {
+    for p in within.windows(2) {
         if p[0] >= own && p[1] - p[0] >= gap {
-            return (p[0] + p[1]) / 2.0;
+            return (tau0, (p[0] + p[1]) / 2.0);
         }
     }
-    tau
+    (tau0, tau)
 }
+
+/// Distances (RGB in `[0, 1]`) the valley search looks at: `[0, VALLEY_RANGE)`.
+pub const VALLEY_RANGE: f32 = 0.5;
+/// Histogram bins over [`VALLEY_RANGE`].
+pub const VALLEY_BINS: usize = 100;
+/// A valley is a bin whose (smoothed) count is below `VALLEY_DEPTH` times
+/// the pick's mode, followed by a bin that rises above it by `1/VALLEY_DEPTH`.
+///
+/// With the embedded `lite` networks (`picker eval --embedded`, 40 scenes per
+/// set) the valley raised the mean pick-mask IoU from 0.535 / 0.569 / 0.609
+/// to 0.676 / 0.627 / 0.691 on seeds 4242 / 9191 / 5151 (0.5: 0.636 / 0.596 /
+/// 0.632; 0.3: 0.618 / 0.561 / 0.633). Clean segmentations are unchanged:
+/// their histogram is empty between materials.
+pub const VALLEY_DEPTH: f32 = 0.7;
+
+/// The first valley of the histogram of the distances `d` beyond the mode
+/// the pick's material makes at `[0, τ₀]`, or `τ₀` when there is none (or
+/// when it lies below `τ₀`). The histogram has [`VALLEY_BINS`] bins over
+/// [`VALLEY_RANGE`], smoothed by a Gaussian of one bin; from the mode, the
+/// search walks outwards keeping the lowest bin seen, and stops at the
+/// first bin that rises above that lowest by `1/`[`VALLEY_DEPTH`] while the
+/// lowest is below [`VALLEY_DEPTH`] times the mode (or at the end of the
+/// range, when the lowest is that deep). The tolerance is the centre of
+/// that lowest bin.
+pub fn valley_tolerance(d: &[f32], tau0: f32) -> f32 {
+    const BIN: f32 = VALLEY_RANGE / VALLEY_BINS as f32;
+    let mut raw = [0f64; VALLEY_BINS];
+    for &x in d {
+        if (0.0..VALLEY_RANGE).contains(&x) {
+            raw[((x / BIN) as usize).min(VALLEY_BINS - 1)] += 1.0;
+        }
+    }
+    // Gaussian, σ = 1 bin, radius 3, renormalised at the ends.
+    let kernel: [f64; 7] = std::array::from_fn(|i| (-((i as f64 - 3.0).powi(2)) / 2.0).exp());
+    let h: Vec<f64> = (0..VALLEY_BINS)
+        .map(|k| {
+            let (mut s, mut n) = (0.0, 0.0);
+            for (j, w) in kernel.iter().enumerate() {
+                if let Some(b) = (k + j).checked_sub(3).filter(|&b| b < VALLEY_BINS) {
+                    s += w * raw[b];
+                    n += w;
+                }
+            }
+            s / n
+        })
+        .collect();
+    let last_mode_bin = ((tau0.max(0.0) / BIN) as usize).min(VALLEY_BINS - 1);
+    let mode = (0..=last_mode_bin).fold(0, |m, k| if h[k] > h[m] { k } else { m });
+    let depth = f64::from(VALLEY_DEPTH);
+    let mut lowest = mode;
+    for k in mode + 1..VALLEY_BINS {
+        if h[k] < h[lowest] {
+            lowest = k;
+        }
+        if h[k] * depth > h[lowest] && h[lowest] < depth * h[mode] {
+            return tau0.max((lowest as f32 + 0.5) * BIN);
+        }
+    }
+    // No rise before the end of the range: the other materials are all
+    // further away, and the lowest bin (the first empty one after a
+    // material that ends) is the valley if it is deep enough.
+    if h[lowest] < depth * h[mode] {
+        tau0.max((lowest as f32 + 0.5) * BIN)
+    } else {
+        tau0
+    }
+}
+
+/// A mask grown from a strict one: the 8-connected regions of `candidate`
+/// that contain at least one pixel of `core` (hysteresis thresholding, as
+/// Canny's edges). Pixels of `core` outside `candidate` are dropped.
+pub fn hysteresis(core: &[bool], candidate: &Mask) -> Mask {
+    let (label, sizes) = components(candidate);
+    let mut keep = vec![false; sizes.len()];
+    for (i, &l) in label.iter().enumerate() {
+        if l != 0 && core[i] {
+            keep[l as usize] = true;
+        }
+    }
+    Mask {
+        width: candidate.width,
+        height: candidate.height,
+        data: label.iter().map(|&l| l != 0 && keep[l as usize]).collect(),
+    }
+}
+
+/// Share of the pick's own tolerance `τ₀` below which a pixel is certain:
+/// a region grown by the valley is kept only when it holds such a pixel
+/// ([`hysteresis`]), so a separate object of a merely similar colour is not
+/// taken. With the embedded networks it added 0.004 / 0.010 / 0.018 to the
+/// mean IoU of seeds 4242 / 9191 / 5151.
+pub const CORE_SHARE: f32 = 0.5;
 
 /// Narrowest empty band of colour distances that separates two materials.
 pub const GAP_MIN: f32 = 0.004;
@@ -261,18 +375,32 @@ pub fn pick_mask(
             "no surface at the pick ({x}, {y}): the pixel and its neighbours show no material (sky or window)"
         ))
     })?;
-    let tolerance = match opts.tolerance {
-        Some(t) => t,
-        None => gap_tolerance(seg, valid, c, sigma),
-    };
-    let data: Vec<bool> = (0..w * h)
-        .map(|i| valid[i] && dist(colour(seg, i), c) <= tolerance)
+    let d: Vec<f32> = (0..w * h)
+        .map(|i| {
+            if valid[i] {
+                dist(colour(seg, i), c)
+            } else {
+                f32::INFINITY
+            }
+        })
         .collect();
+    let (core, sure_below, tolerance) = match opts.tolerance {
+        Some(t) => (t, t, t),
+        None => {
+            let finite: Vec<f32> = d.iter().copied().filter(|x| x.is_finite()).collect();
+            let (tau0, tau) = auto_tolerance(&finite, sigma);
+            (tau.min(CORE_SHARE * tau0), tau.min(tau0), tau)
+        }
+    };
     let mut mask = Mask {
         width: w,
         height: h,
-        data,
+        data: d.iter().map(|&x| x <= tolerance).collect(),
     };
+    if core < tolerance {
+        let strict: Vec<bool> = d.iter().map(|&x| x <= core).collect();
+        mask = hysteresis(&strict, &mask);
+    }
     let (label, sizes) = components(&mask);
     // The component at the pick, or the one nearest to it.
     let at = {
@@ -293,10 +421,22 @@ pub fn pick_mask(
         let l = label[i];
         *m = l != 0 && (l == at || (!opts.connected && sizes[l as usize] >= min_size));
     }
+    let mut sure: Vec<bool> = mask
+        .data
+        .iter()
+        .zip(&d)
+        .map(|(&m, &x)| m && x <= sure_below)
+        .collect();
+    // A pick whose own pixels all lie beyond τ₀ (a noisy pick colour):
+    // the whole mask.
+    if !sure.iter().any(|&b| b) {
+        sure.clone_from(&mask.data);
+    }
     Ok(PickMask {
         mask,
         colour: c,
         tolerance,
+        sure,
     })
 }
 
@@ -517,5 +657,126 @@ mod tests {
         assert!(e.to_string().contains("no surface"), "{e}");
         let e = pick_mask(&seg, &[true; 25], 5, 0, &MaskOptions::default()).unwrap_err();
         assert!(e.to_string().contains("outside"), "{e}");
+    }
+
+    /// Distances of a soft segmentation: the material spreads over
+    /// `[0, spread)`, the others sit around `other`.
+    fn soft_distances(
+        rng: &mut picker_tensor::Rng,
+        n_own: usize,
+        spread: f32,
+        other: f32,
+    ) -> Vec<f32> {
+        let mut d: Vec<f32> = (0..n_own).map(|_| rng.uniform(0.0, spread)).collect();
+        d.extend((0..3 * n_own).map(|_| other + rng.uniform(-0.03, 0.03)));
+        d
+    }
+
+    #[test]
+    fn valley_follows_a_soft_material_up_to_the_next_one() {
+        let mut rng = picker_tensor::Rng::new(21);
+        for (spread, other) in [(0.08f32, 0.3f32), (0.15, 0.3), (0.05, 0.12), (0.2, 0.45)] {
+            let d = soft_distances(&mut rng, 4000, spread, other);
+            let t = valley_tolerance(&d, 0.03);
+            assert!(
+                t > spread - 0.01 && t < other - 0.03,
+                "spread {spread} other {other}: τ {t}"
+            );
+            // The pick's own tolerance is a floor.
+            assert!(valley_tolerance(&d, 0.5) >= 0.5);
+        }
+    }
+
+    #[test]
+    fn valley_keeps_the_pick_tolerance_without_a_valley() {
+        let mut rng = picker_tensor::Rng::new(22);
+        // Uniform over the whole range: no dip.
+        let d: Vec<f32> = (0..20000).map(|_| rng.uniform(0.0, 0.6)).collect();
+        let t = valley_tolerance(&d, 0.05);
+        assert!(t <= 0.08, "τ {t}");
+        // Empty, one value, all beyond the range, NaN.
+        assert_eq!(valley_tolerance(&[], 0.04), 0.04);
+        assert_eq!(valley_tolerance(&[0.0], 0.04), 0.04);
+        assert_eq!(valley_tolerance(&[0.7, 0.9, f32::NAN], 0.04), 0.04);
+    }
+
+    #[test]
+    fn clean_segmentations_keep_close_colours_apart() {
+        // Two flat materials 0.01 apart: the valley sees an empty band
+        // beyond the spike at 0, and the gap rule lowers τ below 0.01.
+        let mut d = vec![0.0f32; 3000];
+        d.extend(vec![0.01f32; 3000]);
+        d.extend(vec![0.3f32; 3000]);
+        let (tau0, tau) = auto_tolerance(&d, 0.0);
+        assert_eq!(tau0, TOLERANCE_MIN);
+        assert!(tau > 0.0 && tau < 0.01, "τ {tau}");
+    }
+
+    #[test]
+    fn hysteresis_keeps_regions_with_a_sure_pixel() {
+        // Three blobs in a 12-wide row; only the first and last hold core pixels.
+        let w = 12;
+        let cand: Vec<bool> = (0..w).map(|x| x != 3 && x != 7).collect();
+        let mut core = vec![false; w];
+        core[1] = true;
+        core[10] = true;
+        let m = hysteresis(
+            &core,
+            &Mask {
+                width: w,
+                height: 1,
+                data: cand,
+            },
+        );
+        let want: Vec<bool> = (0..w).map(|x| !(3..=7).contains(&x)).collect();
+        assert_eq!(m.data, want);
+    }
+
+    #[test]
+    fn a_shaded_soft_material_is_taken_whole_and_a_similar_object_is_not() {
+        // 200×20: the picked material's segmentation colour drifts with
+        // shading from 0.30 to 0.42 across its 120 columns; the other 80
+        // columns are another material at 0.75, except a 4×4 object of
+        // colour 0.36 (the material's range, but a separate object, not
+        // touching it).
+        let (w, h) = (200, 20);
+        let mut seg = Image::zeros(3, h, w);
+        let mut truth = vec![false; w * h];
+        for y in 0..h {
+            for x in 0..w {
+                let i = y * w + x;
+                let v = if x < 120 {
+                    truth[i] = true;
+                    0.30 + 0.12 * x as f32 / 119.0
+                } else if (150..154).contains(&x) && (8..12).contains(&y) {
+                    0.36
+                } else {
+                    0.75
+                };
+                for c in 0..3 {
+                    seg.data[c * w * h + i] = v;
+                }
+            }
+        }
+        let valid = vec![true; w * h];
+        let m = pick_mask(&seg, &valid, 2, 10, &MaskOptions::default()).unwrap();
+        assert_eq!(m.mask.data, truth, "τ {}", m.tolerance);
+        // With a fixed tolerance, exactly that tolerance: less of the
+        // drift, and no hysteresis (the object is in).
+        let fixed = pick_mask(
+            &seg,
+            &valid,
+            2,
+            10,
+            &MaskOptions {
+                connected: false,
+                tolerance: Some(0.12),
+            },
+        )
+        .unwrap();
+        assert_eq!(fixed.tolerance, 0.12);
+        let object = 10 * w + 151;
+        assert!(fixed.mask.data[object]);
+        assert!(!fixed.mask.data[10 * w + 119]);
     }
 }

@@ -109,6 +109,138 @@ pub fn normal_spread_deg(normals: &Image, mask: &[bool], n: Vec3) -> f32 {
     median(&mut ang).unwrap_or(180.0)
 }
 
+/// The part of a material that lies on one plane with the pixel `anchor`
+/// (see [`coplanar_part`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct PlanePart {
+    /// Pixels of the part (the mask's grid, row-major).
+    pub mask: Vec<bool>,
+    /// The part's plane normal ([`plane_normal`] over it).
+    pub normal: Vec3,
+    /// Its [`normal_spread_deg`].
+    pub spread_deg: f32,
+    /// Its share of the mask's pixels.
+    pub share: f64,
+}
+
+/// Smallest share of a material's pixels that [`coplanar_part`] accepts as
+/// its plane (below it the texture would come from a sliver).
+pub const PART_MIN_SHARE: f64 = 0.05;
+/// Fewest pixels [`coplanar_part`] accepts.
+pub const PART_MIN_PIXELS: usize = 16;
+
+/// The pixels of `mask` (`w × h`) on the plane at `anchor`: a material that
+/// is not one plane (a room's walls meeting at corners, a box's faces, a
+/// mask that took in a neighbour) is rectified from the plane the user
+/// picked, and pixels of another plane do not land at wrong places in its
+/// texture. The plane's normal is the [`plane_normal`] of the masked pixels
+/// in a window around `anchor` (radius 3% of the larger side, at least 2
+/// pixels, doubled until it holds 9 masked pixels); the part is the
+/// 8-connected region of masked pixels whose normal is within `max_dev_deg`
+/// of it that holds `anchor` (or, when `anchor`'s own normal is off, the
+/// region nearest to it). Only the connected region: a table top and the
+/// floor are parallel but not one plane (rectified together, their pixels
+/// would be two clusters of the texture plane, which [`plane_coords`]
+/// frames as one). `None` when the normals
+/// are unusable, the part is smaller than [`PART_MIN_SHARE`] of the mask or
+/// [`PART_MIN_PIXELS`], or its own spread exceeds `max_dev_deg`.
+///
+/// # Panics
+/// If `mask` does not hold `w·h` values or `normals` is not `3 × h × w`.
+pub fn coplanar_part(
+    normals: &Image,
+    mask: &[bool],
+    w: usize,
+    h: usize,
+    anchor: (usize, usize),
+    max_dev_deg: f32,
+) -> Option<PlanePart> {
+    assert_eq!(mask.len(), w * h, "mask size");
+    assert!(
+        normals.channels == 3 && normals.width == w && normals.height == h,
+        "normals size"
+    );
+    let total = mask.iter().filter(|&&m| m).count();
+    if total == 0 {
+        return None;
+    }
+    let (ax, ay) = (anchor.0.min(w - 1), anchor.1.min(h - 1));
+    let mut r = ((0.03 * w.max(h) as f64).round() as usize).max(2);
+    let reference = loop {
+        let mut win = vec![false; w * h];
+        let mut n = 0;
+        for y in ay.saturating_sub(r)..(ay + r + 1).min(h) {
+            for x in ax.saturating_sub(r)..(ax + r + 1).min(w) {
+                if mask[y * w + x] {
+                    win[y * w + x] = true;
+                    n += 1;
+                }
+            }
+        }
+        if n >= 9 || n == total || r >= w.max(h) {
+            break plane_normal(normals, &win)?;
+        }
+        r *= 2;
+    };
+    let cos_max = max_dev_deg.to_radians().cos();
+    let on_plane = crate::mask::Mask {
+        width: w,
+        height: h,
+        data: (0..w * h)
+            .map(|i| {
+                let n = normals.rgb(i);
+                mask[i] && n.length() > 1e-6 && n.normalize().dot(reference) >= cos_max
+            })
+            .collect(),
+    };
+    let (label, _) = crate::mask::components(&on_plane);
+    let mut at = (u64::MAX, 0u32);
+    for (i, &l) in label.iter().enumerate() {
+        if l != 0 {
+            let (x, y) = ((i % w) as i64, (i / w) as i64);
+            let d = ((x - ax as i64).pow(2) + (y - ay as i64).pow(2)) as u64;
+            if d < at.0 {
+                at = (d, l);
+            }
+        }
+    }
+    if at.1 == 0 {
+        return None;
+    }
+    let part: Vec<bool> = label.iter().map(|&l| l == at.1).collect();
+    let count = part.iter().filter(|&&b| b).count();
+    let share = count as f64 / total as f64;
+    if count < PART_MIN_PIXELS || share < PART_MIN_SHARE {
+        return None;
+    }
+    let normal = plane_normal(normals, &part)?;
+    let spread_deg = normal_spread_deg(normals, &part, normal);
+    (spread_deg <= max_dev_deg).then_some(PlanePart {
+        mask: part,
+        normal,
+        spread_deg,
+        share,
+    })
+}
+
+/// Whether the plane of normal `n` shows its front at pixel `(x, y)` of a
+/// `w × h` image for every focal length of a plausible room photo
+/// ([`crate::lines::FOCAL_FOV_RANGE`]): [`plane_coords`] gives a pixel whose ray meets
+/// the plane's back no coordinates, so a plane that faces away at the pick
+/// (a noisy predicted normal) would rectify nothing.
+pub fn faces_camera(n: Vec3, (x, y): (usize, usize), w: usize, h: usize) -> bool {
+    let (lo, hi) = crate::lines::FOCAL_FOV_RANGE;
+    [lo, hi].iter().all(|&fov| {
+        let f = focal_from_fov(h, fov);
+        let d = Vec3::new(
+            (x as f32 + 0.5 - w as f32 / 2.0) / f,
+            -(y as f32 + 0.5 - h as f32 / 2.0) / f,
+            -1.0,
+        );
+        n.dot(d) < -1e-4
+    })
+}
+
 /// A direction `along` turns the texture axes only when it is within this
 /// many degrees of the plane (the plane's own lines are; a direction far
 /// out of it says nothing about the plane's axes).
@@ -468,5 +600,99 @@ mod tests {
         assert!(col.windows(2).all(|p| p[1] > p[0]));
         let steps: Vec<f32> = col.windows(2).map(|p| p[1] - p[0]).collect();
         assert!(steps[0] > steps[steps.len() - 1] * 1.5, "{steps:?}");
+    }
+
+    /// `w × h` normals: left of column `split` `a`, from it on `b`, with
+    /// a little noise.
+    fn two_planes(w: usize, h: usize, split: usize, a: Vec3, b: Vec3, seed: u64) -> Image {
+        let mut rng = picker_tensor::Rng::new(seed);
+        let mut img = Image::zeros(3, h, w);
+        for y in 0..h {
+            for x in 0..w {
+                let n = if x < split { a } else { b };
+                let n = (n + Vec3::new(
+                    rng.uniform(-0.05, 0.05),
+                    rng.uniform(-0.05, 0.05),
+                    rng.uniform(-0.05, 0.05),
+                ))
+                .normalize();
+                img.set_rgb(y * w + x, n);
+            }
+        }
+        img
+    }
+
+    #[test]
+    fn coplanar_part_takes_the_picked_wall() {
+        let (w, h) = (60, 40);
+        let a = Vec3::new(0.7, 0.0, 0.7).normalize();
+        let b = Vec3::new(-0.7, 0.1, 0.7).normalize();
+        let normals = two_planes(w, h, 24, a, b, 3);
+        let mask = vec![true; w * h];
+        for (anchor, left) in [
+            ((5, 20), true),
+            ((23, 0), true),
+            ((40, 39), false),
+            ((24, 5), false),
+        ] {
+            let p = coplanar_part(&normals, &mask, w, h, anchor, 20.0).expect("a part");
+            let want: Vec<bool> = (0..w * h).map(|i| (i % w < 24) == left).collect();
+            assert_eq!(p.mask, want, "anchor {anchor:?}");
+            let truth = if left { a } else { b };
+            assert!(p.normal.dot(truth) > 0.999, "{:?} vs {truth:?}", p.normal);
+            assert!(p.spread_deg < 5.0);
+            let share = if left { 24.0 / 60.0 } else { 36.0 / 60.0 };
+            assert!((p.share - share).abs() < 1e-9);
+        }
+    }
+
+    #[test]
+    fn coplanar_part_follows_the_mask_and_refuses_slivers() {
+        let (w, h) = (60, 40);
+        let a = Vec3::new(0.0, 1.0, 0.2).normalize();
+        let b = Vec3::Z;
+        // A floor (a) with a table top (a, parallel but another plane)
+        // that does not touch it, and a two-column strip of wall (b) at the
+        // right edge.
+        let mut normals = two_planes(w, h, 58, a, b, 4);
+        let table = |i: usize| (30..50).contains(&(i % w)) && (10..16).contains(&(i / w));
+        let gap = |i: usize| (28..52).contains(&(i % w)) && (8..18).contains(&(i / w)) && !table(i);
+        for i in (0..w * h).filter(|&i| gap(i)) {
+            normals.set_rgb(i, Vec3::X);
+        }
+        let floor = |i: usize| i % w < 58 && !gap(i) && !table(i);
+        // The mask leaves out the top rows; the anchor outside the mask
+        // reads the normals of the masked pixels around it.
+        let mask: Vec<bool> = (0..w * h).map(|i| i / w >= 4).collect();
+        let p = coplanar_part(&normals, &mask, w, h, (10, 2), 20.0).unwrap();
+        let want: Vec<bool> = (0..w * h).map(|i| i / w >= 4 && floor(i)).collect();
+        assert_eq!(p.mask, want, "the floor, not the table top");
+        let p = coplanar_part(&normals, &mask, w, h, (40, 12), 20.0).unwrap();
+        let want: Vec<bool> = (0..w * h).map(table).collect();
+        assert_eq!(p.mask, want, "the table top, not the floor");
+        // The wall is under 5% of the mask (2 of 60 columns): no part.
+        assert!(coplanar_part(&normals, &mask, w, h, (59, 20), 20.0).is_none());
+        // An anchor beyond the grid is clamped to it (the same sliver).
+        assert!(coplanar_part(&normals, &mask, w, h, (500, 500), 20.0).is_none());
+        // Nothing masked, or no usable normals: none.
+        assert!(coplanar_part(&normals, &vec![false; w * h], w, h, (5, 5), 20.0).is_none());
+        let zero = Image::zeros(3, h, w);
+        assert!(coplanar_part(&zero, &mask, w, h, (5, 20), 20.0).is_none());
+    }
+
+    #[test]
+    fn faces_camera_cases() {
+        let (w, h) = (320, 240);
+        // A wall facing the camera, at the centre and at a corner.
+        assert!(faces_camera(Vec3::Z, (160, 120), w, h));
+        assert!(faces_camera(Vec3::Z, (0, 0), w, h));
+        // Its back.
+        assert!(!faces_camera(-Vec3::Z, (160, 120), w, h));
+        // A floor (normal up) seen below the horizon, and above it (its back).
+        assert!(faces_camera(Vec3::Y, (160, 230), w, h));
+        assert!(!faces_camera(Vec3::Y, (160, 10), w, h));
+        // A side wall facing right, seen on the left of the image only.
+        assert!(faces_camera(Vec3::X, (10, 120), w, h));
+        assert!(!faces_camera(Vec3::X, (300, 120), w, h));
     }
 }
