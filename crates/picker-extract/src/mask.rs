@@ -188,8 +188,9 @@ pub fn pick_colour(seg: &Image, valid: &[bool], x: usize, y: usize) -> Option<([
     Some((pick, sigma))
 }
 
-/// The automatic tolerance, from the pick colour `c`, its spread `sigma` and
-/// `d`, the colour distances of the valid pixels to `c`:
+/// The automatic tolerance, from `d`, the colour distances of the valid
+/// pixels to the pick colour (NaN and values beyond [`VALLEY_RANGE`] are
+/// ignored by the valley), and `sigma`, the spread of the pick's own pixels:
 ///
 /// 1. `τ₀ = clamp(τ_min + 3σ, τ_min, τ_max)`, the pick's own spread;
 /// 2. raised to the first valley of the distances' histogram beyond the
@@ -203,7 +204,7 @@ pub fn pick_colour(seg: &Image, valid: &[bool], x: usize, y: usize) -> Option<([
 ///    segmentations) stay apart.
 ///
 /// Returns `(τ₀, τ)`.
-fn auto_tolerance(d: &[f32], sigma: f32) -> (f32, f32) {
+pub fn auto_tolerance(d: &[f32], sigma: f32) -> (f32, f32) {
     let tau0 = (TOLERANCE_MIN + 3.0 * sigma).clamp(TOLERANCE_MIN, TOLERANCE_MAX);
     let tau = valley_tolerance(d, tau0);
     let mut within: Vec<f32> = d.iter().copied().filter(|&x| x <= tau).collect();
