@@ -350,6 +350,23 @@ pub fn components(mask: &Mask) -> (Vec<u32>, Vec<usize>) {
     (label, sizes)
 }
 
+/// The label (of [`components`], on a grid `w` wide) of the labelled pixel
+/// nearest to `(x, y)` (Euclidean; ties: the first in row order), or 0 when
+/// no pixel is labelled.
+pub fn nearest_label(label: &[u32], w: usize, (x, y): (usize, usize)) -> u32 {
+    let mut best = (u64::MAX, 0u32);
+    for (i, &l) in label.iter().enumerate() {
+        if l != 0 {
+            let (xx, yy) = ((i % w) as i64, (i / w) as i64);
+            let d = ((xx - x as i64).pow(2) + (yy - y as i64).pow(2)) as u64;
+            if d < best.0 {
+                best = (d, l);
+            }
+        }
+    }
+    best.1
+}
+
 /// The mask of the material at pixel `(x, y)` of the segmentation image.
 pub fn pick_mask(
     seg: &Image,
@@ -404,19 +421,7 @@ pub fn pick_mask(
     }
     let (label, sizes) = components(&mask);
     // The component at the pick, or the one nearest to it.
-    let at = {
-        let mut best = (u64::MAX, 0u32);
-        for (i, &l) in label.iter().enumerate() {
-            if l != 0 {
-                let (xx, yy) = ((i % w) as i64, (i / w) as i64);
-                let d = ((xx - x as i64).pow(2) + (yy - y as i64).pow(2)) as u64;
-                if d < best.0 {
-                    best = (d, l);
-                }
-            }
-        }
-        best.1
-    };
+    let at = nearest_label(&label, w, (x, y));
     let min_size = ((MIN_SPECK_FRACTION * (w * h) as f64).ceil() as usize).max(1);
     for (i, m) in mask.data.iter_mut().enumerate() {
         let l = label[i];

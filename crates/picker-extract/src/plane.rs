@@ -194,20 +194,11 @@ pub fn coplanar_part(
             .collect(),
     };
     let (label, _) = crate::mask::components(&on_plane);
-    let mut at = (u64::MAX, 0u32);
-    for (i, &l) in label.iter().enumerate() {
-        if l != 0 {
-            let (x, y) = ((i % w) as i64, (i / w) as i64);
-            let d = ((x - ax as i64).pow(2) + (y - ay as i64).pow(2)) as u64;
-            if d < at.0 {
-                at = (d, l);
-            }
-        }
-    }
-    if at.1 == 0 {
+    let at = crate::mask::nearest_label(&label, w, (ax, ay));
+    if at == 0 {
         return None;
     }
-    let part: Vec<bool> = label.iter().map(|&l| l == at.1).collect();
+    let part: Vec<bool> = label.iter().map(|&l| l == at).collect();
     let count = part.iter().filter(|&&b| b).count();
     let share = count as f64 / total as f64;
     if count < PART_MIN_PIXELS || share < PART_MIN_SHARE {
