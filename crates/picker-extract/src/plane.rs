@@ -281,7 +281,12 @@ pub fn plane_basis(n: Vec3, along: Option<Vec3>) -> (Vec3, Vec3) {
 /// The rectified plane coordinates of the picked pixels of a `w×h` photo
 /// (focal `focal` in photo pixels), mapped into the texture square; pixels
 /// whose ray misses the plane's front get `NaN`. The texture's axes follow
-/// `along` when given ([`plane_basis`]).
+/// `along` when given ([`plane_basis`]). The square's side is the geometric
+/// mean of the sides of the pixels' 2–98% box, and it is centred on that box,
+/// or on the median pixel when it would hold none of them (separate
+/// clusters, the box's centre empty: the extraction would have no texel).
+/// Recentring whenever it held under 10% of them cost two materials of the
+/// evaluation sets 9–12 dB, so it is only the last resort.
 pub fn plane_coords(
     w: usize,
     h: usize,
@@ -342,7 +347,27 @@ pub fn plane_coords(
         };
     };
     let side = ((s1 - s0).max(1e-9) * (t1 - t0).max(1e-9)).sqrt();
-    let (sc, tc) = ((s0 + s1) / 2.0 - side / 2.0, (t0 + t1) / 2.0 - side / 2.0);
+    let (mut sc, mut tc) = ((s0 + s1) / 2.0 - side / 2.0, (t0 + t1) / 2.0 - side / 2.0);
+    // Separate clusters (two parallel surfaces taken as one) can leave the
+    // box's centre empty: then the square is centred on the median pixel.
+    let inside = |v: f32, c: f32| (0.0..1.0).contains(&((v - c) / side));
+    let framed: usize = s
+        .par_chunks(step)
+        .zip(t.par_chunks(step))
+        .map(|(rs, rt)| {
+            rs.iter()
+                .zip(rt)
+                .filter(|&(&a, &b)| a.is_finite() && inside(a, sc) && inside(b, tc))
+                .count()
+        })
+        .sum();
+    if framed == 0 {
+        if let (Some((sm, _)), Some((tm, _))) =
+            rayon::join(|| pct2(&s, 0.5, 0.5), || pct2(&t, 0.5, 0.5))
+        {
+            (sc, tc) = (sm - side / 2.0, tm - side / 2.0);
+        }
+    }
     // The plane coordinates become the texture coordinates in place (NaN
     // where a pixel has none or falls outside the square).
     s.par_chunks_mut(step)
@@ -418,7 +443,16 @@ pub fn plane_coords_reference(
         return coords;
     };
     let side = ((s1 - s0).max(1e-9) * (t1 - t0).max(1e-9)).sqrt();
-    let (sc, tc) = ((s0 + s1) / 2.0 - side / 2.0, (t0 + t1) / 2.0 - side / 2.0);
+    let (mut sc, mut tc) = ((s0 + s1) / 2.0 - side / 2.0, (t0 + t1) / 2.0 - side / 2.0);
+    let inside = |v: f32, c: f32| (0.0..1.0).contains(&((v - c) / side));
+    let framed = (0..w * h)
+        .filter(|&i| s[i].is_finite() && inside(s[i], sc) && inside(t[i], tc))
+        .count();
+    if framed == 0 {
+        if let (Some(sm), Some(tm)) = (pct(&s, 0.5), pct(&t, 0.5)) {
+            (sc, tc) = (sm - side / 2.0, tm - side / 2.0);
+        }
+    }
     for i in 0..w * h {
         if s[i].is_finite() {
             let (u, v) = ((s[i] - sc) / side, (t[i] - tc) / side);
@@ -685,5 +719,28 @@ mod tests {
         // A side wall facing right, seen on the left of the image only.
         assert!(faces_camera(Vec3::X, (10, 120), w, h));
         assert!(!faces_camera(Vec3::X, (300, 120), w, h));
+    }
+
+    #[test]
+    fn two_far_clusters_are_framed_at_the_median() {
+        // A floor seen in two patches at the same depth, far apart left
+        // and right (the middle masked out): the box is wide and shallow,
+        // its centre falls in the gap and the square (the geometric mean of
+        // its sides) is narrower than the gap; it must still hold pixels.
+        let (w, h) = (80, 60);
+        let mask: Vec<bool> = (0..w * h)
+            .map(|i| {
+                let (x, y) = (i % w, i / w);
+                (50..56).contains(&y) && (x < 12 || x >= 68)
+            })
+            .collect();
+        let n = Vec3::new(0.0, 1.0, 0.05).normalize();
+        let a = plane_coords(w, h, &mask, n, 60.0, None);
+        let b = plane_coords_reference(w, h, &mask, n, 60.0, None);
+        let landed = a.u.iter().filter(|u| u.is_finite()).count();
+        assert!(landed > 0, "nothing framed");
+        let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&a.u), bits(&b.u));
+        assert_eq!(bits(&a.v), bits(&b.v));
     }
 }
