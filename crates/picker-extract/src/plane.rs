@@ -731,7 +731,7 @@ mod tests {
         let mask: Vec<bool> = (0..w * h)
             .map(|i| {
                 let (x, y) = (i % w, i / w);
-                (50..56).contains(&y) && (x < 12 || x >= 68)
+                (50..56).contains(&y) && !(12..68).contains(&x)
             })
             .collect();
         let n = Vec3::new(0.0, 1.0, 0.05).normalize();
