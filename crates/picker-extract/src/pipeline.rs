@@ -420,9 +420,9 @@ pub struct UvDecision {
     /// The networks' UV mode: the whole repeats found inside the texture
     /// square, by which the UVs were folded ([`crate::period::fold_uv_if_periodic`]).
     pub repeats: Option<crate::period::UvRepeats>,
-    /// When the material is not one plane and its UVs are not used: the
-    /// share of its pixels on the plane at the pick, which the texture was
-    /// rectified from ([`plane::coplanar_part`]).
+    /// When a plane was considered and the part of the material on the
+    /// plane at the pick was taken instead of the whole: that part's share
+    /// of the (sure) mask ([`plane::coplanar_part`], [`PLANAR_PART_MIN_SHARE`]).
     pub plane_part_share: Option<f64>,
     /// Plane mode: the plane's normal from the predicted normals (camera
     /// space), before any refinement by the photo's lines.
@@ -652,11 +652,7 @@ pub fn extract(
                     wrap: true,
                 }
             });
-        // Never more than ~4 texels per observed pixel: beyond that the texture is mostly invented.
-        let whole_cap = opts
-            .max_size
-            .min((2.0 * (full.count() as f64).sqrt()) as usize)
-            .max(16);
+        let whole_cap = observed_cap(opts.max_size, full.count());
         // Collapsed UVs are not used whatever their consistency: skip measuring it.
         let net_r2 = match (&net_coords, opts.uv) {
             (Some(c), UvChoice::Auto) if !collapsed => {
@@ -705,11 +701,7 @@ pub fn extract(
             }
             None => (mw, full, normal, spread, planar),
         };
-        // Never more than ~4 texels per observed pixel: beyond that the texture is mostly invented.
-        let observed_cap = opts
-            .max_size
-            .min((2.0 * (full.count() as f64).sqrt()) as usize)
-            .max(16);
+        let observed_cap = observed_cap(opts.max_size, full.count());
         let plane_coords = |diag_focal: &mut Option<f32>,
                             diag_lines: &mut Option<crate::lines::LineRefinement>|
          -> Option<Coords> {
@@ -1064,7 +1056,15 @@ fn preview_pixel(
     Some(shader.shade(n, Vec3::Z, phong))
 }
 
-/// The plain, sequential [`preview_sphere`].
+/// The cap of the automatic texture side for `observed` picked photo pixels:
+/// never more than ~4 texels per observed pixel (beyond that the texture is
+/// mostly invented), nor `max_size`, nor under 16.
+fn observed_cap(max_size: usize, observed: usize) -> usize {
+    max_size
+        .min((2.0 * (observed as f64).sqrt()) as usize)
+        .max(16)
+}
+
 /// The masked pixel nearest to the mask's median row and column (`mask` on
 /// a grid `w` wide, not empty): where a material without a pick is anchored.
 fn central_pixel(mask: &[bool], w: usize) -> (usize, usize) {
@@ -1112,6 +1112,7 @@ fn restrict_to_work(full: &Mask, part: &[bool], w: usize, h: usize) -> Mask {
     }
 }
 
+/// The plain, sequential [`preview_sphere`].
 #[cfg(test)]
 fn preview_sphere_reference(m: &Material, env: &EnvMap, size: usize, repeats: f32) -> Image {
     let shader = Shader::new(env, Quality::Fast);
