@@ -184,6 +184,43 @@ def test_other_nets(tmp):
     return paths
 
 
+def test_init(tmp, msn_path):
+    """--init starts from a file's tensors (step 0 = the file's outputs), records the history, refuses a mismatch."""
+    out = os.path.join(tmp, "msn-ft")
+    args = ["--net", "msn", "--preset", "tiny", "--data", FIXTURES, "--size", "24x32", "--batch", "2",
+            "--threads", "1", "--log-every", "1", "--quiet", "--no-flip"]
+    # Zero steps of fine-tuning is impossible (a run takes at least one), so compare the first logged loss
+    # with the same batch's loss of the starting file: equal to float precision, unlike a random start.
+    path = train.main([*args, "--steps", "2", "--init", msn_path, "--out", out])
+    _, start, _ = evaluate.load_weights(msn_path)
+    first = _losses(out)[0]
+    fresh = os.path.join(tmp, "msn-fresh")
+    train.main([*args, "--steps", "1", "--out", fresh])
+    ds = sd.SynthDataset(sd.list_scenes([FIXTURES]), "msn", 0, lambda k: (24, 32), flip=False)
+    b = torch.utils.data.default_collate([ds[0], ds[1]])
+    start.train()
+    with torch.no_grad():
+        expect = float(train.losses("msn", start, b, ["segmentation"], {})[0])
+    assert abs(first - expect) < 1e-4 * max(1.0, expect), (first, expect)
+    assert abs(_losses(fresh)[0] - expect) > 1e-3, "a random start gave the starting file's loss"
+    _, _, meta = evaluate.load_weights(path)
+    init = json.loads(meta["training.init"])
+    assert init["steps"] == 4 and init["data_seeds"] == [2026] and len(init["sha256"]) == 64, init
+    assert meta["training.steps"] == "6", meta["training.steps"]
+    # Another net's file, or the same net with another config: refused before training.
+    try:
+        train.main([*args, "--steps", "1", "--init", msn_path, "--out", os.path.join(tmp, "bad"), "--net", "envmap"])
+        raise AssertionError("an msn file started an envmap run")
+    except SystemExit as e:
+        assert "holds 'msn' weights" in str(e), e
+    try:
+        train.main([*args, "--steps", "1", "--init", msn_path, "--out", os.path.join(tmp, "bad2"),
+                    "--preset", "lite"])
+        raise AssertionError("a tiny file started a lite run")
+    except SystemExit as e:
+        assert "differs from the run's" in str(e), e
+
+
 def picker_bin():
     cands = [os.environ.get("PICKER_BIN", "")] + [os.path.join(ROOT, p, "release", "picker")
                                                   for p in ("target", "../target-main")]
@@ -251,6 +288,7 @@ def main():
         step("mixed scene sizes", test_mixed_scene_sizes)
         irn = step("4-step run lowers the loss; resume and workers are bit-identical", test_training_and_resume, tmp)
         others = step("msn and envmap runs lower the loss", test_other_nets, tmp)
+        step("--init fine-tunes from a weights file", test_init, tmp, others["msn"])
         step("export loads and runs in picker", test_export_loads_in_rust, tmp, irn, others)
         step("evaluate", test_evaluate, tmp, irn, others)
     print(f"all passed in {time.perf_counter() - t_all:.1f} s")

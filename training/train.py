@@ -13,6 +13,9 @@ Usage (from the repository root; ``-m`` so that ``training`` is a package)::
         --size 120x160 --steps 200 --batch 4
     python -m training.train --resume --out runs/msn [--steps 400]       # continue (bit-identical on CPU)
     python -m training.train --export-only --out runs/msn                # (re)write runs/msn/msn.safetensors
+    python -m training.train --net msn --preset lite --init crates/picker-weights/weights/msn.safetensors \
+        --data DATA/train --val DATA/val --out runs/msn-ft --config training/recipes/lite-cpu-msn-ft.json
+                                                                         # fine-tune a weights file (fresh Adam)
 
 Run folder: ``config.json`` (the effective training config), ``train.csv`` / ``val.csv`` (logs),
 ``samples/step_NNNNNNN.png`` (input | target | prediction per element for a few fixed scenes),
@@ -24,6 +27,7 @@ import argparse
 import copy
 import csv
 import datetime
+import hashlib
 import json
 import os
 import random
@@ -62,6 +66,8 @@ DEFAULTS = {
     "cache": False,
     "amp": False,              # bf16 autocast on CUDA
     "export_dtype": "f16",
+    "init": None,              # weights file whose tensors start the run (fine-tuning), else random init
+    "init_history": None,      # set by the trainer: what the export records about "init" (training.init)
 }
 
 DTYPES = {"f16": torch.float16, "bf16": torch.bfloat16, "f32": torch.float32}
@@ -94,6 +100,7 @@ def arg_parser():
     p.add_argument("--device", choices=("cpu", "cuda"), help="default: cuda when available")
     p.add_argument("--threads", type=int, help="torch CPU threads")
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoints/last.pt")
+    p.add_argument("--init", help="start from this weights file's tensors (same net and config; fresh Adam state)")
     p.add_argument("--until", type=int, help="stop (checkpoint, no export) once this step is reached")
     p.add_argument("--export-only", action="store_true", help="export OUT/checkpoints/last.pt and exit")
     p.add_argument("--log-every", type=int)
@@ -122,6 +129,8 @@ def effective_config(args, base=None):
             cfg[k] = v
     if args.preset is not None:
         cfg["model"] = None
+    if args.init:
+        cfg["init"] = args.init
     if args.data:
         cfg["data"] = args.data
     if args.val:
@@ -313,6 +322,45 @@ def save_samples(path, net, model, scenes, size, elements, device):
     Image.fromarray(arr).save(path)
 
 
+def read_init(path, net, config):
+    """(state dict, metadata) of the weights file that starts a fine-tuning run.
+
+    Refuses a file of another net or config, or one whose tensors do not match the model's keys exactly.
+    Floating tensors are returned as f32 (the file may hold F16/BF16).
+    """
+    from safetensors import safe_open
+
+    if not os.path.exists(path):
+        raise SystemExit(f"--init {path}: no such file")
+    with safe_open(path, framework="pt") as f:
+        meta = f.metadata() or {}
+        state = {k: f.get_tensor(k) for k in f.keys()}
+    if meta.get("net") != net:
+        raise SystemExit(f"--init {path}: holds {meta.get('net')!r} weights, this run trains {net!r}")
+    try:
+        file_config = json.loads(meta.get("config", "null"))
+    except json.JSONDecodeError:
+        raise SystemExit(f"--init {path}: metadata 'config' is not JSON") from None
+    if file_config != config:
+        raise SystemExit(f"--init {path}: config {file_config} differs from the run's {config}")
+    return {k: (v.float() if v.is_floating_point() else v) for k, v in state.items()}, meta
+
+
+def init_history(path, meta):
+    """What the export records about a fine-tuning run's starting weights (metadata ``training.init``)."""
+    with open(path, "rb") as f:
+        digest = hashlib.sha256(f.read()).hexdigest()
+    keep = ("training.steps", "training.data_seeds", "training.val_seeds", "training.recipe", "training.date")
+    history = {"file": os.path.basename(path), "sha256": digest}
+    for k in keep:
+        if k in meta:
+            try:
+                history[k.removeprefix("training.")] = json.loads(meta[k])
+            except json.JSONDecodeError:  # a date, or a value written as plain text
+                history[k.removeprefix("training.")] = meta[k]
+    return history
+
+
 def export(run_dir, cfg, model, step, metrics, train_seeds, val_seeds, device_name):
     """Writes RUN_DIR/<net>.safetensors (the documented format; floats as cfg["export_dtype"])."""
     net = cfg["net"]
@@ -321,10 +369,20 @@ def export(run_dir, cfg, model, step, metrics, train_seeds, val_seeds, device_na
     when = (datetime.datetime.fromtimestamp(int(epoch), datetime.timezone.utc) if epoch
             else datetime.datetime.now(datetime.timezone.utc))
     recipe = {k: cfg[k] for k in ("seed", "batch", "lr", "adam_betas", "stages", "flip", "loss_weights")}
+    steps_before = 0
+    extra = {}
+    history = cfg.get("init_history")
+    if history:
+        # A fine-tuned file's seeds are those of its whole history, so that evaluate.py still refuses test
+        # data any stage of it saw; its steps are the starting file's plus this run's.
+        steps_before = int(history.get("steps", 0))
+        train_seeds = sorted(set(train_seeds) | set(history.get("data_seeds", [])))
+        val_seeds = sorted(set(val_seeds) | set(history.get("val_seeds", [])))
+        extra["training.init"] = json.dumps(history, separators=(",", ":"))
     meta = {
         "created_by": "training/train.py",
         "training.date": when.strftime("%Y-%m-%dT%H:%M:%SZ"),
-        "training.steps": str(step),
+        "training.steps": str(steps_before + step),
         "training.data_seeds": json.dumps(train_seeds),
         "training.val_seeds": json.dumps(val_seeds),
         "training.recipe": json.dumps(recipe, separators=(",", ":")),
@@ -332,6 +390,7 @@ def export(run_dir, cfg, model, step, metrics, train_seeds, val_seeds, device_na
         "training.loss": "L1 in tanh space on encoded targets (training/synth_data.py)",
         "training.device": device_name,
         "training.torch": torch.__version__,
+        **extra,
     }
     model = copy.deepcopy(model).cpu().eval()
     save_weights(model, net, cfg["label"], cfg["model"], path, dtype=DTYPES[cfg["export_dtype"]],
@@ -379,6 +438,18 @@ def main(argv=None):
     model = build(net, cfg["model"]).to(device)
     opt = torch.optim.Adam(model.parameters(), lr=cfg["lr"], betas=tuple(cfg["adam_betas"]))
     step, elapsed, metrics = 0, 0.0, {}
+    if cfg.get("init") and ckpt is None:
+        state, init_meta = read_init(cfg["init"], net, cfg["model"])
+        cfg["init_history"] = init_history(cfg["init"], init_meta)
+        mine = model.state_dict()
+        missing, extra_keys = sorted(set(mine) - set(state)), sorted(set(state) - set(mine))
+        if missing or extra_keys:
+            raise SystemExit(f"--init {cfg['init']}: missing tensors {missing}, unexpected {extra_keys}")
+        bad = [k for k in mine if tuple(mine[k].shape) != tuple(state[k].shape)]
+        if bad:
+            raise SystemExit(f"--init {cfg['init']}: misshaped tensors {bad}")
+        model.load_state_dict(state)
+        say(f"started from {cfg['init']}")
     if ckpt is not None:
         model.load_state_dict(ckpt["model"])
         opt.load_state_dict(ckpt["optimizer"])
