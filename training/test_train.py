@@ -221,6 +221,28 @@ def test_init(tmp, msn_path):
         assert "differs from the run's" in str(e), e
 
 
+def test_stage_lr(tmp):
+    """A stage's own "lr" applies to its steps (a step schedule), the run's elsewhere; bad values are refused."""
+    cfg = os.path.join(tmp, "sched.json")
+    with open(cfg, "w") as f:
+        json.dump({"lr": 1e-3, "stages": [{"size": [24, 32], "steps": 2, "lr": 5e-4},
+                                          {"size": [24, 32], "steps": 2}]}, f)
+    out = os.path.join(tmp, "sched")
+    train.main(["--net", "msn", "--preset", "tiny", "--data", FIXTURES, "--config", cfg, "--batch", "2",
+                "--threads", "1", "--log-every", "1", "--quiet", "--out", out])
+    with open(os.path.join(out, "train.csv"), newline="") as f:
+        lrs = [float(r["lr"]) for r in csv.DictReader(f)]
+    assert lrs == [5e-4, 5e-4, 1e-3, 1e-3], lrs
+    with open(cfg, "w") as f:
+        json.dump({"stages": [{"size": [24, 32], "steps": 2, "lr": 0}]}, f)
+    try:
+        train.main(["--net", "msn", "--preset", "tiny", "--data", FIXTURES, "--config", cfg, "--quiet",
+                    "--out", os.path.join(tmp, "sched-bad")])
+        raise AssertionError("a stage with lr 0 was accepted")
+    except SystemExit as e:
+        assert "lr must be a positive number" in str(e), e
+
+
 def picker_bin():
     cands = [os.environ.get("PICKER_BIN", "")] + [os.path.join(ROOT, p, "release", "picker")
                                                   for p in ("target", "../target-main")]
@@ -288,6 +310,7 @@ def main():
         step("mixed scene sizes", test_mixed_scene_sizes)
         irn = step("4-step run lowers the loss; resume and workers are bit-identical", test_training_and_resume, tmp)
         others = step("msn and envmap runs lower the loss", test_other_nets, tmp)
+        step("a stage's lr is a step schedule", test_stage_lr, tmp)
         step("--init fine-tunes from a weights file", test_init, tmp, others["msn"])
         step("export loads and runs in picker", test_export_loads_in_rust, tmp, irn, others)
         step("evaluate", test_evaluate, tmp, irn, others)

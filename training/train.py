@@ -154,6 +154,11 @@ def effective_config(args, base=None):
     if cfg["label"] in PRESETS[cfg["net"]] and PRESETS[cfg["net"]][cfg["label"]] != cfg["model"]:
         raise SystemExit(f"label {cfg['label']!r} names a preset but the model config differs from it")
     for s in cfg["stages"]:
+        unknown = set(s) - {"size", "steps", "lr"}
+        if unknown:
+            raise SystemExit(f"stage {s}: unknown keys {sorted(unknown)}; known: lr, size, steps")
+        if "lr" in s and not (isinstance(s["lr"], (int, float)) and s["lr"] > 0):
+            raise SystemExit(f"stage {s}: lr must be a positive number")
         h, w = s["size"]
         if cfg["net"] != "envmap" and (h % 4 or w % 4):
             raise SystemExit(f"training size {h}x{w}: IRN/MSN need multiples of 4")
@@ -171,7 +176,7 @@ def set_total_steps(stages, total):
         if left <= 0:
             break
         n = min(s["steps"], left)
-        out.append({"size": list(s["size"]), "steps": n})
+        out.append({**s, "size": list(s["size"]), "steps": n})
         left -= n
     if left > 0:
         if out:
@@ -179,6 +184,12 @@ def set_total_steps(stages, total):
         else:
             out = [{"size": list(stages[-1]["size"]), "steps": left}]
     return out
+
+
+def stage_lr(cfg, stage):
+    """Learning rate of stage ``stage``: its own ``"lr"`` when it has one, else the run's (a step schedule
+    is written as stages of one size with different rates)."""
+    return cfg["stages"][stage].get("lr", cfg["lr"])
 
 
 def stage_of(stages, step):
@@ -506,6 +517,9 @@ def main(argv=None):
     total_f, per_f = None, {}
     for b in loader:
         stage, size = stage_of(cfg["stages"], step)
+        lr = stage_lr(cfg, stage)
+        for g in opt.param_groups:
+            g["lr"] = lr
         b = to_device(b, device)
         with torch.autocast(device_type="cuda", dtype=torch.bfloat16, enabled=use_amp):
             total, per, _ = losses(net, model, b, elements, cfg["loss_weights"])
@@ -518,7 +532,7 @@ def main(argv=None):
         elapsed += now - t0
         t0 = now
         if step % cfg["log_every"] == 0 or step == 1 or step == stop:
-            row = {"step": step, "stage": stage, "height": size[0], "width": size[1], "lr": cfg["lr"],
+            row = {"step": step, "stage": stage, "height": size[0], "width": size[1], "lr": lr,
                    "loss": fmt(total_f), "seconds": fmt(elapsed)}
             row.update({k: fmt(v) for k, v in per_f.items()})
             train_log.write(row)
