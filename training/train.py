@@ -461,6 +461,10 @@ def main(argv=None):
             raise SystemExit(f"--init {cfg['init']}: misshaped tensors {bad}")
         model.load_state_dict(state)
         say(f"started from {cfg['init']}")
+    if cfg.get("init") and not cfg.get("init_history"):
+        # A checkpoint written before the history was recorded at the start: read it now.
+        _, init_meta = read_init(cfg["init"], net, cfg["model"])
+        cfg["init_history"] = init_history(cfg["init"], init_meta)
     if ckpt is not None:
         model.load_state_dict(ckpt["model"])
         opt.load_state_dict(ckpt["optimizer"])
