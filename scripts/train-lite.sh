@@ -10,11 +10,13 @@
 #   2. training: IRN on one core while MSN and then EnvMap train on the other (the 2-core CPU this
 #      was made on; `--threads` and the recipes in training/recipes/lite-cpu-*.json say the rest).
 #      Interrupted runs continue from their last checkpoint (`--resume`, bit-identical on CPU).
-#      Then the MSN is fine-tuned from that run's weights on fresh scenes (seeds 1000004 and 1000005,
-#      recipe lite-cpu-msn-ft.json, both cores): runs/lite-msn-ft (stop 26; the embedded MSN).
+#      With MSN_FT=1, the MSN is then fine-tuned from that run's weights on fresh scenes (seeds
+#      1000004 and 1000005, recipe lite-cpu-msn-ft.json, both cores) into runs/lite-msn-ft: the stop-26
+#      experiment, which is NOT embedded (better on the synthetic test split, worse on real photos and
+#      on procedural-texture scenes; docs/model-card.md). Off by default.
 #   3. evaluation: the test-split metrics of docs/model-card.md (python -m training.evaluate and
 #      picker eval), written to WORK_DIR/metrics/.
-# Then copy WORK_DIR/runs/lite-{irn,msn-ft,envmap}/*.safetensors to crates/picker-weights/weights/ and
+# Then copy WORK_DIR/runs/lite-{irn,msn,envmap}/*.safetensors to crates/picker-weights/weights/ and
 # rebuild `picker` to embed them.
 #
 # Requirements: cargo, python3 with training/requirements.txt (PYTHON=... to choose the interpreter),
@@ -52,9 +54,6 @@ gen 900000 64 240x320 "$D/val"
 gen 4242 300 240x320 "$D/test"
 for i in 0 1 2; do gen $((1000000 + i)) 2000 120x160 "$D/train-$((1000000 + i))" prune; done
 gen 1000003 1000 240x320 "$D/train-1000003" prune
-# The MSN fine-tuning data (1135 scenes: the 240×320 chunk was cut there to start training in time).
-gen 1000004 1135 240x320 "$D/train-1000004" prune
-gen 1000005 6000 120x160 "$D/train-1000005" prune
 
 DATA=()
 for i in 0 1 2 3; do DATA+=(--data "$D/train-$((1000000 + i))"); done
@@ -75,9 +74,12 @@ irn=$!
 rest=$!
 wait "$irn" "$rest"
 
-# MSN fine-tuning: fresh Adam from the lite MSN, lower learning rate, new scenes only.
+# MSN fine-tuning (MSN_FT=1 only): fresh Adam from the lite MSN, lower learning rate, new scenes only
+# (1135 240×320 scenes: that chunk was cut there to start training in time).
 ft="$WORK/runs/lite-msn-ft"
-if [ ! -f "$ft/msn.safetensors" ]; then
+if [ "${MSN_FT:-0}" = 1 ] && [ ! -f "$ft/msn.safetensors" ]; then
+    gen 1000004 1135 240x320 "$D/train-1000004" prune
+    gen 1000005 6000 120x160 "$D/train-1000005" prune
     if [ -f "$ft/checkpoints/last.pt" ]; then
         "$PYTHON" -m training.train --resume --config training/recipes/lite-cpu-msn-ft.json --out "$ft" --threads 2
     else
@@ -88,9 +90,9 @@ if [ ! -f "$ft/msn.safetensors" ]; then
 fi
 
 R="$WORK/runs"
-"$PYTHON" -m training.evaluate --weights "$R/lite-irn" --weights "$R/lite-msn-ft" --weights "$R/lite-envmap" \
+"$PYTHON" -m training.evaluate --weights "$R/lite-irn" --weights "$R/lite-msn" --weights "$R/lite-envmap" \
     --data "$D/test" --threads 2 --out "$WORK/metrics/test-metrics.json"
 "$PICKER" synth --count 100 --size 240x320 --seed 4242 --assets "$ASSETS" --out "$D/test100" --threads 2
-"$PICKER" eval "$D/test100" --weights "$R/lite-irn/irn.safetensors" --weights "$R/lite-msn-ft/msn.safetensors" \
+"$PICKER" eval "$D/test100" --weights "$R/lite-irn/irn.safetensors" --weights "$R/lite-msn/msn.safetensors" \
     --weights "$R/lite-envmap/envmap.safetensors" --json-out "$WORK/metrics/picker-eval.json" > "$WORK/metrics/picker-eval.txt"
-echo "train-lite: done; metrics in $WORK/metrics, weights in $R/lite-{irn,msn-ft,envmap}/"
+echo "train-lite: done; metrics in $WORK/metrics, weights in $R/lite-{irn,msn,envmap}/"
