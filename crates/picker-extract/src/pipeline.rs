@@ -220,14 +220,12 @@ impl Prepared {
         (self.inputs.elements.width(), self.inputs.elements.height())
     }
 
-    /// The working-resolution pixel under photo pixel position `(x, y)`.
-    pub fn to_work(&self, x: f32, y: f32) -> (usize, usize) {
+    /// The working-resolution pixel under the centre of photo pixel `(x, y)`
+    /// (the same mapping that limits a photo mask to working pixels).
+    pub fn to_work(&self, x: usize, y: usize) -> (usize, usize) {
         let (fw, fh) = self.photo_size();
         let (w, h) = self.work_size();
-        (
-            ((x * w as f32 / fw as f32) as usize).min(w - 1),
-            ((y * h as f32 / fh as f32) as usize).min(h - 1),
-        )
+        (cell_under(x, fw, w), cell_under(y, fh, h))
     }
 
     /// Checks a pick given in photo pixels.
@@ -245,7 +243,7 @@ impl Prepared {
     /// The mask of the material at `pick` (photo pixels), at the working resolution.
     pub fn pick_mask(&self, pick: [u32; 2], opts: &MaskOptions) -> Result<PickMask> {
         self.check_pick(pick)?;
-        let (x, y) = self.to_work(pick[0] as f32 + 0.5, pick[1] as f32 + 0.5);
+        let (x, y) = self.to_work(pick[0] as usize, pick[1] as usize);
         mask::pick_mask(&self.inputs.segmentation, &self.valid, x, y, opts)
     }
 
@@ -504,8 +502,7 @@ pub fn extract(
         let mut data: Vec<bool> = up.iter().map(|&v| v >= 0.5).collect();
         for (i, _) in pm.mask.data.iter().enumerate().filter(|(_, &m)| m) {
             let (x, y) = (i % w, i / w);
-            let fx = (((x as f64 + 0.5) * fw as f64 / w as f64) as usize).min(fw - 1);
-            let fy = (((y as f64 + 0.5) * fh as f64 / h as f64) as usize).min(fh - 1);
+            let (fx, fy) = (cell_under(x, w, fw), cell_under(y, h, fh));
             data[fy * fw + fx] = true;
         }
         Mask {
@@ -675,7 +672,7 @@ pub fn extract(
         };
         let part = if wants_plane {
             let anchor = match pick {
-                Some(k) => p.to_work(k[0] as f32 + 0.5, k[1] as f32 + 0.5),
+                Some(k) => p.to_work(k[0] as usize, k[1] as usize),
                 None => central_pixel(mw, w),
             };
             plane::coplanar_part(&el.normals, mw, w, h, anchor, AUTO_MAX_PLANE_SPREAD_DEG)
@@ -1088,19 +1085,23 @@ fn central_pixel(mask: &[bool], w: usize) -> (usize, usize) {
         .unwrap_or((cx, cy))
 }
 
+/// The cell of a `to`-cell grid under the centre of cell `i` of a `from`-cell
+/// grid spanning the same extent (photo pixel → working pixel and back).
+fn cell_under(i: usize, from: usize, to: usize) -> usize {
+    (((i as f64 + 0.5) * to as f64 / from as f64) as usize).min(to.saturating_sub(1))
+}
+
 /// The photo-resolution mask `full` limited to the photo pixels whose
 /// working-resolution pixel (`w × h` grid, the one under the pixel's centre)
 /// is in `part`.
 fn restrict_to_work(full: &Mask, part: &[bool], w: usize, h: usize) -> Mask {
     let (fw, fh) = (full.width, full.height);
-    let col: Vec<usize> = (0..fw)
-        .map(|x| (((x as f64 + 0.5) * w as f64 / fw as f64) as usize).min(w - 1))
-        .collect();
+    let col: Vec<usize> = (0..fw).map(|x| cell_under(x, fw, w)).collect();
     let mut data = full.data.clone();
     data.par_chunks_mut(fw.max(1))
         .enumerate()
         .for_each(|(y, row)| {
-            let wy = (((y as f64 + 0.5) * h as f64 / fh as f64) as usize).min(h - 1);
+            let wy = cell_under(y, fh, h);
             for (x, v) in row.iter_mut().enumerate() {
                 *v = *v && part[wy * w + col[x]];
             }
@@ -1141,6 +1142,37 @@ fn preview_sphere_reference(m: &Material, env: &EnvMap, size: usize, repeats: f3
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn cell_under_maps_centres_both_ways() {
+        for (small, big) in [
+            (1, 1),
+            (1, 7),
+            (3, 3),
+            (80, 320),
+            (60, 4000),
+            (7, 9),
+            (240, 241),
+        ] {
+            for i in 0..big {
+                let c = cell_under(i, big, small);
+                assert!(c < small);
+                // The cell holds the centre of big cell i.
+                let centre = (i as f64 + 0.5) / big as f64;
+                assert!(
+                    c as f64 / small as f64 <= centre && centre < (c + 1) as f64 / small as f64
+                );
+            }
+            for j in 0..small {
+                // A small cell's centre lies in the big cell it maps to, which maps back.
+                let b = cell_under(j, small, big);
+                assert!(b < big);
+                assert_eq!(cell_under(b, big, small), j, "{small} {big} {j}");
+            }
+            // Monotone.
+            assert!((1..big).all(|i| cell_under(i - 1, big, small) <= cell_under(i, big, small)));
+        }
+    }
 
     #[test]
     fn parallel_preview_matches_reference() {
