@@ -104,11 +104,18 @@ def pick(ch, layer, names):
     return np.stack(out, axis=0)
 
 
+# Set by `scenes --half`: EXRs are written as 16-bit floats (small fixtures).
+EXR_DTYPE = np.float32
+
+
 def write_exr(path, planes):
-    """planes: [C, H, W] float32, C = 1 (channel Y) or 3 (R, G, B); written atomically."""
+    """planes: [C, H, W] float32, C = 1 (channel Y) or 3 (R, G, B); written atomically, as
+    `EXR_DTYPE` (float32, or float16 with `scenes --half`)."""
     import OpenEXR
 
     planes = np.asarray(planes, dtype=np.float32)
+    if EXR_DTYPE == np.float16:
+        planes = np.clip(planes, -65504.0, 65504.0).astype(np.float16)
     if planes.shape[0] == 1:
         chans = {"Y": np.ascontiguousarray(planes[0])}
     else:
@@ -291,7 +298,11 @@ def main():
     s.add_argument("--out", required=True)
     s.add_argument("--seed", type=int, default=31337)
     s.add_argument("--force", action="store_true")
+    s.add_argument("--half", action="store_true", help="write 16-bit float EXRs (small fixtures)")
     a = p.parse_args()
+    if getattr(a, "half", False):
+        global EXR_DTYPE
+        EXR_DTYPE = np.float16
     {"textures": cmd_textures, "scenes": cmd_scenes}[a.cmd](a)
 
 

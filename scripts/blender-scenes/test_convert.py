@@ -165,6 +165,28 @@ class Scene(unittest.TestCase):
             self.assertEqual(scene["materials"][0]["family"], "blender:src")
             self.assertTrue((exr("diffuse_albedo.exr")[:, :3, :4] == 0).all())
 
+    def test_half_exrs_keep_values_to_half_precision(self):
+        rng = np.random.default_rng(5)
+        planes = rng.uniform(-2.0, 2.0, (3, 4, 5)).astype(np.float32)
+        planes[0, 0, 0] = 1e6  # beyond half's range: clipped to its largest finite value
+        with tempfile.TemporaryDirectory() as d:
+            path = os.path.join(d, "x.exr")
+            old = convert.EXR_DTYPE
+            convert.EXR_DTYPE = np.float16
+            try:
+                convert.write_exr(path, planes)
+            finally:
+                convert.EXR_DTYPE = old
+            with OpenEXR.File(path, separate_channels=True) as f:
+                ch = f.channels()
+                self.assertEqual(ch["R"].pixels.dtype, np.float16)
+                got = np.stack([np.asarray(ch[k].pixels, np.float32) for k in "RGB"])
+            self.assertEqual(got[0, 0, 0], 65504.0)
+            want = planes.copy()
+            want[0, 0, 0] = 65504.0
+            np.testing.assert_allclose(got, want, rtol=2 ** -11, atol=0)
+            self.assertFalse(os.path.exists(path + ".tmp.exr"))
+
 
 if __name__ == "__main__":
     unittest.main()
