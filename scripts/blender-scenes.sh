@@ -15,6 +15,7 @@
 # assets of scripts/fetch-assets.sh (ASSETS=..., default ./assets) for the Sweet Home 3D photographs.
 # The GIMP "extras" patterns (gimp-data-extras, never used in training) are downloaded, not installed.
 # SAMPLES=256 Cycles samples per pixel (adaptive); about 40 s per 240×320 scene on 2 cores.
+# PIXEL_FILTER=blackman-harris (Blender's default, 1.5 px) or box (1 px, as picker synth's samples).
 set -euo pipefail
 
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -24,6 +25,7 @@ SEED="${3:-31337}"
 PYTHON="${PYTHON:-python3}"
 ASSETS="${ASSETS:-$ROOT/assets}"
 SAMPLES="${SAMPLES:-256}"
+PIXEL_FILTER="${PIXEL_FILTER:-blackman-harris}"
 SIZE="${SIZE:-240x320}"
 
 command -v blender >/dev/null || { echo "blender-scenes: no blender (apt-get install blender python3-numpy)" >&2; exit 1; }
@@ -41,6 +43,7 @@ if [ ! -f "$OUT/textures/.done" ]; then
 fi
 
 blender -b --factory-startup -noaudio --python-exit-code 1 -P "$ROOT/scripts/blender-scenes/make_scenes.py" -- \
-    --out "$OUT/raw" --textures "$OUT/textures" --seed "$SEED" --count "$COUNT" --size "$SIZE" --samples "$SAMPLES"
+    --out "$OUT/raw" --textures "$OUT/textures" --seed "$SEED" --count "$COUNT" --size "$SIZE" --samples "$SAMPLES" \
+    --pixel-filter "$PIXEL_FILTER"
 "$PYTHON" "$ROOT/scripts/blender-scenes/convert.py" scenes "$OUT/raw" --out "$OUT/scenes" --seed "$SEED"
 echo "blender-scenes: $COUNT scenes in $OUT/scenes"

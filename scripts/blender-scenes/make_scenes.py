@@ -48,6 +48,9 @@ def parse_args():
     p.add_argument("--size", default="240x320", help="HxW")
     p.add_argument("--samples", type=int, default=256)
     p.add_argument("--threads", type=int, default=0, help="0: all cores")
+    p.add_argument("--pixel-filter", choices=["blackman-harris", "box"], default="blackman-harris",
+                   help="Cycles' pixel filter: Blender's default (Blackman-Harris, 1.5 px wide) or a "
+                        "1-pixel box (as picker synth's samples)")
     a = p.parse_args(argv)
     h, w = (int(x) for x in a.size.lower().split("x"))
     if h < 8 or w < 8:
@@ -82,6 +85,12 @@ def reset(a):
     sc.cycles.glossy_bounces = 4
     sc.cycles.sample_clamp_indirect = 10.0
     sc.cycles.seed = 0
+    if a.pixel_filter == "box":
+        sc.cycles.pixel_filter_type = "BOX"
+        sc.cycles.filter_width = 1.0
+    else:
+        sc.cycles.pixel_filter_type = "BLACKMAN_HARRIS"
+        sc.cycles.filter_width = 1.5
     sc.render.resolution_x = a.width
     sc.render.resolution_y = a.height
     sc.render.resolution_percentage = 100
