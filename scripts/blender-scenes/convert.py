@@ -275,6 +275,8 @@ def convert_scene(raw, out, rng):
 
 
 def cmd_scenes(a):
+    global EXR_DTYPE
+    EXR_DTYPE = np.float16 if a.half else np.float32
     raws = sorted(d for d in os.listdir(a.raw) if os.path.exists(os.path.join(a.raw, d, "meta.json")))
     if not raws:
         raise SystemExit(f"convert scenes: no rendered scenes in {a.raw}")
@@ -300,9 +302,6 @@ def main():
     s.add_argument("--force", action="store_true")
     s.add_argument("--half", action="store_true", help="write 16-bit float EXRs (small fixtures)")
     a = p.parse_args()
-    if getattr(a, "half", False):
-        global EXR_DTYPE
-        EXR_DTYPE = np.float16
     {"textures": cmd_textures, "scenes": cmd_scenes}[a.cmd](a)
 
 

@@ -44,6 +44,19 @@ fn json_file(p: &Path) -> Value {
         .unwrap_or_else(|e| panic!("{}: {e}", p.display()))
 }
 
+/// `picker eval SCENES [EXTRA...] --json-out REPORT`: its table (stdout) and
+/// the JSON report.
+fn eval_report(scenes: &Path, extra: &[&str], report: &Path) -> (String, Value) {
+    let mut args = vec!["eval", scenes.to_str().unwrap()];
+    args.extend_from_slice(extra);
+    args.extend(["--json-out", report.to_str().unwrap()]);
+    let out = ok(&args);
+    (
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        json_file(report),
+    )
+}
+
 #[test]
 fn ground_truth_extraction_recovers_masks_and_textures() {
     let tmp = tempfile::tempdir().unwrap();
@@ -61,16 +74,8 @@ fn ground_truth_extraction_recovers_masks_and_textures() {
         "--out",
         scenes.to_str().unwrap(),
     ]);
-    let report = tmp.path().join("eval.json");
-    let out = ok(&[
-        "eval",
-        scenes.to_str().unwrap(),
-        "--json-out",
-        report.to_str().unwrap(),
-    ]);
-    let text = String::from_utf8_lossy(&out.stdout);
+    let (text, r) = eval_report(&scenes, &[], &tmp.path().join("eval.json"));
     println!("{text}");
-    let r = json_file(&report);
     let rows = r["rows"].as_array().unwrap();
     assert!(
         rows.len() >= 6,
@@ -117,16 +122,11 @@ fn ground_truth_extraction_recovers_masks_and_textures() {
     }
     // The plane mode alone on the same truth: every textured row rectified,
     // with its plane error measured, and the fold reported.
-    let plane = tmp.path().join("eval-plane.json");
-    ok(&[
-        "eval",
-        scenes.to_str().unwrap(),
-        "--uv",
-        "plane",
-        "--json-out",
-        plane.to_str().unwrap(),
-    ]);
-    let r = json_file(&plane);
+    let (_, r) = eval_report(
+        &scenes,
+        &["--uv", "plane"],
+        &tmp.path().join("eval-plane.json"),
+    );
     let textured: Vec<&Value> = r["rows"]
         .as_array()
         .unwrap()
@@ -152,14 +152,7 @@ fn ground_truth_extraction_recovers_masks_and_textures() {
 fn extraction_from_a_cycles_scene_meets_the_issue_bounds() {
     let tmp = tempfile::tempdir().unwrap();
     let scenes = repo().join("fixtures/blender");
-    let report = tmp.path().join("eval.json");
-    ok(&[
-        "eval",
-        scenes.to_str().unwrap(),
-        "--json-out",
-        report.to_str().unwrap(),
-    ]);
-    let r = json_file(&report);
+    let (_, r) = eval_report(&scenes, &[], &tmp.path().join("eval.json"));
     let rows = r["rows"].as_array().unwrap();
     // Walls and box (textured), ceiling (single colour).
     assert_eq!(rows.len(), 3, "{rows:?}");
