@@ -181,7 +181,7 @@ def encode_targets(raw):
     the exact inverses of :mod:`training.conventions` (values clamped to the decodable range)."""
     t = {}
     for name, a in raw.items():
-        x = torch.from_numpy(np.ascontiguousarray(a))
+        x = a if torch.is_tensor(a) else torch.from_numpy(np.ascontiguousarray(a))
         if name in ("diffuse_albedo", "specular_albedo", "glossiness", "segmentation"):
             t[name] = conv.from_unit(x.clamp(0.0, 1.0))
         elif name == "uv":
@@ -304,17 +304,21 @@ class SynthDataset(torch.utils.data.Dataset):
     training size is looked up per sample with ``size_of(k)`` (multi-resolution stages). Only scenes at least
     as large as that size are drawn (a 120×160 scene cannot give a 240×320 sample): when some scenes are too
     small, the permutation runs over the n' eligible ones and is drawn from ``default_rng([seed, e, H, W])``
-    with e = k // n'. ``cache`` keeps the decoded scenes in memory (small datasets only).
+    with e = k // n'. ``cache`` keeps the decoded scenes in memory (small datasets only). ``sizes`` (the
+    (H, W) of each scene) saves reading each ``scene.json`` (:class:`training.device_data.DeviceData`).
     """
 
-    def __init__(self, scenes, net, seed, size_of, flip=True, crop="random", shuffle=True, cache=False):
+    def __init__(self, scenes, net, seed, size_of, flip=True, crop="random", shuffle=True, cache=False,
+                 sizes=None):
         if not scenes:
             raise ValueError("no scenes")
         self.scenes, self.net, self.seed = list(scenes), net, int(seed)
         self.size_of, self.flip, self.crop, self.shuffle = size_of, flip, crop, shuffle
         self.cache = {} if cache else None
         self._perms = {}
-        self._sizes = None
+        self._sizes = None if sizes is None else [tuple(v) for v in sizes]
+        if self._sizes is not None and len(self._sizes) != len(self.scenes):
+            raise ValueError(f"{len(self._sizes)} sizes for {len(self.scenes)} scenes")
         self._eligible = {}
 
     def __len__(self):

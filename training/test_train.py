@@ -21,6 +21,7 @@ import numpy as np
 import torch
 
 from training import conventions as conv
+from training import device_data
 from training import evaluate, train
 from training import synth_data as sd
 
@@ -292,6 +293,107 @@ def test_evaluate(tmp, irn_path, other_paths):
         assert "2026" in str(e)
 
 
+def test_device_batches(tmp):
+    """DeviceData (scenes on the device, batches made there) gives the CPU reader's samples; packs give the
+    same batches as the synth folders they were made of."""
+    pack_dir = os.path.join(tmp, "pack")
+    meta = device_data.pack(FIXTURES, pack_dir, workers=2)
+    assert meta["count"] == 2 and (meta["height"], meta["width"]) == (24, 32) and meta["seeds"] == [2026, 2026]
+    assert not os.path.exists(pack_dir + ".tmp") and device_data.is_pack(pack_dir)
+    assert device_data.source_seeds([pack_dir]) == [2026] == device_data.source_seeds([FIXTURES])
+    try:
+        device_data.pack(FIXTURES, pack_dir)
+        raise AssertionError("packing over an existing pack was accepted")
+    except FileExistsError:
+        pass
+    for net in ("irn", "msn", "envmap"):
+        dd = device_data.DeviceData([FIXTURES], net, 7, "cpu")
+        dp = device_data.DeviceData([pack_dir], net, 7, "cpu")
+        for size in ((24, 32), (12, 16), (16, 16), (20, 28), (8, 12)):
+            cpu = sd.SynthDataset(sd.list_scenes([FIXTURES]), net, 7, lambda k, size=size: size)
+            ks = range(3, 11)
+            want = torch.utils.data.default_collate([cpu[k] for k in ks])
+            got, got_pack = dd.batch(ks, size), dp.batch(ks, size)
+            assert set(got) == set(want), (net, sorted(got), sorted(want))
+            for name in want:
+                assert got[name].shape == want[name].shape, (net, size, name, got[name].shape, want[name].shape)
+                assert torch.equal(got[name], got_pack[name]), (net, size, name)
+                if name in ("surface", "textured"):
+                    assert torch.equal(got[name], want[name]), (net, size, name)
+                else:
+                    close(got[name], want[name], 3e-3)
+    # Crops and mirrors really vary: two sample numbers of one scene differ.
+    dd = device_data.DeviceData([FIXTURES], "irn", 7, "cpu")
+    a = dd.batch(range(0, 8), (16, 16))["input"]
+    assert len({tuple(x.flatten()[:64].tolist()) for x in a}) > 2
+    try:
+        dd.eligible((48, 64))
+        raise AssertionError("a stage larger than every scene was accepted")
+    except ValueError as e:
+        assert "48x64" in str(e), e
+
+
+def test_augment():
+    x = torch.rand(6, 3, 8, 10) * 2 - 1
+    same = device_data.augment_photometric(x, 1, 5, {"p": 0.0})
+    assert torch.equal(same, x)
+    a = device_data.augment_photometric(x, 1, 5, {"p": 1.0})
+    b = device_data.augment_photometric(x, 1, 5, {"p": 1.0})
+    c = device_data.augment_photometric(x, 1, 6, {"p": 1.0})
+    assert torch.equal(a, b) and not torch.equal(a, c)
+    assert a.min() >= -1 and a.max() <= 1 and (a - x).abs().mean() > 1e-3
+    # Without noise and colour change, a gain of one is the identity up to the sRGB round trip.
+    d = device_data.augment_photometric(x, 1, 5, {"p": 1.0, "exposure": [1.0, 1.0], "white_balance": 0.0,
+                                                  "noise": 0.0})
+    close(d, x, 1e-5)
+
+
+def test_device_training(tmp):
+    """A run on DeviceData: a stage of seconds becomes a step count in the config and the export; the loss
+    falls; steps-based runs repeat and resume bit-identically on CPU."""
+    cfg = os.path.join(tmp, "dev.json")
+    with open(cfg, "w") as f:
+        json.dump({"device_data": True, "augment": {"p": 0.5}, "batch": 2, "log_every": 1,
+                   "stages": [{"size": [24, 32], "seconds": 0.5}, {"size": [16, 16], "steps": 2, "lr": 1e-4}]}, f)
+    out = os.path.join(tmp, "dev")
+    path = train.main(["--net", "irn", "--preset", "tiny", "--config", cfg, "--data", FIXTURES, "--threads", "1",
+                       "--quiet", "--out", out])
+    from safetensors import safe_open  # noqa: PLC0415
+    with safe_open(path, framework="pt") as f:
+        meta = f.metadata()
+    stages = json.loads(meta["training.recipe"])["stages"]
+    first = stages[0]["steps"]
+    assert first >= 1 and stages[0]["seconds"] == 0.5 and stages[1]["steps"] == 2, stages
+    assert int(meta["training.steps"]) == first + 2
+    with open(os.path.join(out, "train.csv"), newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert [int(r["step"]) for r in rows] == list(range(1, first + 3))
+    assert [r["height"] for r in rows[-2:]] == ["16", "16"] and rows[-1]["lr"] == "0.0001"
+    # Steps only: repeatable and resumable bit for bit.
+    with open(cfg, "w") as f:
+        json.dump({"device_data": True, "augment": {"p": 0.5}, "batch": 2, "log_every": 1,
+                   "stages": [{"size": [24, 32], "steps": 3}, {"size": [16, 16], "steps": 2}]}, f)
+    common = ["--net", "irn", "--preset", "tiny", "--config", cfg, "--data", FIXTURES, "--threads", "1", "--quiet"]
+    runs = [os.path.join(tmp, n) for n in ("dev-a", "dev-b", "dev-c")]
+    train.main(common + ["--out", runs[0]])
+    train.main(common + ["--out", runs[1]])
+    assert train.main(common + ["--out", runs[2], "--until", "4"]) is None
+    train.main(["--resume", "--out", runs[2], "--threads", "1", "--quiet"])
+    losses = _losses(runs[0])
+    assert losses[-1] < losses[0], losses
+    ck = [torch.load(os.path.join(r, "checkpoints", "last.pt"), weights_only=False) for r in runs]
+    for k in ck[0]["model"]:
+        assert torch.equal(ck[0]["model"][k], ck[1]["model"][k]), k
+        assert torch.equal(ck[0]["model"][k], ck[2]["model"][k]), k
+    assert _losses(runs[2]) == losses
+    try:
+        train.main(["--net", "envmap", "--preset", "tiny", "--config", cfg, "--data", FIXTURES, "--quiet",
+                    "--out", os.path.join(tmp, "env-aug")])
+        raise AssertionError("augmenting the EnvMap's input was accepted")
+    except SystemExit as e:
+        assert "EnvMap" in str(e), e
+
+
 def main():
     torch.set_num_threads(1)
     t_all = time.perf_counter()
@@ -314,6 +416,9 @@ def main():
         step("--init fine-tunes from a weights file", test_init, tmp, others["msn"])
         step("export loads and runs in picker", test_export_loads_in_rust, tmp, irn, others)
         step("evaluate", test_evaluate, tmp, irn, others)
+        step("device data: the CPU reader's batches, packs", test_device_batches, tmp)
+        step("photometric augmentation", test_augment)
+        step("device-data runs: stages of seconds, repeatable, resumable", test_device_training, tmp)
     print(f"all passed in {time.perf_counter() - t_all:.1f} s")
 
 

@@ -31,11 +31,13 @@ import hashlib
 import json
 import os
 import random
+import signal
 import time
 
 import numpy as np
 import torch
 
+from training import device_data
 from training import synth_data as sd
 from training.picker_nets import build, named_outputs, save_weights
 from training.presets import PRESETS, preset, validate_config
@@ -68,6 +70,9 @@ DEFAULTS = {
     "export_dtype": "f16",
     "init": None,              # weights file whose tensors start the run (fine-tuning), else random init
     "init_history": None,      # set by the trainer: what the export records about "init" (training.init)
+    "device_data": False,      # keep the scenes on the device, batches made there (training/device_data.py)
+    "augment": None,           # photometric augmentation of the input (IRN, MSN): {"p", "exposure", ...}
+    "channels_last": False,    # NHWC activations on CUDA (faster bf16 convolutions)
 }
 
 DTYPES = {"f16": torch.float16, "bf16": torch.bfloat16, "f32": torch.float32}
@@ -143,6 +148,8 @@ def effective_config(args, base=None):
         cfg["stages"] = set_total_steps(cfg["stages"], args.steps)
     if cfg["net"] not in DEFAULT_LR:
         raise SystemExit("--net irn|msn|envmap is required")
+    if cfg["augment"] and cfg["net"] == "envmap":
+        raise SystemExit("augment: not for the EnvMap net (an exposure change would have to change its target)")
     if cfg["lr"] is None:
         cfg["lr"] = DEFAULT_LR[cfg["net"]]
     if cfg["model"] is None:
@@ -154,9 +161,15 @@ def effective_config(args, base=None):
     if cfg["label"] in PRESETS[cfg["net"]] and PRESETS[cfg["net"]][cfg["label"]] != cfg["model"]:
         raise SystemExit(f"label {cfg['label']!r} names a preset but the model config differs from it")
     for s in cfg["stages"]:
-        unknown = set(s) - {"size", "steps", "lr"}
+        unknown = set(s) - {"size", "steps", "seconds", "lr"}
         if unknown:
-            raise SystemExit(f"stage {s}: unknown keys {sorted(unknown)}; known: lr, size, steps")
+            raise SystemExit(f"stage {s}: unknown keys {sorted(unknown)}; known: lr, seconds, size, steps")
+        if "steps" not in s and "seconds" not in s:
+            raise SystemExit(f"stage {s}: needs steps or seconds")
+        if "steps" not in s and not cfg["device_data"]:
+            raise SystemExit(f"stage {s}: a stage of seconds needs \"device_data\": true")
+        if "steps" not in s and not (isinstance(s["seconds"], (int, float)) and s["seconds"] > 0):
+            raise SystemExit(f"stage {s}: seconds must be a positive number")
         if "lr" in s and not (isinstance(s["lr"], (int, float)) and s["lr"] > 0):
             raise SystemExit(f"stage {s}: lr must be a positive number")
         h, w = s["size"]
@@ -171,6 +184,8 @@ def effective_config(args, base=None):
 
 def set_total_steps(stages, total):
     """Stages cut or extended (the last one) so that their steps sum to ``total``."""
+    if any("steps" not in s for s in stages):
+        raise SystemExit("--steps: the stages are given in seconds; give them steps instead")
     out, left = [], total
     for s in stages:
         if left <= 0:
@@ -200,6 +215,41 @@ def stage_of(stages, step):
         if step < end:
             return i, tuple(s["size"])
     return len(stages) - 1, tuple(stages[-1]["size"])
+
+
+class Schedule:
+    """Which stage a step is in. A stage has a number of ``steps``, or a training-time budget ``seconds``
+    (``device_data`` only): once that much training time is spent, the stage gets the number of steps it took
+    (recorded in the config, so the export's recipe and a re-run with it are in steps)."""
+
+    def __init__(self, stages, state=None):
+        self.stages = stages
+        self.idx, self.start, self.secs = state if state is not None else (0, 0, 0.0)
+
+    def current(self, step):
+        """(stage index, size) of step ``step``, or None when every stage is done."""
+        while self.idx < len(self.stages):
+            s = self.stages[self.idx]
+            if "steps" in s:
+                done = step - self.start >= s["steps"]
+            else:
+                done = self.secs >= s["seconds"]
+                if done:
+                    s["steps"] = step - self.start
+            if not done:
+                break
+            self.start += s["steps"]
+            self.idx += 1
+            self.secs = 0.0
+        if self.idx == len(self.stages):
+            return None
+        return self.idx, tuple(self.stages[self.idx]["size"])
+
+    def add_time(self, seconds):
+        self.secs += seconds
+
+    def state(self):
+        return (self.idx, self.start, self.secs)
 
 
 class StageSize:
@@ -434,19 +484,32 @@ def main(argv=None):
         torch.backends.cudnn.benchmark = True
     device_name = torch.cuda.get_device_name(device) if device.type == "cuda" else "cpu"
 
-    train_scenes = sd.list_scenes(cfg["data"])
     val_scenes = sd.list_scenes(cfg["val"])[:cfg["val_scenes"]] if cfg["val"] else []
-    try:
-        sd.check_disjoint({"train": train_scenes, "val": val_scenes})
-    except ValueError as e:
-        raise SystemExit(str(e)) from None
-    train_seeds, val_seeds = sd.seeds_of(train_scenes), sd.seeds_of(val_scenes)
-    sample_scenes = (val_scenes or train_scenes)[:cfg["sample_scenes"]]
+    val_seeds = sd.seeds_of(val_scenes)
+    if cfg["device_data"]:
+        train_scenes = None
+        train_seeds = device_data.source_seeds(cfg["data"])
+        shared = sorted(set(train_seeds) & set(val_seeds))
+        if shared:
+            raise SystemExit(f"splits 'train' and 'val' share the picker synth seeds {shared}; "
+                             "train, validation and test data must come from different seeds")
+    else:
+        train_scenes = sd.list_scenes(cfg["data"])
+        try:
+            sd.check_disjoint({"train": train_scenes, "val": val_scenes})
+        except ValueError as e:
+            raise SystemExit(str(e)) from None
+        train_seeds = sd.seeds_of(train_scenes)
+    sample_scenes = (val_scenes or train_scenes or [])[:cfg["sample_scenes"]]
     elements = elements_of(net, cfg["model"])
-    total_steps = sum(s["steps"] for s in cfg["stages"])
+    steps_known = all("steps" in s for s in cfg["stages"])
+    total_steps = sum(s["steps"] for s in cfg["stages"]) if steps_known else None
 
     seed_everything(cfg["seed"])
     model = build(net, cfg["model"]).to(device)
+    nhwc = cfg["channels_last"] and device.type == "cuda"
+    if nhwc:
+        model = model.to(memory_format=torch.channels_last)
     opt = torch.optim.Adam(model.parameters(), lr=cfg["lr"], betas=tuple(cfg["adam_betas"]))
     step, elapsed, metrics = 0, 0.0, {}
     if cfg.get("init") and ckpt is None:
@@ -490,74 +553,129 @@ def main(argv=None):
     def checkpoint():
         atomic_save({"model": model.state_dict(), "optimizer": opt.state_dict(), "step": step,
                      "seconds": elapsed, "rng": rng_state(), "config": cfg, "metrics": metrics,
-                     "device": device_name}, ckpt_path)
+                     "device": device_name, "schedule": sched.state()}, ckpt_path)
 
-    def validate():
+    def validate(size):
         nonlocal metrics
         if not val_scenes:
             return
-        size = stage_of(cfg["stages"], max(step - 1, 0))[1]
         metrics = evaluate_val(net, model, val_scenes, size, elements, cfg["loss_weights"], cfg["batch"], device)
         val_log.write({"step": step, **{k: fmt(v) for k, v in metrics.items()}, "seconds": fmt(elapsed)})
         say(f"step {step} val loss {metrics['loss']:.4f}")
 
     batch = cfg["batch"]
-    ds = sd.SynthDataset(train_scenes, net, cfg["seed"], StageSize(cfg["stages"], batch), flip=cfg["flip"],
-                         cache=cfg["cache"])
+    sched = Schedule(cfg["stages"], ckpt.get("schedule") if ckpt is not None else None)
+    if cfg["device_data"]:
+        t_load = time.perf_counter()
+        try:
+            data = device_data.DeviceData(cfg["data"], net, cfg["seed"], device, flip=cfg["flip"])
+        except (ValueError, FileNotFoundError) as e:
+            raise SystemExit(f"--data: {e}") from None
+        n_train = len(data)
+        say(f"loaded {n_train} scenes onto {device_name} in {time.perf_counter() - t_load:.1f} s")
+        check = data.eligible
+    else:
+        ds = sd.SynthDataset(train_scenes, net, cfg["seed"], StageSize(cfg["stages"], batch), flip=cfg["flip"],
+                             cache=cfg["cache"])
+        n_train = len(train_scenes)
+        check = ds.eligible
     for st in cfg["stages"]:  # every stage needs scenes at least its size: fail now, not hours later
         try:
-            ds.eligible(st["size"])
+            check(st["size"])
         except ValueError as e:
             raise SystemExit(f"stage {st['size'][0]}x{st['size'][1]}: {e}") from None
-    stop = min(total_steps, args.until) if args.until else total_steps
-    loader = torch.utils.data.DataLoader(
-        ds, batch_size=batch, sampler=sd.RangeSampler(step * batch, stop * batch), num_workers=cfg["workers"],
-        pin_memory=device.type == "cuda", persistent_workers=False)
-    say(f"{net} ({cfg['label']}) on {device_name}: {len(train_scenes)} training scenes (seeds {train_seeds}), "
-        f"{len(val_scenes)} validation; steps {step} → {stop} of {total_steps}")
+    if cfg["device_data"]:
+        def batches():
+            while not (args.until and step >= args.until):
+                cur = sched.current(step)
+                if cur is None:
+                    return
+                yield data.batch(range(step * batch, (step + 1) * batch), cur[1])
+        source = batches()
+        stop = args.until
+    else:
+        stop = min(total_steps, args.until) if args.until else total_steps
+        source = torch.utils.data.DataLoader(
+            ds, batch_size=batch, sampler=sd.RangeSampler(step * batch, stop * batch), num_workers=cfg["workers"],
+            pin_memory=device.type == "cuda", persistent_workers=False)
+    say(f"{net} ({cfg['label']}) on {device_name}: {n_train} training scenes (seeds {train_seeds}), "
+        f"{len(val_scenes)} validation; from step {step}, stages {cfg['stages']}")
     model.train()
     use_amp = cfg["amp"] and device.type == "cuda"
     t0 = time.perf_counter()
-    total_f, per_f = None, {}
-    for b in loader:
-        stage, size = stage_of(cfg["stages"], step)
+    total_t, per_t = None, {}
+    last_val = last_sample = None
+    size = None
+
+    def floats():
+        return float(total_t.detach()), {k: float(v.detach()) for k, v in per_t.items()}
+
+    stop_signal = []
+    previous = {sig: signal.signal(sig, lambda signum, frame: stop_signal.append(signum))
+                for sig in (signal.SIGINT, signal.SIGTERM)}
+    for b in source:
+        stage, size = sched.current(step)
         lr = stage_lr(cfg, stage)
         for g in opt.param_groups:
             g["lr"] = lr
         b = to_device(b, device)
+        if cfg["augment"]:
+            b["input"] = device_data.augment_photometric(b["input"], cfg["seed"], step, cfg["augment"])
+        if nhwc:
+            b["input"] = b["input"].contiguous(memory_format=torch.channels_last)
         with torch.autocast(device_type="cuda", dtype=torch.bfloat16, enabled=use_amp):
-            total, per, _ = losses(net, model, b, elements, cfg["loss_weights"])
-        total_f, per_f = float(total.detach()), {k: float(v.detach()) for k, v in per.items()}
+            total_t, per_t, _ = losses(net, model, b, elements, cfg["loss_weights"])
         opt.zero_grad(set_to_none=True)
-        total.backward()
+        total_t.backward()
         opt.step()
         step += 1
+        if device.type == "cuda" and "steps" not in cfg["stages"][stage] and step % 10 == 0:
+            torch.cuda.synchronize(device)  # a stage of seconds counts finished work (within 10 steps)
         now = time.perf_counter()
         elapsed += now - t0
+        sched.add_time(now - t0)
         t0 = now
         if step % cfg["log_every"] == 0 or step == 1 or step == stop:
+            total_f, per_f = floats()
             row = {"step": step, "stage": stage, "height": size[0], "width": size[1], "lr": lr,
                    "loss": fmt(total_f), "seconds": fmt(elapsed)}
             row.update({k: fmt(v) for k, v in per_f.items()})
             train_log.write(row)
-            say(f"step {step}/{total_steps} {size[0]}x{size[1]} loss {total_f:.4f} ({elapsed:.1f} s)")
-        if step % cfg["sample_every"] == 0 or step == stop:
+            say(f"step {step}/{total_steps or '?'} {size[0]}x{size[1]} loss {total_f:.4f} ({elapsed:.1f} s)")
+        if (step % cfg["sample_every"] == 0 or step == stop) and sample_scenes:
             save_samples(os.path.join(run_dir, "samples", f"step_{step:07d}.png"), net, model, sample_scenes,
                          size, elements, device)
-        if step % cfg["val_every"] == 0 or step == total_steps:
-            validate()
+            last_sample = step
+        if step % cfg["val_every"] == 0:
+            validate(size)
+            last_val = step
         if step % cfg["ckpt_every"] == 0 or step == stop:
             checkpoint()
+        if stop_signal:
+            checkpoint()
+            break
         t0 = time.perf_counter()  # evaluation, pictures and checkpoints are not training time
-    if step < total_steps:
-        say(f"stopped at step {step} (--until); continue with --resume --out {run_dir}")
+    for sig, handler in previous.items():
+        signal.signal(sig, handler)
+    if stop_signal or sched.current(step) is not None:
+        why = f"signal {stop_signal[0]}" if stop_signal else "--until"
+        say(f"stopped at step {step} ({why}); continue with --resume --out {run_dir}, "
+            f"or export this state with --export-only --out {run_dir}")
         return None
-    if not metrics and total_f is not None:  # no validation data: record the last training losses
+    if size is None:
+        size = tuple(cfg["stages"][-1]["size"])
+    if last_val != step:
+        validate(size)
+    if sample_scenes and last_sample != step:
+        save_samples(os.path.join(run_dir, "samples", f"step_{step:07d}.png"), net, model, sample_scenes,
+                     size, elements, device)
+    checkpoint()
+    if not metrics and total_t is not None:  # no validation data: record the last training losses
+        total_f, per_f = floats()
         metrics = {f"train_{k}": v for k, v in [("loss", total_f)] + list(per_f.items())}
     path = export(run_dir, cfg, model, step, metrics, train_seeds, val_seeds, device_name)
     say(f"wrote {path}")
     return path
-
 
 if __name__ == "__main__":
     main()

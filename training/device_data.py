@@ -1,0 +1,359 @@
+"""Training data held on the training device: scene packs, batched sampling on the GPU, photometric augmentation.
+
+The reader of :mod:`training.synth_data` decodes seven EXRs per IRN sample in Python and prepares each sample on
+the CPU: fine for a 2-core CPU run, far too slow to feed a GPU (it measured ~9 IRN samples/s per core). This
+module keeps every training scene in the device's memory and makes a whole batch there with a few batched
+tensor operations, so a GPU run is bound by the networks, not by the data.
+
+**Packs.** ``python -m training.pack SYNTH_DIR --out PACK_DIR`` turns a ``picker synth`` output folder into one
+folder of ``.npy`` arrays (every element of every scene, ``image`` as the 8-bit sRGB values of ``image.png``,
+``surface`` as uint8, the element values as written by synth in float16) and a ``meta.json``; a 120×160 scene
+takes 0.8 MB instead of synth's 3.2 MB of EXRs and PNGs, so tens of thousands of scenes fit a disk and
+a GPU. :class:`DeviceData` reads packs and synth folders alike.
+
+**Same samples as the CPU reader.** Sample k of a run is the one :class:`training.synth_data.SynthDataset`
+gives: the same scene permutation, the same crop and mirror drawn from ``default_rng([seed, 2**32 + k])``,
+the same reduction, envmap resampling and target encoding (:func:`training.synth_data.prepare`), done on whole
+batches. The only differences are the float16 storage of element values (|error| ≤ 2⁻¹¹ relative) and the
+order of clamping and reduction; ``training/test_train.py`` checks the batches against the CPU reader.
+"""
+
+import json
+import os
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from training import synth_data as sd
+
+PACK_FORMAT = "picker-pack 1"
+"""``meta.json`` ``format`` of the packs this module writes and reads."""
+
+ELEMENTS = ("diffuse_albedo", "specular_albedo", "normals", "glossiness", "view_vector", "uv", "segmentation",
+            "envmap")
+"""Every element a pack holds (besides ``image`` and ``surface``)."""
+
+NET_ELEMENTS = {"irn": sd.IRN_ELEMENTS, "msn": ("segmentation",), "envmap": ("envmap",)}
+"""The elements each net trains on."""
+
+
+def _load_all(scene_dir):
+    r = sd.load_scene(scene_dir, "irn")
+    for name in ("segmentation", "envmap"):
+        r[name] = sd.read_exr(os.path.join(scene_dir, f"{name}.exr"))
+    return r
+
+
+def _pack_arrays(r):
+    out = {"image": np.clip(np.rint(r["image"] * 255.0), 0, 255).astype(np.uint8),
+           "surface": r["surface"].astype(np.uint8)}
+    for name in ELEMENTS:
+        a = r[name]
+        if not np.isfinite(a).all():
+            raise ValueError(f"{name} holds non-finite values")
+        out[name] = np.clip(a, -65504.0, 65504.0).astype(np.float16)
+    return out
+
+
+def pack(synth_dir, out_dir, workers=1):
+    """Packs every scene of ``synth_dir`` (a ``picker synth --out`` folder) into ``out_dir``; returns its meta.
+
+    All scenes must have one size. Written to ``out_dir + ".tmp"`` first and renamed, so an interrupted pack
+    leaves no half-written pack."""
+    scenes = sd.list_scenes([synth_dir])
+    infos = [sd.scene_info(s) for s in scenes]
+    sizes = {(h, w) for _, _, h, w in infos}
+    if len(sizes) != 1:
+        raise ValueError(f"{synth_dir}: scenes of several sizes {sorted(sizes)}; pack each size on its own")
+    (h, w), n = sizes.pop(), len(scenes)
+    tmp = out_dir.rstrip("/") + ".tmp"
+    if os.path.exists(out_dir):
+        raise FileExistsError(f"{out_dir} exists")
+    os.makedirs(tmp, exist_ok=True)
+    first = _pack_arrays(_load_all(scenes[0]))
+    arrays = {name: np.lib.format.open_memmap(os.path.join(tmp, f"{name}.npy"), mode="w+", dtype=a.dtype,
+                                              shape=(n, *a.shape)) for name, a in first.items()}
+
+    def put(i, packed):
+        for name, a in packed.items():
+            if a.shape != arrays[name].shape[1:]:
+                raise ValueError(f"{scenes[i]}: {name} is {a.shape}, expected {arrays[name].shape[1:]}")
+            arrays[name][i] = a
+
+    put(0, first)
+    if workers > 1 and n > 1:
+        from concurrent.futures import ProcessPoolExecutor  # noqa: PLC0415
+
+        with ProcessPoolExecutor(workers) as ex:
+            for i, packed in enumerate(ex.map(_pack_one, scenes[1:], chunksize=16), start=1):
+                put(i, packed)
+    else:
+        for i in range(1, n):
+            put(i, _pack_one(scenes[i]))
+    for a in arrays.values():
+        a.flush()
+    del arrays
+    meta = {"format": PACK_FORMAT, "height": h, "width": w, "count": n,
+            "seeds": [s for s, _, _, _ in infos], "indices": [i for _, i, _, _ in infos],
+            "scenes": [os.path.basename(s) for s in scenes]}
+    with open(os.path.join(tmp, "meta.json"), "w") as f:
+        json.dump(meta, f)
+    os.replace(tmp, out_dir)
+    return meta
+
+
+def _pack_one(scene_dir):
+    try:
+        return _pack_arrays(_load_all(scene_dir))
+    except Exception as e:  # name the scene: the pool would only say which call failed
+        raise ValueError(f"{scene_dir}: {e}") from e
+
+
+def is_pack(path):
+    """True when ``path`` is a pack folder (holds a ``meta.json`` of :data:`PACK_FORMAT`)."""
+    p = os.path.join(path, "meta.json")
+    if not os.path.isfile(p):
+        return False
+    with open(p) as f:
+        return json.load(f).get("format") == PACK_FORMAT
+
+
+def read_pack_meta(path):
+    with open(os.path.join(path, "meta.json")) as f:
+        meta = json.load(f)
+    if meta.get("format") != PACK_FORMAT:
+        raise ValueError(f"{path}/meta.json: format {meta.get('format')!r}, expected {PACK_FORMAT!r}")
+    return meta
+
+
+class _Group:
+    """The scenes of one source (a pack or a synth folder), one size, as device tensors of raw values."""
+
+    def __init__(self, tensors, height, width, seeds):
+        self.t, self.height, self.width, self.seeds = tensors, height, width, seeds
+
+    def __len__(self):
+        return len(self.seeds)
+
+
+def _group_from_pack(path, names, device):
+    meta = read_pack_meta(path)
+    t = {}
+    for name in ("image", "surface") + tuple(names):
+        f = os.path.join(path, f"{name}.npy")
+        if not os.path.isfile(f):
+            raise FileNotFoundError(f"{path}: no {name}.npy in this pack")
+        a = np.load(f, mmap_mode="r")
+        if a.shape[0] != meta["count"]:
+            raise ValueError(f"{f}: {a.shape[0]} scenes, meta.json says {meta['count']}")
+        t[name] = torch.from_numpy(np.array(a)).to(device)
+    return _Group(t, meta["height"], meta["width"], list(meta["seeds"]))
+
+
+def _group_from_synth(scenes, names, device):
+    arrays = {}
+    seeds, size = [], None
+    for s in scenes:
+        seed, _, h, w = sd.scene_info(s)
+        if size is not None and size != (h, w):
+            raise ValueError("mixed sizes in one group")
+        size = (h, w)
+        p = _pack_arrays(_load_all(s))
+        for name in ("image", "surface") + tuple(names):
+            arrays.setdefault(name, []).append(p[name])
+        seeds.append(seed)
+    t = {name: torch.from_numpy(np.stack(v)).to(device) for name, v in arrays.items()}
+    return _Group(t, size[0], size[1], seeds)
+
+
+def _reduce(raw, k):
+    """:func:`training.synth_data.reduce_scene` on batched tensors [B, C, H, W]."""
+    if k == 1:
+        return raw
+    out = {}
+    for name, a in raw.items():
+        h, w = a.shape[-2] // k * k, a.shape[-1] // k * k
+        if name == "envmap":
+            out[name] = a
+            continue
+        a = a[..., :h, :w]
+        if name in ("image", "diffuse_albedo", "specular_albedo", "glossiness"):
+            out[name] = F.avg_pool2d(a, k)
+        elif name in ("normals", "view_vector"):
+            v = F.avg_pool2d(a, k)
+            out[name] = v / torch.linalg.vector_norm(v, dim=1, keepdim=True).clamp_min(1e-12)
+        elif name in ("uv", "segmentation"):
+            out[name] = a[..., k // 2::k, k // 2::k]
+        elif name in ("surface", "textured"):
+            out[name] = -F.max_pool2d(-a, k)
+        else:
+            raise ValueError(name)
+    return out
+
+
+def _resize_envmap(env, size):
+    """:func:`training.synth_data.resize_envmap` on a batch [B, C, h, w]."""
+    if tuple(env.shape[-2:]) == tuple(size):
+        return env
+    h, w = env.shape[-2:]
+    if h % size[0] == 0 and w % size[1] == 0:
+        return F.interpolate(env, size=size, mode="area")
+    return F.interpolate(env, size=size, mode="bilinear", align_corners=False, antialias=True)
+
+
+class DeviceData:
+    """All training scenes of ``sources`` (pack folders and ``picker synth`` folders) on ``device``, sampled as
+    :class:`training.synth_data.SynthDataset` samples them (same arguments), a whole batch at a time."""
+
+    def __init__(self, sources, net, seed, device, flip=True, crop="random", shuffle=True):
+        if net not in NET_ELEMENTS:
+            raise ValueError(f"no synth targets for net {net!r}")
+        self.net, self.seed, self.flip, self.crop = net, int(seed), flip, crop
+        self.device = torch.device(device)
+        self.names = NET_ELEMENTS[net]
+        self.groups, self.where = [], []  # where[i] = (group, index in group) of scene i
+        for src in sources:
+            src = os.fspath(src)
+            if is_pack(src):
+                groups = [_group_from_pack(src, self.names, self.device)]
+            else:
+                by_size = {}
+                for s in sd.list_scenes([src]):
+                    by_size.setdefault(tuple(sd.scene_info(s)[2:]), []).append(s)
+                # Keep list_scenes' order: one group per size, scenes listed in order within each.
+                order = sd.list_scenes([src])
+                groups, pos = [], {}
+                for size, scenes in by_size.items():
+                    pos[size] = len(groups)
+                    groups.append(_group_from_synth(scenes, self.names, self.device))
+                count = {size: 0 for size in by_size}
+                for s in order:
+                    size = tuple(sd.scene_info(s)[2:])
+                    self.where.append((len(self.groups) + pos[size], count[size]))
+                    count[size] += 1
+                self.groups.extend(groups)
+                continue
+            self.where.extend((len(self.groups), j) for j in range(len(groups[0])))
+            self.groups.extend(groups)
+        if not self.where:
+            raise ValueError("no scenes")
+        sizes = [(self.groups[g].height, self.groups[g].width) for g, _ in self.where]
+        # The scene order and permutations of the CPU reader (it needs only the scene count and sizes).
+        self.order = sd.SynthDataset([f"scene {i}" for i in range(len(sizes))], net, seed, size_of=None,
+                                     flip=flip, crop=crop, shuffle=shuffle, sizes=sizes)
+
+    def __len__(self):
+        return len(self.where)
+
+    def seeds(self):
+        """Sorted distinct generator seeds of the scenes."""
+        return sorted({s for g in self.groups for s in g.seeds})
+
+    def eligible(self, size):
+        """As :meth:`training.synth_data.SynthDataset.eligible`: raises ValueError when no scene is that big."""
+        return self.order.eligible(size)
+
+    def batch(self, ks, size):
+        """The batch of global sample numbers ``ks`` at training size ``size`` = (H, W): a dict of float32
+        device tensors, as ``default_collate`` of the CPU reader's samples."""
+        h, w = size
+        n = len(ks)
+        draws = {}
+        for pos, k in enumerate(ks):
+            i = self.order.scene_index(int(k), tuple(size))
+            g, j = self.where[i]
+            grp = self.groups[g]
+            kf = sd.reduction_factor(grp.height, grp.width, h, w)
+            hr, wr = grp.height // kf, grp.width // kf
+            rng = np.random.default_rng([self.seed, (1 << 32) + int(k)])
+            if self.crop == "random":
+                top, left = int(rng.integers(0, hr - h + 1)), int(rng.integers(0, wr - w + 1))
+            else:
+                top, left = (hr - h) // 2, (wr - w) // 2
+            mirror = bool(self.flip and rng.random() < 0.5)
+            draws.setdefault(g, []).append((pos, j, top, left, mirror))
+        out = {}
+        dev = self.device
+        for g, items in draws.items():
+            grp = self.groups[g]
+            kf = sd.reduction_factor(grp.height, grp.width, h, w)
+            pos = torch.tensor([it[0] for it in items], device=dev)
+            idx = torch.tensor([it[1] for it in items], device=dev)
+            top = torch.tensor([it[2] for it in items], device=dev)
+            left = torch.tensor([it[3] for it in items], device=dev)
+            mirror = torch.tensor([it[4] for it in items], device=dev)
+            raw = {}
+            for name, t in grp.t.items():
+                a = t.index_select(0, idx).float()
+                raw[name] = a / 255.0 if name == "image" else a
+            if "uv" in raw:
+                raw["textured"] = raw["surface"] * (raw["uv"][:, 2:3] >= 0.5)
+            r = _reduce(raw, kf)
+            ar_h, ar_w = torch.arange(h, device=dev), torch.arange(w, device=dev)
+            rows = top[:, None] + ar_h[None]                                         # [b, h]
+            cols = torch.where(mirror[:, None], left[:, None] + (w - 1 - ar_w)[None], left[:, None] + ar_w[None])
+            sample = {}
+            for name, a in r.items():
+                if name == "envmap":
+                    ew = a.shape[-1]
+                    ec = torch.where(mirror[:, None], (ew - 1 - torch.arange(ew, device=dev))[None],
+                                     torch.arange(ew, device=dev)[None])
+                    a = a.gather(3, ec[:, None, None, :].expand(-1, a.shape[1], a.shape[2], -1))
+                    sample[name] = _resize_envmap(a, (max(1, h // 8), max(1, w // 8)))
+                    continue
+                b, c = a.shape[:2]
+                a = a.gather(2, rows[:, None, :, None].expand(b, c, h, a.shape[-1]))
+                a = a.gather(3, cols[:, None, None, :].expand(b, c, h, w))
+                if name in ("normals", "view_vector"):
+                    sign = torch.ones(b, 3, 1, 1, device=dev)
+                    sign[:, 0, 0, 0] = torch.where(mirror, -1.0, 1.0)
+                    a = a * sign
+                sample[name] = a
+            t = sd.encode_targets(sample)
+            t["input"] = t.pop("image")
+            for name, a in t.items():
+                if name not in out:
+                    out[name] = torch.empty((n, *a.shape[1:]), dtype=torch.float32, device=dev)
+                out[name][pos] = a
+        return out
+
+
+def augment_photometric(x, seed, step, params):
+    """Photometric augmentation of a batch of network inputs ``x`` ([N, 3, H, W], 2·sRGB − 1) in place of the
+    camera: with probability ``p`` per sample, an exposure gain (log-uniform in ``exposure``), a white-balance
+    gain per channel (log-uniform in [1/(1 + wb), 1 + wb]) applied in linear light with the sRGB clipping a
+    camera does, then Gaussian noise of σ uniform in [0, ``noise``] (sRGB units). The targets (albedos,
+    normals, segmentation: properties of the surfaces) do not change. Deterministic in (seed, step)."""
+    n = x.shape[0]
+    rng = np.random.default_rng([int(seed), 3 << 32, int(step)])
+    p = float(params.get("p", 0.8))
+    lo, hi = params.get("exposure", [0.5, 2.0])
+    wb = float(params.get("white_balance", 0.15))
+    noise = float(params.get("noise", 0.02))
+    on = rng.random(n) < p
+    gain = np.exp(rng.uniform(np.log(lo), np.log(hi), n))
+    balance = np.exp(rng.uniform(-np.log1p(wb), np.log1p(wb), (n, 3)))
+    sigma = rng.uniform(0.0, noise, n)
+    g = torch.from_numpy(np.where(on[:, None], gain[:, None] * balance, 1.0)).float().to(x.device)
+    s = torch.from_numpy(np.where(on, sigma, 0.0)).float().to(x.device)
+    gen = torch.Generator(device=x.device).manual_seed(int(rng.integers(0, 2**62)))
+    srgb = (x + 1.0) / 2.0
+    lin = sd.srgb_decode(srgb.clamp(0.0, 1.0)) * g[:, :, None, None]
+    out = sd.srgb_encode(lin) + s[:, None, None, None] * torch.randn(x.shape, generator=gen, device=x.device)
+    out = out.clamp(0.0, 1.0)
+    keep = torch.from_numpy(~on).to(x.device)[:, None, None, None]
+    return torch.where(keep, x, 2.0 * out - 1.0)
+
+
+def source_seeds(sources):
+    """Sorted distinct generator seeds of the scenes of ``sources`` (packs and synth folders), read from the
+    packs' ``meta.json`` and the scenes' ``scene.json`` without loading any image."""
+    seeds = set()
+    for src in sources:
+        src = os.fspath(src)
+        if is_pack(src):
+            seeds.update(read_pack_meta(src)["seeds"])
+        else:
+            seeds.update(sd.seeds_of(sd.list_scenes([src])))
+    return sorted(seeds)
