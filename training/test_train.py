@@ -365,6 +365,8 @@ def test_device_training(tmp):
     first = stages[0]["steps"]
     assert first >= 1 and stages[0]["seconds"] == 0.5 and stages[1]["steps"] == 2, stages
     assert int(meta["training.steps"]) == first + 2
+    recipe = json.loads(meta["training.recipe"])
+    assert recipe["augment"] == {"p": 0.5} and recipe["device_data"] is True and "amp" not in recipe, recipe
     with open(os.path.join(out, "train.csv"), newline="") as f:
         rows = list(csv.DictReader(f))
     assert [int(r["step"]) for r in rows] == list(range(1, first + 3))

@@ -430,6 +430,9 @@ def export(run_dir, cfg, model, step, metrics, train_seeds, val_seeds, device_na
     when = (datetime.datetime.fromtimestamp(int(epoch), datetime.timezone.utc) if epoch
             else datetime.datetime.now(datetime.timezone.utc))
     recipe = {k: cfg[k] for k in ("seed", "batch", "lr", "adam_betas", "stages", "flip", "loss_weights")}
+    for k in ("augment", "amp", "device_data"):  # what changes the samples or the arithmetic, when used
+        if cfg.get(k):
+            recipe[k] = cfg[k]
     steps_before = 0
     extra = {}
     history = cfg.get("init_history")
