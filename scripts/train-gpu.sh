@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
 # The GPU training recipe of the `lite` IRN, MSN and EnvMap (docs/model-card.md): data, packs, three runs.
+# The embedded IRN and EnvMap (stop 29) come from it; its MSN was not embedded (docs/model-card.md).
 #
 #   scripts/train-gpu.sh WORK_DIR
 #

@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# The training recipe of the embedded default weights (`lite` IRN, MSN and EnvMap; docs/model-card.md).
+# The CPU training recipe of the `lite` IRN, MSN and EnvMap (docs/model-card.md): the embedded weights of
+# stops 12-28; since stop 29 the embedded MSN is still this recipe's, the IRN and EnvMap scripts/train-gpu.sh's.
 #
 #   scripts/train-lite.sh [WORK_DIR]        (WORK_DIR defaults to ./lite-work; needs ~25 GB)
 #
