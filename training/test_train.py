@@ -126,6 +126,16 @@ def _losses(run_dir):
         return [float(r["loss"]) for r in csv.DictReader(f)]
 
 
+def _refused(argv, expected, what):
+    """``train.main(argv)`` must exit with a message containing ``expected``; ``what`` names the case."""
+    try:
+        train.main(argv)
+    except SystemExit as e:
+        assert expected in str(e), e
+        return
+    raise AssertionError(what)
+
+
 def test_mixed_scene_sizes():
     """Stages larger than some scenes draw only from the scenes that are large enough; none: a clear error."""
     ds = sd.SynthDataset([SCENE0, SCENE1], "msn", 3, lambda k: (24, 32) if k < 4 else (12, 16))
@@ -209,17 +219,11 @@ def test_init(tmp, msn_path):
     assert init["steps"] == 4 and init["data_seeds"] == [2026] and len(init["sha256"]) == 64, init
     assert meta["training.steps"] == "6", meta["training.steps"]
     # Another net's file, or the same net with another config: refused before training.
-    try:
-        train.main([*args, "--steps", "1", "--init", msn_path, "--out", os.path.join(tmp, "bad"), "--net", "envmap"])
-        raise AssertionError("an msn file started an envmap run")
-    except SystemExit as e:
-        assert "holds 'msn' weights" in str(e), e
-    try:
-        train.main([*args, "--steps", "1", "--init", msn_path, "--out", os.path.join(tmp, "bad2"),
-                    "--preset", "lite"])
-        raise AssertionError("a tiny file started a lite run")
-    except SystemExit as e:
-        assert "differs from the run's" in str(e), e
+    _refused([*args, "--steps", "1", "--init", msn_path, "--out", os.path.join(tmp, "bad"), "--net", "envmap"],
+             "holds 'msn' weights", "an msn file started an envmap run")
+    _refused([*args, "--steps", "1", "--init", msn_path, "--out", os.path.join(tmp, "bad2"),
+              "--preset", "lite"],
+             "differs from the run's", "a tiny file started a lite run")
 
 
 def test_stage_lr(tmp):
@@ -236,12 +240,9 @@ def test_stage_lr(tmp):
     assert lrs == [5e-4, 5e-4, 1e-3, 1e-3], lrs
     with open(cfg, "w") as f:
         json.dump({"stages": [{"size": [24, 32], "steps": 2, "lr": 0}]}, f)
-    try:
-        train.main(["--net", "msn", "--preset", "tiny", "--data", FIXTURES, "--config", cfg, "--quiet",
-                    "--out", os.path.join(tmp, "sched-bad")])
-        raise AssertionError("a stage with lr 0 was accepted")
-    except SystemExit as e:
-        assert "lr must be a positive number" in str(e), e
+    _refused(["--net", "msn", "--preset", "tiny", "--data", FIXTURES, "--config", cfg, "--quiet",
+              "--out", os.path.join(tmp, "sched-bad")],
+             "lr must be a positive number", "a stage with lr 0 was accepted")
 
 
 def picker_bin():
@@ -388,12 +389,9 @@ def test_device_training(tmp):
         assert torch.equal(ck[0]["model"][k], ck[1]["model"][k]), k
         assert torch.equal(ck[0]["model"][k], ck[2]["model"][k]), k
     assert _losses(runs[2]) == losses
-    try:
-        train.main(["--net", "envmap", "--preset", "tiny", "--config", cfg, "--data", FIXTURES, "--quiet",
-                    "--out", os.path.join(tmp, "env-aug")])
-        raise AssertionError("augmenting the EnvMap's input was accepted")
-    except SystemExit as e:
-        assert "EnvMap" in str(e), e
+    _refused(["--net", "envmap", "--preset", "tiny", "--config", cfg, "--data", FIXTURES, "--quiet",
+              "--out", os.path.join(tmp, "env-aug")],
+             "EnvMap", "augmenting the EnvMap's input was accepted")
 
 
 def main():
