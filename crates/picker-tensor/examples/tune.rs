@@ -1,6 +1,6 @@
 //! Times one layer shape of the thesis networks at 240×320, for quick tuning
 //! without criterion: `cargo run --release -p picker-tensor --example tune -- res`
-//! (`res`, `resmany`, `envres`, `envresmany`, `decout`, `encin`, `down0`, `down1`, `envin`, `envdown0`, `envdown1`, `up0`, `up1`; `RAYON_NUM_THREADS`, `PICKER_ISA` apply).
+//! (`TUNE_RUNS` sets the number of timed runs, default 49; `res`, `resmany`, `envres`, `envresmany`, `decout`, `encin`, `down0`, `down1`, `envin`, `envdown0`, `envdown1`, `up0`, `up1`; `RAYON_NUM_THREADS`, `PICKER_ISA` apply).
 
 use picker_tensor::{
     Activation, Conv2d, ConvAlgorithm, ConvSpec, ConvTranspose2d, ConvTransposeSpec, Isa, Rng,
@@ -8,9 +8,15 @@ use picker_tensor::{
 };
 use std::time::Instant;
 
-/// Runs `f` 25 times and prints the median and minimum with their FLOP rates.
+/// Runs `f` 49 times (`TUNE_RUNS` to change, e.g. longer for `perf record`)
+/// and prints the median and minimum with their FLOP rates.
 fn time_it(name: &str, flops: u64, mut f: impl FnMut() -> Tensor) {
-    let mut t: Vec<f64> = (0..49)
+    let runs = std::env::var("TUNE_RUNS")
+        .ok()
+        .and_then(|v| v.parse::<usize>().ok())
+        .filter(|&n| n > 0)
+        .unwrap_or(49);
+    let mut t: Vec<f64> = (0..runs)
         .map(|_| {
             let t0 = Instant::now();
             std::hint::black_box(f());
@@ -21,8 +27,8 @@ fn time_it(name: &str, flops: u64, mut f: impl FnMut() -> Tensor) {
     let g = |s: f64| flops as f64 / s / 1e9;
     println!(
         "{name}: median {:.2} ms ({:.0} GFLOP/s), min {:.2} ms ({:.0} GFLOP/s)",
-        t[24] * 1e3,
-        g(t[24]),
+        t[runs / 2] * 1e3,
+        g(t[runs / 2]),
         t[0] * 1e3,
         g(t[0])
     );
