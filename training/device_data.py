@@ -45,10 +45,10 @@ def _load_all(scene_dir):
     return r
 
 
-def _pack_arrays(r):
+def _pack_arrays(r, names=ELEMENTS):
     out = {"image": np.clip(np.rint(r["image"] * 255.0), 0, 255).astype(np.uint8),
            "surface": r["surface"].astype(np.uint8)}
-    for name in ELEMENTS:
+    for name in names:
         a = r[name]
         if not np.isfinite(a).all():
             raise ValueError(f"{name} holds non-finite values")
@@ -151,18 +151,12 @@ def _group_from_pack(path, names, device):
     return _Group(t, meta["height"], meta["width"], list(meta["seeds"]))
 
 
-def _group_from_synth(scenes, names, device):
+def _group_from_synth(scenes, net, size, seeds, device):
+    """The scenes (folders, all of ``size``) of one group, read for ``net`` alone."""
     arrays = {}
-    seeds, size = [], None
     for s in scenes:
-        seed, _, h, w = sd.scene_info(s)
-        if size is not None and size != (h, w):
-            raise ValueError("mixed sizes in one group")
-        size = (h, w)
-        p = _pack_arrays(_load_all(s))
-        for name in ("image", "surface") + tuple(names):
-            arrays.setdefault(name, []).append(p[name])
-        seeds.append(seed)
+        for name, a in _pack_arrays(sd.load_scene(s, net), NET_ELEMENTS[net]).items():
+            arrays.setdefault(name, []).append(a)
     t = {name: torch.from_numpy(np.stack(v)).to(device) for name, v in arrays.items()}
     return _Group(t, size[0], size[1], seeds)
 
@@ -216,31 +210,28 @@ class DeviceData:
         for src in sources:
             src = os.fspath(src)
             if is_pack(src):
-                groups = [_group_from_pack(src, self.names, self.device)]
-            else:
-                by_size = {}
-                for s in sd.list_scenes([src]):
-                    by_size.setdefault(tuple(sd.scene_info(s)[2:]), []).append(s)
-                # Keep list_scenes' order: one group per size, scenes listed in order within each.
-                order = sd.list_scenes([src])
-                groups, pos = [], {}
-                for size, scenes in by_size.items():
-                    pos[size] = len(groups)
-                    groups.append(_group_from_synth(scenes, self.names, self.device))
-                count = {size: 0 for size in by_size}
-                for s in order:
-                    size = tuple(sd.scene_info(s)[2:])
-                    self.where.append((len(self.groups) + pos[size], count[size]))
-                    count[size] += 1
-                self.groups.extend(groups)
+                group = _group_from_pack(src, self.names, self.device)
+                self.where.extend((len(self.groups), j) for j in range(len(group)))
+                self.groups.append(group)
                 continue
-            self.where.extend((len(self.groups), j) for j in range(len(groups[0])))
-            self.groups.extend(groups)
+            # A synth folder: one group per scene size; the scenes keep list_scenes' order.
+            by_size, order = {}, []
+            for s in sd.list_scenes([src]):
+                scene_seed, _, h, w = sd.scene_info(s)
+                scenes, seeds = by_size.setdefault((h, w), ([], []))
+                order.append(((h, w), len(scenes)))
+                scenes.append(s)
+                seeds.append(scene_seed)
+            index = {}
+            for size, (scenes, seeds) in by_size.items():
+                index[size] = len(self.groups)
+                self.groups.append(_group_from_synth(scenes, net, size, seeds, self.device))
+            self.where.extend((index[size], j) for size, j in order)
         if not self.where:
             raise ValueError("no scenes")
         sizes = [(self.groups[g].height, self.groups[g].width) for g, _ in self.where]
         # The scene order and permutations of the CPU reader (it needs only the scene count and sizes).
-        self.order = sd.SynthDataset([f"scene {i}" for i in range(len(sizes))], net, seed, size_of=None,
+        self.order = sd.SynthDataset([f"scene {i}" for i in range(len(sizes))], net, self.seed, size_of=None,
                                      flip=flip, crop=crop, shuffle=shuffle, sizes=sizes)
 
     def __len__(self):
