@@ -203,10 +203,15 @@ class DeviceData:
     def __init__(self, sources, net, seed, device, flip=True, crop="random", shuffle=True):
         if net not in NET_ELEMENTS:
             raise ValueError(f"no synth targets for net {net!r}")
-        self.net, self.seed, self.flip, self.crop = net, int(seed), flip, crop
+        self.net, self.seed, self.flip, self.crop, self.shuffle = net, int(seed), flip, crop, shuffle
         self.device = torch.device(device)
         self.names = NET_ELEMENTS[net]
         self.groups, self.where = [], []  # where[i] = (group, index in group) of scene i
+        self.add(sources)
+
+    def add(self, sources):
+        """Appends the scenes of more ``sources`` (after those already held). The scene order, and so the
+        permutations of later sample numbers, are those of a reader made with all the sources at once."""
         for src in sources:
             src = os.fspath(src)
             if is_pack(src):
@@ -225,14 +230,15 @@ class DeviceData:
             index = {}
             for size, (scenes, seeds) in by_size.items():
                 index[size] = len(self.groups)
-                self.groups.append(_group_from_synth(scenes, net, size, seeds, self.device))
+                self.groups.append(_group_from_synth(scenes, self.net, size, seeds, self.device))
             self.where.extend((index[size], j) for size, j in order)
         if not self.where:
             raise ValueError("no scenes")
         sizes = [(self.groups[g].height, self.groups[g].width) for g, _ in self.where]
         # The scene order and permutations of the CPU reader (it needs only the scene count and sizes).
-        self.order = sd.SynthDataset([f"scene {i}" for i in range(len(sizes))], net, self.seed, size_of=None,
-                                     flip=flip, crop=crop, shuffle=shuffle, sizes=sizes)
+        self.order = sd.SynthDataset([f"scene {i}" for i in range(len(sizes))], self.net, self.seed,
+                                     size_of=None, flip=self.flip, crop=self.crop, shuffle=self.shuffle,
+                                     sizes=sizes)
 
     def __len__(self):
         return len(self.where)

@@ -12,6 +12,7 @@ import glob
 import json
 import os
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
@@ -394,6 +395,59 @@ def test_device_training(tmp):
              "EnvMap", "augmenting the EnvMap's input was accepted")
 
 
+def test_stage_data(tmp):
+    """Stage data: read when its stage begins (waiting for a pack made meanwhile), counted in the export's
+    seeds, resumable bit for bit before and after the stage that reads it; a pack that never comes fails."""
+    import threading  # noqa: PLC0415
+
+    late = os.path.join(tmp, "late-pack")
+    threading.Timer(1.0, lambda: device_data.pack(FIXTURES, late)).start()
+    cfg = os.path.join(tmp, "stage-data.json")
+    with open(cfg, "w") as f:
+        json.dump({"device_data": True, "batch": 2, "log_every": 1, "data_wait_s": 60,
+                   "stages": [{"size": [24, 32], "steps": 2}, {"size": [16, 16], "steps": 2}]}, f)
+    common = ["--net", "msn", "--preset", "tiny", "--config", cfg, "--data", SCENE0, "--stage-data", "1", late,
+              "--threads", "1", "--quiet"]
+    runs = [os.path.join(tmp, n) for n in ("sd-a", "sd-b", "sd-c")]
+    path = train.main(common + ["--out", runs[0]])
+    from safetensors import safe_open  # noqa: PLC0415
+    with safe_open(path, framework="pt") as f:
+        meta = f.metadata()
+    assert json.loads(meta["training.data_seeds"]) == [2026], meta["training.data_seeds"]
+    assert json.loads(meta["training.recipe"])["stages"][1]["data"] == [late]
+    for out, until in ((runs[1], "1"), (runs[2], "3")):
+        assert train.main(common + ["--out", out, "--until", until]) is None
+        train.main(["--resume", "--out", out, "--threads", "1", "--quiet"])
+    ck = [torch.load(os.path.join(r, "checkpoints", "last.pt"), weights_only=False) for r in runs]
+    for k in ck[0]["model"]:
+        assert torch.equal(ck[0]["model"][k], ck[1]["model"][k]), k
+        assert torch.equal(ck[0]["model"][k], ck[2]["model"][k]), k
+    # The stage data were trained on: without them stage 1 draws from SCENE0 alone, other weights.
+    alone = os.path.join(tmp, "sd-alone")
+    train.main(common[:common.index("--stage-data")] + common[common.index("--stage-data") + 3:] + ["--out", alone])
+    other = torch.load(os.path.join(alone, "checkpoints", "last.pt"), weights_only=False)["model"]
+    assert any(not torch.equal(other[k], ck[0]["model"][k]) for k in other)
+    # A signal while waiting for stage data: checkpoint, stop; the export's seeds are those read.
+    with open(cfg, "w") as f:
+        json.dump({"device_data": True, "batch": 2, "data_wait_s": 60,
+                   "stages": [{"size": [24, 32], "steps": 1}, {"size": [16, 16], "steps": 1}]}, f)
+    waiting = os.path.join(tmp, "sd-wait")
+    threading.Timer(1.5, signal.raise_signal, (signal.SIGINT,)).start()
+    assert train.main(["--net", "msn", "--preset", "tiny", "--config", cfg, "--data", SCENE0, "--stage-data", "1",
+                       os.path.join(tmp, "never"), "--threads", "1", "--quiet", "--out", waiting]) is None
+    path = train.main(["--export-only", "--out", waiting, "--quiet"])
+    with safe_open(path, framework="pt") as f:
+        assert json.loads(f.metadata()["training.steps"]) == 1
+    with open(cfg, "w") as f:
+        json.dump({"device_data": True, "batch": 2, "data_wait_s": 1,
+                   "stages": [{"size": [24, 32], "steps": 1}, {"size": [16, 16], "steps": 1}]}, f)
+    _refused(["--net", "msn", "--preset", "tiny", "--config", cfg, "--data", SCENE0, "--stage-data", "1",
+              os.path.join(tmp, "never"), "--threads", "1", "--quiet", "--out", os.path.join(tmp, "sd-never")],
+             "not there after 1 s", "a stage whose data never came")
+    _refused(["--net", "msn", "--preset", "tiny", "--config", cfg, "--data", SCENE0, "--stage-data", "2", late,
+              "--quiet", "--out", os.path.join(tmp, "sd-bad")], "no stage 2", "stage data for a stage that is not")
+
+
 def main():
     torch.set_num_threads(1)
     t_all = time.perf_counter()
@@ -419,6 +473,7 @@ def main():
         step("device data: the CPU reader's batches, packs", test_device_batches, tmp)
         step("photometric augmentation", test_augment)
         step("device-data runs: stages of seconds, repeatable, resumable", test_device_training, tmp)
+        step("stage data: read when its stage begins, resumable", test_stage_data, tmp)
     print(f"all passed in {time.perf_counter() - t_all:.1f} s")
 
 

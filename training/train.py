@@ -73,6 +73,7 @@ DEFAULTS = {
     "device_data": False,      # keep the scenes on the device, batches made there (training/device_data.py)
     "augment": None,           # photometric augmentation of the input (IRN, MSN): {"p", "exposure", ...}
     "channels_last": False,    # NHWC activations on CUDA (faster bf16 convolutions)
+    "data_wait_s": 0,          # device_data: how long a stage waits for its "data" to appear (made meanwhile)
 }
 
 DTYPES = {"f16": torch.float16, "bf16": torch.bfloat16, "f32": torch.float32}
@@ -94,6 +95,8 @@ def arg_parser():
     p.add_argument("--config", help="JSON training config (keys of DEFAULTS; CLI flags override it)")
     p.add_argument("--data", action="append", help="picker synth output folder for training (repeatable)")
     p.add_argument("--val", action="append", help="validation folder (repeatable; seeds disjoint from --data)")
+    p.add_argument("--stage-data", nargs=2, action="append", metavar=("STAGE", "DIR"),
+                   help="more training data read when stage STAGE (0-based) begins (device_data; repeatable)")
     p.add_argument("--out", required=True, help="run folder")
     p.add_argument("--steps", type=int, help="total steps (the last stage is extended or cut to reach it)")
     p.add_argument("--size", type=parse_size, help="training size HxW: one stage (overrides the config's stages)")
@@ -140,6 +143,12 @@ def effective_config(args, base=None):
         cfg["data"] = args.data
     if args.val:
         cfg["val"] = args.val
+    for stage, folder in args.stage_data or []:
+        try:
+            cfg["stages"][int(stage)].setdefault("data", []).append(folder)
+        except (ValueError, IndexError):
+            raise SystemExit(f"--stage-data {stage} {folder}: no stage {stage} "
+                             f"(the run has {len(cfg['stages'])})") from None
     if args.no_flip:
         cfg["flip"] = False
     if args.size is not None:
@@ -161,9 +170,11 @@ def effective_config(args, base=None):
     if cfg["label"] in PRESETS[cfg["net"]] and PRESETS[cfg["net"]][cfg["label"]] != cfg["model"]:
         raise SystemExit(f"label {cfg['label']!r} names a preset but the model config differs from it")
     for s in cfg["stages"]:
-        unknown = set(s) - {"size", "steps", "seconds", "lr"}
+        unknown = set(s) - {"size", "steps", "seconds", "lr", "data"}
         if unknown:
-            raise SystemExit(f"stage {s}: unknown keys {sorted(unknown)}; known: lr, seconds, size, steps")
+            raise SystemExit(f"stage {s}: unknown keys {sorted(unknown)}; known: data, lr, seconds, size, steps")
+        if "data" in s and not cfg["device_data"]:
+            raise SystemExit(f"stage {s}: stage data needs \"device_data\": true")
         if "steps" not in s and "seconds" not in s:
             raise SystemExit(f"stage {s}: needs steps or seconds")
         if "steps" not in s and not cfg["device_data"]:
@@ -260,6 +271,42 @@ class StageSize:
 
     def __call__(self, k):
         return stage_of(self.stages, k // self.batch)[1]
+
+
+def sources_until(cfg, stage):
+    """Training sources of a device-data run once stage ``stage`` has begun: ``data`` and the stage data of
+    stages 0..stage."""
+    out = list(cfg["data"])
+    for s in cfg["stages"][:stage + 1]:
+        out += s.get("data", [])
+    return out
+
+
+def disjoint_seeds(sources, val_seeds):
+    """Sorted generator seeds of ``sources``; SystemExit when the validation data share one."""
+    seeds = device_data.source_seeds(sources)
+    shared = sorted(set(seeds) & set(val_seeds))
+    if shared:
+        raise SystemExit(f"splits 'train' and 'val' share the picker synth seeds {shared}; "
+                         "train, validation and test data must come from different seeds")
+    return seeds
+
+
+def wait_for(folders, seconds, say, stopped=lambda: False):
+    """Waits up to ``seconds`` for every folder to exist (a pack appears whole: it is renamed into place);
+    SystemExit naming the missing ones after that. Returns False when ``stopped()`` became true first."""
+    t_end = time.monotonic() + seconds
+    missing = [f for f in folders if not os.path.exists(f)]
+    if missing:
+        say(f"waiting up to {seconds} s for {missing}")
+    while missing and time.monotonic() < t_end:
+        if stopped():
+            return False
+        time.sleep(0.5)
+        missing = [f for f in missing if not os.path.exists(f)]
+    if missing:
+        raise SystemExit(f"stage data {missing}: not there after {seconds} s (data_wait_s)")
+    return True
 
 
 def seed_everything(seed):
@@ -491,11 +538,9 @@ def main(argv=None):
     val_seeds = sd.seeds_of(val_scenes)
     if cfg["device_data"]:
         train_scenes = None
-        train_seeds = device_data.source_seeds(cfg["data"])
-        shared = sorted(set(train_seeds) & set(val_seeds))
-        if shared:
-            raise SystemExit(f"splits 'train' and 'val' share the picker synth seeds {shared}; "
-                             "train, validation and test data must come from different seeds")
+        # The data read so far (a stage's data are read when it begins; the checkpoint says how far).
+        read = ckpt.get("data_stage", 0) if ckpt is not None else 0
+        train_seeds = disjoint_seeds(sources_until(cfg, read), val_seeds)
     else:
         train_scenes = sd.list_scenes(cfg["data"])
         try:
@@ -556,7 +601,7 @@ def main(argv=None):
     def checkpoint():
         atomic_save({"model": model.state_dict(), "optimizer": opt.state_dict(), "step": step,
                      "seconds": elapsed, "rng": rng_state(), "config": cfg, "metrics": metrics,
-                     "device": device_name, "schedule": sched.state()}, ckpt_path)
+                     "device": device_name, "schedule": sched.state(), "data_stage": loaded}, ckpt_path)
 
     def validate(size):
         nonlocal metrics
@@ -568,10 +613,15 @@ def main(argv=None):
 
     batch = cfg["batch"]
     sched = Schedule(cfg["stages"], ckpt.get("schedule") if ckpt is not None else None)
+    loaded = 0  # device data: the last stage whose data are read
     if cfg["device_data"]:
         t_load = time.perf_counter()
+        loaded = sched.idx if sched.idx < len(cfg["stages"]) else len(cfg["stages"]) - 1
+        first = sources_until(cfg, loaded)
+        wait_for(first, cfg["data_wait_s"], say)
+        train_seeds = disjoint_seeds(first, val_seeds)
         try:
-            data = device_data.DeviceData(cfg["data"], net, cfg["seed"], device, flip=cfg["flip"])
+            data = device_data.DeviceData(first, net, cfg["seed"], device, flip=cfg["flip"])
         except (ValueError, FileNotFoundError) as e:
             raise SystemExit(f"--data: {e}") from None
         n_train = len(data)
@@ -582,17 +632,44 @@ def main(argv=None):
                              cache=cfg["cache"])
         n_train = len(train_scenes)
         check = ds.eligible
-    for st in cfg["stages"]:  # every stage needs scenes at least its size: fail now, not hours later
-        try:
-            check(st["size"])
-        except ValueError as e:
-            raise SystemExit(f"stage {st['size'][0]}x{st['size'][1]}: {e}") from None
+    def check_stages(first, last):
+        for st in cfg["stages"][first:last]:  # every stage needs scenes at least its size: fail early
+            try:
+                check(st["size"])
+            except ValueError as e:
+                raise SystemExit(f"stage {st['size'][0]}x{st['size'][1]}: {e}") from None
+
+    def data_until(stage):  # the stages whose data are all read once stage `stage` has begun
+        later = [i for i, st in enumerate(cfg["stages"]) if i > stage and st.get("data")]
+        return later[0] if later else len(cfg["stages"])
+
+    if cfg["device_data"]:
+        check_stages(0, data_until(loaded))
+    else:
+        check_stages(0, len(cfg["stages"]))
+    paused = [0.0]  # seconds the data source spent reading stage data: not training time
     if cfg["device_data"]:
         def batches():
+            nonlocal loaded, train_seeds
             while not (args.until and step >= args.until):
                 cur = sched.current(step)
                 if cur is None:
                     return
+                if cur[0] > loaded:
+                    t_read = time.perf_counter()
+                    more = [f for st in cfg["stages"][loaded + 1:cur[0] + 1] for f in st.get("data", [])]
+                    if not wait_for(more, cfg["data_wait_s"], say, lambda: bool(stop_signal)):
+                        return  # stopped by a signal while waiting
+                    train_seeds = disjoint_seeds(sources_until(cfg, cur[0]), val_seeds)
+                    try:
+                        data.add(more)
+                    except (ValueError, FileNotFoundError) as e:
+                        raise SystemExit(f"stage {cur[0]} data: {e}") from None
+                    check_stages(loaded + 1, data_until(cur[0]))
+                    loaded = cur[0]
+                    paused[0] += time.perf_counter() - t_read
+                    say(f"stage {cur[0]}: {len(data)} training scenes (read {more} in "
+                        f"{time.perf_counter() - t_read:.1f} s)")
                 yield data.batch(range(step * batch, (step + 1) * batch), cur[1])
         source = batches()
         stop = args.until
@@ -635,8 +712,10 @@ def main(argv=None):
         if device.type == "cuda" and "steps" not in cfg["stages"][stage] and step % 10 == 0:
             torch.cuda.synchronize(device)  # a stage of seconds counts finished work (within 10 steps)
         now = time.perf_counter()
-        elapsed += now - t0
-        sched.add_time(now - t0)
+        dt = now - t0 - paused[0]
+        paused[0] = 0.0
+        elapsed += dt
+        sched.add_time(dt)
         t0 = now
         if step % cfg["log_every"] == 0 or step == 1 or step == stop:
             total_f, per_f = floats()
@@ -655,11 +734,12 @@ def main(argv=None):
         if step % cfg["ckpt_every"] == 0 or step == stop:
             checkpoint()
         if stop_signal:
-            checkpoint()
             break
         t0 = time.perf_counter()  # evaluation, pictures and checkpoints are not training time
     for sig, handler in previous.items():
         signal.signal(sig, handler)
+    if stop_signal:
+        checkpoint()
     if stop_signal or sched.current(step) is not None:
         why = f"signal {stop_signal[0]}" if stop_signal else "--until"
         say(f"stopped at step {step} ({why}); continue with --resume --out {run_dir}, "
