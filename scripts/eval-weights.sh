@@ -94,13 +94,7 @@ for c in "$@"; do
         while read -r photo_name photo pick; do
             "$PICKER" extract "$photo" --pick "$pick" "${WX[@]}" --out "$OUT/photos/$name/$photo_name" \
                 --no-timings --threads "$THREADS" > /dev/null
-        done <<EOF
-room fixtures/examples/room.png 200,150
-coffee fixtures/examples/coffee.jpg 20,190
-aloe $PHOTO_DATA/aloeL.jpg 150,150
-stuff $PHOTO_DATA/stuff.jpg 150,380
-board $PHOTO_DATA/left01.jpg 380,200
-EOF
+        done < <(grep -v '^#' scripts/model-card-photos.txt | sed "s|OPENCV_DATA|$PHOTO_DATA|")
     fi
 done
 python3 "$ROOT/scripts/eval_summary.py" "$OUT"

@@ -22,7 +22,7 @@ DATA="$TMP/pkg/usr/share/doc/opencv-doc/examples/data"
 
 OUT="$ROOT/docs/model-card"
 mkdir -p "$OUT"
-# name photo pick: what is picked
+# name photo pick (scripts/model-card-photos.txt)
 while read -r name photo pick; do
     "$PICKER" extract "$photo" --pick "$pick" --out "$TMP/$name" --no-timings --threads 2
     "$PYTHON" - "$TMP/$name/report.png" "$OUT/$name.jpg" <<'EOF'
@@ -31,11 +31,5 @@ from PIL import Image
 im = Image.open(sys.argv[1]).convert("RGB")
 im.save(sys.argv[2], quality=82, optimize=True)
 EOF
-done <<EOF
-room fixtures/examples/room.png 200,150
-coffee fixtures/examples/coffee.jpg 20,190
-aloe $DATA/aloeL.jpg 150,150
-stuff $DATA/stuff.jpg 150,380
-board $DATA/left01.jpg 380,200
-EOF
+done < <(grep -v '^#' scripts/model-card-photos.txt | sed "s|OPENCV_DATA|$DATA|")
 echo "model-card-photos: wrote $(ls "$OUT"/*.jpg | wc -l) pictures to $OUT"
