@@ -632,6 +632,7 @@ def main(argv=None):
                              cache=cfg["cache"])
         n_train = len(train_scenes)
         check = ds.eligible
+
     def check_stages(first, last):
         for st in cfg["stages"][first:last]:  # every stage needs scenes at least its size: fail early
             try:
