@@ -8,7 +8,8 @@
 # Made for one machine with a CUDA GPU and many cores, run in one go (e.g. a lent GPU machine with a
 # deadline): all data are generated there with `picker synth` and packed (training/pack.py), the three
 # nets train at once on the one GPU with the scenes held in its memory (recipes training/recipes/gpu-*.json:
-# stages of seconds, bf16, photometric augmentation), and everything the run made is left in WORK_DIR/runs.
+# stages of seconds, bf16, photometric augmentation), and everything the run made is left in WORK_DIR/runs
+# (the three exported files also together in WORK_DIR/runs/weights, for `--weights` and eval-weights.sh).
 #
 # Data (seeds never used by earlier runs or by the test split 4242). Chunks of even seed offset use the
 # photographic assets (ASSETS), odd ones procedural textures and skies only, so that neither kind is all
@@ -122,5 +123,10 @@ for net in irn msn envmap; do
     fi
     tail -n 3 "$WORK/runs/$net.log"
 done
-echo "train-gpu: done after $((SECONDS - START)) s"
+# The three files in one folder, as `picker --weights DIR` and scripts/eval-weights.sh read them.
+mkdir -p "$WORK/runs/weights"
+for net in irn msn envmap; do
+    if [ -f "$WORK/runs/$net/$net.safetensors" ]; then cp "$WORK/runs/$net/$net.safetensors" "$WORK/runs/weights/"; fi
+done
+echo "train-gpu: done after $((SECONDS - START)) s; weights in $WORK/runs/weights"
 exit $status
