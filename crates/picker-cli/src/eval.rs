@@ -13,7 +13,9 @@
 //!   ignoring the tiling's offset and scale ([`picker_extract::eval::aligned_texture_score`]:
 //!   best over cyclic shifts and a few scales, PSNR on sRGB values, plus a
 //!   colour-statistics distance) and the seam ratio of the result next to the
-//!   true texture's own;
+//!   true texture's own; a textured material extracted as a single colour is
+//!   scored as that flat colour (what the artist gets), so that calling a
+//!   texture plain is not left out of the mean;
 //! - for single-colour materials, the RMSE of the diffuse colour.
 //!
 //! - the IoU of a baseline without networks: a 4-connected flood fill from the
@@ -23,17 +25,36 @@
 //!
 //! Prints a table and writes the rows and their aggregates as JSON (`--json-out`).
 
+use std::borrow::Cow;
 use std::path::{Path, PathBuf};
 
 use anyhow::{anyhow, bail, Context, Result};
 use picker_extract::eval as metrics;
 use picker_extract::mask::Mask;
+use picker_extract::resample;
 use picker_extract::{pipeline, Inputs, Prepared, UvMode};
 use picker_inpaint::{seam_score, PatchMatchInpainter};
 use picker_render::io as rio;
 use picker_render::{ElementImages, EnvMap};
 use serde::Serialize;
 use serde_json::json;
+
+/// `img` at `w × h`: itself when it has that size, else area-averaged
+/// (shrinking) or bilinearly interpolated (otherwise), for comparing the
+/// networks' elements (working size) with a scene's truth (its own size).
+fn at_size(img: &rio::Image, w: usize, h: usize) -> Cow<'_, rio::Image> {
+    if (img.width, img.height) == (w, h) {
+        Cow::Borrowed(img)
+    } else if img.width >= w && img.height >= h {
+        Cow::Owned(resample::area(img, w, h))
+    } else {
+        Cow::Owned(resample::bilinear(img, w, h))
+    }
+}
+
+/// Side of the flat texture a textured material extracted as a single colour
+/// is scored as (any size gives the same score).
+const FLAT_SIZE: usize = 16;
 
 /// Arguments of `picker eval`.
 #[derive(Debug, clap::Args)]
@@ -304,6 +325,10 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
         seed: 0,
         inpainter: &inpainter,
     };
+    // The predicted elements at the scene's size: the networks run at the
+    // working size, which differs from the scene's unless it is 240×320.
+    let el_diffuse = at_size(&prepared.inputs.elements.diffuse, w, h);
+    let el_normals = at_size(&prepared.inputs.elements.normals, w, h);
     let mut rows = Vec::new();
     for m in scene["materials"].as_array().cloned().unwrap_or_default() {
         let id = m["id"].as_u64().unwrap_or(0) as u32;
@@ -326,7 +351,6 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
             height: h,
             data: got,
         };
-        let el = &prepared.inputs.elements;
         let textured_truth = m["textured"].as_bool().unwrap_or(false);
         let mut row = Row {
             scene: dir
@@ -347,8 +371,8 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
                 .iter()
                 .map(|&t| metrics::mask_iou(&flood_fill(&photo.data, w, h, pick, t), &true_mask))
                 .collect(),
-            albedo_rmse: metrics::albedo_error(&el.diffuse, &truth.diffuse, &true_mask),
-            normal_error_deg: metrics::normal_error_deg(&el.normals, &truth.normals, &true_mask),
+            albedo_rmse: metrics::albedo_error(&el_diffuse, &truth.diffuse, &true_mask),
+            normal_error_deg: metrics::normal_error_deg(&el_normals, &truth.normals, &true_mask),
             texture_psnr_db: None,
             texture_colour_distance: None,
             texture_size: diag.texture_size,
@@ -400,7 +424,7 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
             let predicted = uv
                 .plane_normal
                 .map(glam::Vec3::from)
-                .or_else(|| picker_extract::plane::plane_normal(&el.normals, &got.data));
+                .or_else(|| picker_extract::plane::plane_normal(&el_normals, &got.data));
             let used = uv
                 .lines
                 .as_ref()
@@ -431,6 +455,21 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
                 row.texture_scale = Some(s.scale);
                 row.seam_ratio = Some(t.seam.ratio);
                 row.coverage = Some(t.coverage_fraction);
+            } else {
+                // Extracted as a single colour: score that flat colour.
+                let flat = rio::Image::new(
+                    3,
+                    FLAT_SIZE,
+                    FLAT_SIZE,
+                    (0..3)
+                        .flat_map(|k| {
+                            std::iter::repeat_n(mat.params.diffuse[k], FLAT_SIZE * FLAT_SIZE)
+                        })
+                        .collect(),
+                )?;
+                let s = metrics::aligned_texture_score(&flat, &true_tex);
+                row.texture_psnr_db = Some(s.psnr_db);
+                row.texture_colour_distance = Some(s.colour_distance);
             }
         } else if let Some(c) = m["diffuse_colour"].as_array() {
             let c: Vec<f32> = c.iter().filter_map(f).collect();

@@ -173,6 +173,44 @@ fn extraction_from_a_cycles_scene_meets_the_issue_bounds() {
     assert_eq!(textured, 2);
 }
 
+/// `picker eval` with networks on a scene that is not the networks' working
+/// size (the 120×160 Cycles fixture; the nets run at 240×320): the elements
+/// are compared at the scene's size (this panicked until stop 29), and a
+/// textured material extracted as a single colour is scored as that flat
+/// colour instead of being left out (the tiny random weights call every
+/// material single-colour here).
+#[test]
+fn eval_with_networks_scores_every_material_at_the_scenes_size() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scenes = repo().join("fixtures/blender");
+    let weights = repo().join("fixtures/weights/tiny");
+    let (_, r) = eval_report(
+        &scenes,
+        &["--weights", weights.to_str().unwrap()],
+        &tmp.path().join("eval.json"),
+    );
+    let rows = r["rows"].as_array().unwrap();
+    assert_eq!(rows.len(), 3, "{rows:?}");
+    let mut flat = 0;
+    for row in rows {
+        for key in ["albedo_rmse", "normal_error_deg"] {
+            let v = row[key].as_f64().unwrap();
+            assert!(v.is_finite() && v >= 0.0, "{key} {v}: {row}");
+        }
+        if row["textured_truth"].as_bool().unwrap() {
+            let psnr = row["texture_psnr_db"].as_f64().unwrap();
+            assert!(psnr.is_finite() && psnr > 0.0, "{row}");
+            flat += usize::from(!row["textured_extracted"].as_bool().unwrap());
+        }
+    }
+    assert!(
+        flat >= 1,
+        "no textured material was extracted flat: {rows:?}"
+    );
+    let scored = r["aggregate"]["mean_texture_psnr_db"].as_f64().unwrap();
+    assert!(scored.is_finite(), "{}", r["aggregate"]);
+}
+
 /// Compares two images value by value (8-bit PNGs: ±1 code value).
 fn same_png(got: &Path, want: &Path) -> Result<(), String> {
     let (a, b) = (
