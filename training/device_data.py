@@ -71,7 +71,7 @@ def pack(synth_dir, out_dir, workers=1):
     if os.path.exists(out_dir):
         raise FileExistsError(f"{out_dir} exists")
     os.makedirs(tmp, exist_ok=True)
-    first = _pack_arrays(_load_all(scenes[0]))
+    first = _pack_one(scenes[0])
     arrays = {name: np.lib.format.open_memmap(os.path.join(tmp, f"{name}.npy"), mode="w+", dtype=a.dtype,
                                               shape=(n, *a.shape)) for name, a in first.items()}
 
@@ -186,16 +186,6 @@ def _reduce(raw, k):
     return out
 
 
-def _resize_envmap(env, size):
-    """:func:`training.synth_data.resize_envmap` on a batch [B, C, h, w]."""
-    if tuple(env.shape[-2:]) == tuple(size):
-        return env
-    h, w = env.shape[-2:]
-    if h % size[0] == 0 and w % size[1] == 0:
-        return F.interpolate(env, size=size, mode="area")
-    return F.interpolate(env, size=size, mode="bilinear", align_corners=False, antialias=True)
-
-
 class DeviceData:
     """All training scenes of ``sources`` (pack folders and ``picker synth`` folders) on ``device``, sampled as
     :class:`training.synth_data.SynthDataset` samples them (same arguments), a whole batch at a time."""
@@ -242,10 +232,6 @@ class DeviceData:
 
     def __len__(self):
         return len(self.where)
-
-    def seeds(self):
-        """Sorted distinct generator seeds of the scenes."""
-        return sorted({s for g in self.groups for s in g.seeds})
 
     def eligible(self, size):
         """As :meth:`training.synth_data.SynthDataset.eligible`: raises ValueError when no scene is that big."""
@@ -297,7 +283,7 @@ class DeviceData:
                     ec = torch.where(mirror[:, None], (ew - 1 - torch.arange(ew, device=dev))[None],
                                      torch.arange(ew, device=dev)[None])
                     a = a.gather(3, ec[:, None, None, :].expand(-1, a.shape[1], a.shape[2], -1))
-                    sample[name] = _resize_envmap(a, (max(1, h // 8), max(1, w // 8)))
+                    sample[name] = sd.resize_envmap(a, (max(1, h // 8), max(1, w // 8)))
                     continue
                 b, c = a.shape[:2]
                 a = a.gather(2, rows[:, None, :, None].expand(b, c, h, a.shape[-1]))

@@ -246,14 +246,17 @@ def reduce_scene(raw, k):
 
 
 def resize_envmap(env, size):
-    """Resamples a [C, h, w] tensor env map to ``size`` = (rows, cols): area average for integer ratios,
-    otherwise antialiased bilinear."""
+    """Resamples a [C, h, w] (or batched [B, C, h, w]) tensor env map to ``size`` = (rows, cols): area
+    average for integer ratios, otherwise antialiased bilinear."""
     if tuple(env.shape[-2:]) == tuple(size):
         return env
+    batch = env if env.dim() == 4 else env[None]
     h, w = env.shape[-2:]
     if h % size[0] == 0 and w % size[1] == 0:
-        return F.interpolate(env[None], size=size, mode="area")[0]
-    return F.interpolate(env[None], size=size, mode="bilinear", align_corners=False, antialias=True)[0]
+        out = F.interpolate(batch, size=size, mode="area")
+    else:
+        out = F.interpolate(batch, size=size, mode="bilinear", align_corners=False, antialias=True)
+    return out if env.dim() == 4 else out[0]
 
 
 def reduction_factor(h0, w0, h, w):
