@@ -160,6 +160,9 @@ pub struct Prepared {
     /// The focal length from the photo's lines, found once at the first
     /// pick that needs it ([`Prepared::line_focal`]).
     line_focal: std::sync::OnceLock<(crate::lines::SmallLuma, Option<crate::lines::LineFocal>)>,
+    /// The mask's leak-guard relief of the segmentation, made at the first
+    /// automatic pick ([`mask::leak_guard_relief`]).
+    relief: std::sync::OnceLock<Vec<f32>>,
 }
 
 fn check_size(what: &str, img: &Image, c: usize, w: usize, h: usize) -> Result<()> {
@@ -195,6 +198,7 @@ impl Prepared {
             valid,
             prepare_ms: t.elapsed().as_secs_f64() * 1e3,
             line_focal: std::sync::OnceLock::new(),
+            relief: std::sync::OnceLock::new(),
         })
     }
 
@@ -244,7 +248,14 @@ impl Prepared {
     pub fn pick_mask(&self, pick: [u32; 2], opts: &MaskOptions) -> Result<PickMask> {
         self.check_pick(pick)?;
         let (x, y) = self.to_work(pick[0] as usize, pick[1] as usize);
-        mask::pick_mask(&self.inputs.segmentation, &self.valid, x, y, opts)
+        let seg = &self.inputs.segmentation;
+        mask::pick_mask_on(seg, self.relief(), &self.valid, x, y, opts)
+    }
+
+    /// The segmentation's leak-guard relief, computed once.
+    fn relief(&self) -> &[f32] {
+        self.relief
+            .get_or_init(|| mask::leak_guard_relief(&self.inputs.segmentation))
     }
 
     /// The material palette: masks of every material covering at least
@@ -290,7 +301,15 @@ impl Prepared {
                 })
                 .expect("non-empty bin");
             let (x, y) = (seed % w, seed / w);
-            let Ok(pm) = mask::pick_mask(seg, &remaining, x, y, &MaskOptions::default()) else {
+            let pm = mask::pick_mask_on(
+                seg,
+                self.relief(),
+                &remaining,
+                x,
+                y,
+                &MaskOptions::default(),
+            );
+            let Ok(pm) = pm else {
                 remaining[seed] = false;
                 continue;
             };
