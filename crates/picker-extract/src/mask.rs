@@ -1101,6 +1101,25 @@ mod tests {
     }
 
     #[test]
+    fn degenerate_sizes_give_a_mask() {
+        let mut rng = picker_tensor::Rng::new(31);
+        for &(w, h) in &[(1, 1), (1, 5), (6, 1), (2, 2), (3, 7)] {
+            let mut seg = Image::zeros(3, h, w);
+            for v in &mut seg.data {
+                *v = rng.uniform(0.0, 1.0);
+            }
+            for (x, y) in [(0, 0), (w - 1, h - 1)] {
+                let m = pick_mask(&seg, &vec![true; w * h], x, y, &MaskOptions::default())
+                    .unwrap_or_else(|e| panic!("{w}x{h} ({x}, {y}): {e}"));
+                // At least half the pick's window members lie within
+                // ½τ₀ of the pick colour: they seed the pick's front.
+                assert!(m.mask.count() > 0, "{w}x{h} ({x}, {y})");
+                assert!(m.sure.iter().any(|&b| b));
+            }
+        }
+    }
+
+    #[test]
     fn watershed_splits_at_the_ridge() {
         // One row: relief rising to a ridge at column 6, markers at both ends.
         let relief = [0.0, 0.1, 0.2, 0.1, 0.3, 0.5, 0.9, 0.4, 0.2, 0.1, 0.0];
