@@ -21,7 +21,12 @@
 //! - the IoU of a baseline without networks: a 4-connected flood fill from the
 //!   pick over the photo's sRGB colours, for each of [`FLOOD_TOLERANCES`]; the
 //!   aggregate reports every tolerance's mean and the best one (an oracle
-//!   choice, generous to the baseline).
+//!   choice, generous to the baseline);
+//! - what any thresholding of the segmentation could reach at this pick:
+//!   the best IoU over [`oracle_tolerance_iou`]'s tolerances of the pixels
+//!   whose segmentation colour lies within the tolerance of the pick colour
+//!   (an oracle, told the truth: it tells a segmentation network's limits
+//!   from the mask rule's).
 //!
 //! Prints a table and writes the rows and their aggregates as JSON (`--json-out`).
 
@@ -108,6 +113,9 @@ pub struct Row {
     mask_recall: f64,
     /// IoU of the flood-fill baseline, one per [`FLOOD_TOLERANCES`] entry.
     flood_iou: Vec<f64>,
+    /// The best IoU a single segmentation-colour tolerance gives at this
+    /// pick ([`oracle_tolerance_iou`]).
+    oracle_tolerance_iou: f64,
     albedo_rmse: f64,
     normal_error_deg: f64,
     texture_psnr_db: Option<f64>,
@@ -211,6 +219,57 @@ fn inner_distance(mask: &[bool], w: usize, h: usize) -> Vec<u32> {
         }
     }
     d
+}
+
+/// Tolerances of [`oracle_tolerance_iou`]: 0.005 to 0.5 in steps of 0.005.
+pub const ORACLE_TOLERANCE_STEPS: usize = 100;
+
+/// The best IoU against `truth` of `{i : |seg_i − colour| ≤ τ}` (Euclidean
+/// RGB distance, no connectivity) over `τ = 0.005·k`, `k = 1..=`
+/// [`ORACLE_TOLERANCE_STEPS`]: what thresholding the segmentation at the
+/// pick colour could reach with the best tolerance for this pick. Pixels
+/// where `valid` is false are never taken. `seg` is 3 planes of `truth.len()`.
+/// An empty truth and an empty mask agree (IoU 1, as [`metrics::mask_iou`]).
+pub fn oracle_tolerance_iou(seg: &[f32], valid: &[bool], colour: [f32; 3], truth: &[bool]) -> f64 {
+    let n = truth.len();
+    assert_eq!(
+        seg.len(),
+        3 * n,
+        "oracle_tolerance_iou: seg is not 3 planes"
+    );
+    assert_eq!(valid.len(), n, "oracle_tolerance_iou: valid length");
+    // Pixels by the first tolerance that takes them (bin k: τ = 0.005·(k+1)).
+    let mut inside = vec![0u64; ORACLE_TOLERANCE_STEPS];
+    let mut outside = vec![0u64; ORACLE_TOLERANCE_STEPS];
+    for i in (0..n).filter(|&i| valid[i]) {
+        let d = (0..3)
+            .map(|c| (seg[c * n + i] - colour[c]).powi(2))
+            .sum::<f32>()
+            .sqrt();
+        let k = (d / 0.005 - 1e-6).ceil().max(1.0) as usize - 1;
+        if k < ORACLE_TOLERANCE_STEPS {
+            if truth[i] {
+                inside[k] += 1;
+            } else {
+                outside[k] += 1;
+            }
+        }
+    }
+    let total = truth.iter().filter(|&&b| b).count() as u64;
+    let (mut tp, mut fp, mut best) = (0u64, 0u64, 0f64);
+    for k in 0..ORACLE_TOLERANCE_STEPS {
+        tp += inside[k];
+        fp += outside[k];
+        let union = total + fp;
+        // Both empty agree ([`metrics::mask_iou`]'s convention).
+        let iou = if union > 0 {
+            tp as f64 / union as f64
+        } else {
+            1.0
+        };
+        best = best.max(iou);
+    }
+    best
 }
 
 /// Colour tolerances (Euclidean sRGB distance in `[0, 1]` units) of the flood-fill baseline.
@@ -343,6 +402,11 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
             .expect("non-empty");
         let pick = [(best % w) as u32, (best / w) as u32];
         let pm = prepared.pick_mask(pick, &opts.mask)?;
+        let seg_here = at_size(&prepared.inputs.segmentation, w, h);
+        let valid_here: Vec<bool> = (0..w * h)
+            .map(|i| (0..3).all(|c| seg_here.data[c * w * h + i].is_finite()))
+            .collect();
+        let oracle = oracle_tolerance_iou(&seg_here.data, &valid_here, pm.colour, &true_mask);
         let (mat, diag) = pipeline::extract(&prepared, &format!("m{id}"), Some(pick), &pm, &opts)
             .with_context(|| format!("{}: material {id}", dir.display()))?;
         let got: Vec<bool> = mat.mask.data.iter().map(|&v| v > 0.5).collect();
@@ -371,6 +435,7 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
                 .iter()
                 .map(|&t| metrics::mask_iou(&flood_fill(&photo.data, w, h, pick, t), &true_mask))
                 .collect(),
+            oracle_tolerance_iou: oracle,
             albedo_rmse: metrics::albedo_error(&el_diffuse, &truth.diffuse, &true_mask),
             normal_error_deg: metrics::normal_error_deg(&el_normals, &truth.normals, &true_mask),
             texture_psnr_db: None,
@@ -572,6 +637,9 @@ pub fn run(a: Args) -> Result<()> {
         "flood_fill_best_mean_iou": (0..FLOOD_TOLERANCES.len())
             .filter_map(|k| mean(rows.iter().map(|r| r.flood_iou[k])))
             .max_by(|a, b| a.total_cmp(b)),
+        "mean_oracle_tolerance_iou": mean(rows.iter().map(|r| r.oracle_tolerance_iou)),
+        "fraction_oracle_tolerance_iou_at_least_0_8":
+            mean(rows.iter().map(|r| f64::from(u8::from(r.oracle_tolerance_iou >= 0.8)))),
         "mean_texture_psnr_db": mean(tex.iter().filter_map(|r| r.texture_psnr_db)),
         "min_texture_psnr_db": min(tex.iter().filter_map(|r| r.texture_psnr_db)),
         "mean_texture_colour_distance": mean(tex.iter().filter_map(|r| r.texture_colour_distance)),
@@ -620,6 +688,61 @@ mod tests {
             }
         }
         v
+    }
+
+    /// The plain oracle: every tolerance's mask, its IoU.
+    fn oracle_reference(seg: &[f32], valid: &[bool], colour: [f32; 3], truth: &[bool]) -> f64 {
+        let n = truth.len();
+        (1..=ORACLE_TOLERANCE_STEPS)
+            .map(|k| {
+                let tau = 0.005 * k as f32;
+                let m: Vec<bool> = (0..n)
+                    .map(|i| {
+                        valid[i]
+                            && (0..3)
+                                .map(|c| (seg[c * n + i] - colour[c]).powi(2))
+                                .sum::<f32>()
+                                .sqrt()
+                                <= tau
+                    })
+                    .collect();
+                metrics::mask_iou(&m, truth)
+            })
+            .fold(0.0, f64::max)
+    }
+
+    #[test]
+    fn oracle_tolerance_matches_the_plain_sweep() {
+        let mut rng = picker_tensor::Rng::new(40);
+        for &n in &[1usize, 7, 300] {
+            for spread in [0.01f32, 0.1, 0.6] {
+                let seg: Vec<f32> = (0..3 * n)
+                    .map(|_| rng.uniform(0.5 - spread, 0.5 + spread))
+                    .collect();
+                let valid: Vec<bool> = (0..n).map(|_| rng.f64() < 0.9).collect();
+                let truth: Vec<bool> = (0..n).map(|_| rng.f64() < 0.4).collect();
+                let c = [0.5, 0.5, 0.5];
+                let a = oracle_tolerance_iou(&seg, &valid, c, &truth);
+                let b = oracle_reference(&seg, &valid, c, &truth);
+                assert!((a - b).abs() < 1e-12, "n {n} spread {spread}: {a} vs {b}");
+            }
+        }
+        // Two clean colours: the oracle separates them exactly.
+        let seg = [0.2, 0.2, 0.6, 0.2, 0.2, 0.6, 0.2, 0.2, 0.6];
+        let truth = [true, true, false];
+        assert_eq!(
+            oracle_tolerance_iou(&seg, &[true; 3], [0.2; 3], &truth),
+            1.0
+        );
+        // A true pixel beyond 0.5: 0; no true pixel and none taken: 1.
+        assert_eq!(
+            oracle_tolerance_iou(&[0.0; 3], &[true], [1.0; 3], &[false]),
+            1.0
+        );
+        assert_eq!(
+            oracle_tolerance_iou(&[0.0; 3], &[true], [1.0; 3], &[true]),
+            0.0
+        );
     }
 
     #[test]
