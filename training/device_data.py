@@ -305,9 +305,14 @@ class DeviceData:
 def augment_photometric(x, seed, step, params):
     """Photometric augmentation of a batch of network inputs ``x`` ([N, 3, H, W], 2·sRGB − 1) in place of the
     camera: with probability ``p`` per sample, an exposure gain (log-uniform in ``exposure``), a white-balance
-    gain per channel (log-uniform in [1/(1 + wb), 1 + wb]) applied in linear light with the sRGB clipping a
-    camera does, then Gaussian noise of σ uniform in [0, ``noise``] (sRGB units). The targets (albedos,
-    normals, segmentation: properties of the surfaces) do not change. Deterministic in (seed, step)."""
+    gain per channel (log-uniform in [1/(1 + wb), 1 + wb]) and a lens vignetting, all applied in linear light
+    with the sRGB clipping a camera does, then Gaussian noise of σ uniform in [0, ``noise``] (sRGB units).
+    The vignetting (``vignette`` = v, default 0: none) multiplies by 1 − k·(r/r₀)², k uniform in [0, v],
+    r the distance to a centre jittered by up to ±10 % of the image's size, r₀ the half-diagonal: real
+    photos darken towards their corners, and a network that takes that fall-off for a change of material
+    splits one table into two (the stop-30 real-photo sheets). The targets (albedos, normals,
+    segmentation: properties of the surfaces) do not change. Deterministic in (seed, step); with
+    ``vignette`` 0 the result is that of the recipes made before it existed, bit for bit."""
     n = x.shape[0]
     rng = np.random.default_rng([int(seed), 3 << 32, int(step)])
     p = float(params.get("p", 0.8))
@@ -323,6 +328,20 @@ def augment_photometric(x, seed, step, params):
     gen = torch.Generator(device=x.device).manual_seed(int(rng.integers(0, 2**62)))
     srgb = (x + 1.0) / 2.0
     lin = sd.srgb_decode(srgb.clamp(0.0, 1.0)) * g[:, :, None, None]
+    vignette = float(params.get("vignette", 0.0))
+    if vignette > 0.0:
+        # Drawn after everything the recipes without vignetting draw, so theirs stay as they were.
+        k = np.where(on, rng.uniform(0.0, vignette, n), 0.0)
+        centre = rng.uniform(-0.1, 0.1, (n, 2))
+        h, w = x.shape[2], x.shape[3]
+        ys = (torch.arange(h, device=x.device, dtype=torch.float32) + 0.5) / h - 0.5
+        xs = (torch.arange(w, device=x.device, dtype=torch.float32) + 0.5) / w - 0.5
+        cy = torch.from_numpy(centre[:, 0]).float().to(x.device)[:, None, None]
+        cx = torch.from_numpy(centre[:, 1]).float().to(x.device)[:, None, None]
+        # Distances in pixels over the half-diagonal.
+        r2 = (((ys[None, :, None] - cy) * h) ** 2 + ((xs[None, None, :] - cx) * w) ** 2) / (0.25 * (h * h + w * w))
+        fall = 1.0 - torch.from_numpy(k).float().to(x.device)[:, None, None] * r2.clamp(max=1.0)
+        lin = lin * fall[:, None, :, :]
     out = sd.srgb_encode(lin) + s[:, None, None, None] * torch.randn(x.shape, generator=gen, device=x.device)
     out = out.clamp(0.0, 1.0)
     keep = torch.from_numpy(~on).to(x.device)[:, None, None, None]

@@ -348,6 +348,16 @@ def test_augment():
     d = device_data.augment_photometric(x, 1, 5, {"p": 1.0, "exposure": [1.0, 1.0], "white_balance": 0.0,
                                                   "noise": 0.0})
     close(d, x, 1e-5)
+    # Vignetting: 0 is the old behaviour bit for bit; otherwise the corners darken, the centre hardly.
+    assert torch.equal(device_data.augment_photometric(x, 1, 5, {"p": 1.0, "vignette": 0.0}), a)
+    flat = torch.full((4, 3, 30, 40), 0.6)
+    plain = {"p": 1.0, "exposure": [1.0, 1.0], "white_balance": 0.0, "noise": 0.0}
+    v = device_data.augment_photometric(flat, 2, 7, dict(plain, vignette=0.8))
+    assert torch.equal(v, device_data.augment_photometric(flat, 2, 7, dict(plain, vignette=0.8)))
+    corners = v[:, :, [0, 0, -1, -1], [0, -1, 0, -1]]
+    assert (corners <= 0.6 + 1e-5).all() and (corners < 0.6 - 1e-3).any(), corners
+    assert (v[:, :, 14:16, 19:21] - 0.6).abs().max() < 0.05
+    assert v.min() >= -1 and (v <= 0.6 + 1e-5).all()
 
 
 def test_device_training(tmp):
@@ -393,6 +403,12 @@ def test_device_training(tmp):
     _refused(["--net", "envmap", "--preset", "tiny", "--config", cfg, "--data", FIXTURES, "--quiet",
               "--out", os.path.join(tmp, "env-aug")],
              "EnvMap", "augmenting the EnvMap's input was accepted")
+    with open(cfg, "w") as f:
+        json.dump({"device_data": True, "augment": {"p": 0.5, "vignete": 0.5}, "batch": 2,
+                   "stages": [{"size": [16, 16], "steps": 1}]}, f)
+    _refused(["--net", "msn", "--preset", "tiny", "--config", cfg, "--data", FIXTURES, "--quiet",
+              "--out", os.path.join(tmp, "typo")],
+             "vignete", "a misspelt augmentation key was accepted")
 
 
 def test_stage_data(tmp):

@@ -159,6 +159,11 @@ def effective_config(args, base=None):
         raise SystemExit("--net irn|msn|envmap is required")
     if cfg["augment"] and cfg["net"] == "envmap":
         raise SystemExit("augment: not for the EnvMap net (an exposure change would have to change its target)")
+    if cfg["augment"]:
+        known = {"p", "exposure", "white_balance", "noise", "vignette"}
+        unknown = set(cfg["augment"]) - known
+        if unknown:
+            raise SystemExit(f"augment: unknown keys {sorted(unknown)}; known: {', '.join(sorted(known))}")
     if cfg["lr"] is None:
         cfg["lr"] = DEFAULT_LR[cfg["net"]]
     if cfg["model"] is None:
