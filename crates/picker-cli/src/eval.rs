@@ -305,24 +305,11 @@ pub fn flood_fill(rgb: &[f32], w: usize, h: usize, pick: [u32; 2], tol: f32) -> 
     mask[start] = true;
     let mut stack = vec![start];
     while let Some(i) = stack.pop() {
-        let (x, y) = (i % w, i / w);
-        let mut visit = |j: usize| {
+        for j in picker_extract::mask::neighbours4(i, w, h) {
             if !mask[j] && close(j) {
                 mask[j] = true;
                 stack.push(j);
             }
-        };
-        if x > 0 {
-            visit(i - 1);
-        }
-        if x + 1 < w {
-            visit(i + 1);
-        }
-        if y > 0 {
-            visit(i - w);
-        }
-        if y + 1 < h {
-            visit(i + w);
         }
     }
     mask

@@ -463,29 +463,30 @@ pub fn watershed(relief: &[f32], w: usize, h: usize, markers: &[u8]) -> Vec<u8> 
         }
     }
     while let Some(Reverse((_, _, i))) = heap.pop() {
-        let (x, y) = (i % w, i / w);
         let l = label[i];
-        let mut visit = |j: usize| {
+        for j in neighbours4(i, w, h) {
             if label[j] == 0 {
                 label[j] = l;
                 heap.push(Reverse((key(relief[j]), age, j)));
                 age += 1;
             }
-        };
-        if x > 0 {
-            visit(i - 1);
-        }
-        if x + 1 < w {
-            visit(i + 1);
-        }
-        if y > 0 {
-            visit(i - w);
-        }
-        if y + 1 < h {
-            visit(i + w);
         }
     }
     label
+}
+
+/// The 4-neighbours of pixel `i` inside a `w × h` grid (left, right, up,
+/// down; those outside the grid left out).
+pub fn neighbours4(i: usize, w: usize, h: usize) -> impl Iterator<Item = usize> {
+    let (x, y) = (i % w, i / w);
+    [
+        (x > 0).then(|| i - 1),
+        (x + 1 < w).then(|| i + 1),
+        (y > 0).then(|| i - w),
+        (y + 1 < h).then(|| i + w),
+    ]
+    .into_iter()
+    .flatten()
 }
 
 /// 8-connected component labels of `mask` (0 = outside, 1.. = component).
@@ -1117,6 +1118,16 @@ mod tests {
                 assert!(m.sure.iter().any(|&b| b));
             }
         }
+    }
+
+    #[test]
+    fn neighbours4_stay_inside_the_grid() {
+        let n = |i, w, h| neighbours4(i, w, h).collect::<Vec<_>>();
+        assert_eq!(n(0, 1, 1), Vec::<usize>::new());
+        assert_eq!(n(0, 3, 2), vec![1, 3]);
+        assert_eq!(n(4, 3, 2), vec![3, 5, 1]);
+        assert_eq!(n(4, 3, 3), vec![3, 5, 1, 7]);
+        assert_eq!(n(2, 1, 4), vec![1, 3]);
     }
 
     #[test]
