@@ -15,6 +15,9 @@ EVAL_FIGURES = [
     ("mask IoU, mean", lambda a, r: a["mean_iou"], "{:.3f}"),
     ("materials with IoU >= 0.8", lambda a, r: a["fraction_iou_at_least_0_8"], "{:.1%}"),
     ("flood fill (best), mean IoU", lambda a, r: a["flood_fill_best_mean_iou"], "{:.3f}"),
+    # Since stop 30; older JSON files have none (printed as a dash).
+    ("segmentation's best tolerance per pick (oracle), mean IoU",
+     lambda a, r: a.get("mean_oracle_tolerance_iou"), "{:.3f}"),
     ("texture PSNR, mean over textured (dB)", lambda a, r: a["mean_texture_psnr_db"], "{:.2f}"),
     ("normals at the picks, mean error (deg)", lambda a, r: a["mean_normal_error_deg"], "{:.1f}"),
     ("single-colour materials called textured", lambda a, r: single_called_textured(r), "{}"),
