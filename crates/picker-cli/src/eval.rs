@@ -375,6 +375,11 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
     // working size, which differs from the scene's unless it is 240×320.
     let el_diffuse = at_size(&prepared.inputs.elements.diffuse, w, h);
     let el_normals = at_size(&prepared.inputs.elements.normals, w, h);
+    // The segmentation at the scene's size, for every material's oracle.
+    let seg_here = at_size(&prepared.inputs.segmentation, w, h);
+    let valid_here: Vec<bool> = (0..w * h)
+        .map(|i| (0..3).all(|c| seg_here.data[c * w * h + i].is_finite()))
+        .collect();
     let mut rows = Vec::new();
     for m in scene["materials"].as_array().cloned().unwrap_or_default() {
         let id = m["id"].as_u64().unwrap_or(0) as u32;
@@ -389,10 +394,6 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
             .expect("non-empty");
         let pick = [(best % w) as u32, (best / w) as u32];
         let pm = prepared.pick_mask(pick, &opts.mask)?;
-        let seg_here = at_size(&prepared.inputs.segmentation, w, h);
-        let valid_here: Vec<bool> = (0..w * h)
-            .map(|i| (0..3).all(|c| seg_here.data[c * w * h + i].is_finite()))
-            .collect();
         let oracle = oracle_tolerance_iou(&seg_here.data, &valid_here, pm.colour, &true_mask);
         let (mat, diag) = pipeline::extract(&prepared, &format!("m{id}"), Some(pick), &pm, &opts)
             .with_context(|| format!("{}: material {id}", dir.display()))?;

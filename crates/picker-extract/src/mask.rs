@@ -880,6 +880,15 @@ mod tests {
         }
     }
 
+    /// [`pick_mask`] with the tolerance `t` given (no guard), unwrapped.
+    fn pick_fixed(seg: &Image, valid: &[bool], (x, y): (usize, usize), t: f32) -> PickMask {
+        let opts = MaskOptions {
+            connected: false,
+            tolerance: Some(t),
+        };
+        pick_mask(seg, valid, x, y, &opts).unwrap()
+    }
+
     fn seg_from(ids: &[u8], w: usize, h: usize, palette: &[[f32; 3]]) -> Image {
         let mut img = Image::zeros(3, h, w);
         for (i, &id) in ids.iter().enumerate() {
@@ -1036,17 +1045,7 @@ mod tests {
         assert_eq!(m.mask.data, truth, "τ {}", m.tolerance);
         // With a fixed tolerance, exactly that tolerance: less of the
         // drift, and no hysteresis (the object is in).
-        let fixed = pick_mask(
-            &seg,
-            &valid,
-            2,
-            10,
-            &MaskOptions {
-                connected: false,
-                tolerance: Some(0.12),
-            },
-        )
-        .unwrap();
+        let fixed = pick_fixed(&seg, &valid, (2, 10), 0.12);
         assert_eq!(fixed.tolerance, 0.12);
         let object = 10 * w + 151;
         assert!(fixed.mask.data[object]);
@@ -1089,17 +1088,7 @@ mod tests {
         assert_eq!(cols, (0..100).collect::<Vec<_>>());
         assert_eq!(m.mask.count(), 100 * h);
         // The same tolerance given by hand has no guard: the neighbour is in.
-        let fixed = pick_mask(
-            &seg,
-            &valid,
-            2,
-            10,
-            &MaskOptions {
-                connected: false,
-                tolerance: Some(m.tolerance),
-            },
-        )
-        .unwrap();
+        let fixed = pick_fixed(&seg, &valid, (2, 10), m.tolerance);
         assert!(fixed.mask.data[10 * w + 150]);
     }
 
