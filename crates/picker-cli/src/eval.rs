@@ -343,6 +343,7 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
             photo: rio::read_png(&photo_path)?,
             elements: truth.clone(),
             segmentation: rio::read_exr(&dir.join("segmentation.exr"))?,
+            segmentation_estimated: false,
             envmap: Some(
                 EnvMap::from_image(&rio::read_exr(&env_path)?)
                     .map_err(|e| anyhow!("{}: {e}", env_path.display()))?,
@@ -375,8 +376,8 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
     // working size, which differs from the scene's unless it is 240×320.
     let el_diffuse = at_size(&prepared.inputs.elements.diffuse, w, h);
     let el_normals = at_size(&prepared.inputs.elements.normals, w, h);
-    // The segmentation at the scene's size, for every material's oracle.
-    let seg_here = at_size(&prepared.inputs.segmentation, w, h);
+    // The segmentation the masks read, at the scene's size, for every material's oracle.
+    let seg_here = at_size(prepared.mask_segmentation(), w, h);
     let valid_here: Vec<bool> = (0..w * h)
         .map(|i| (0..3).all(|c| seg_here.data[c * w * h + i].is_finite()))
         .collect();

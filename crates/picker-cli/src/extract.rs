@@ -477,6 +477,7 @@ pub fn load_inputs_from(
                     photo: photo_img,
                     elements,
                     segmentation,
+                    segmentation_estimated: true,
                     envmap,
                 },
                 source,
@@ -514,15 +515,37 @@ fn read_elements(dir: &Path, photo: Image) -> Result<(Inputs, Value)> {
     } else {
         None
     };
+    let segmentation_estimated = segmentation_is_estimated(dir)?;
     Ok((
         Inputs {
             photo,
             elements,
             segmentation,
+            segmentation_estimated,
             envmap,
         },
         json!({"source": "elements", "elements": dir.display().to_string()}),
     ))
+}
+
+/// Whether an elements folder's segmentation is a network's estimate: the
+/// folder is `picker infer` output (its `manifest.json` names a network for
+/// the segmentation). A folder without a manifest (`picker synth` ground
+/// truth) holds an exact segmentation.
+fn segmentation_is_estimated(dir: &Path) -> Result<bool> {
+    let path = dir.join("manifest.json");
+    if !path.exists() {
+        return Ok(false);
+    }
+    let text =
+        std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+    let v: Value =
+        serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))?;
+    Ok(v["files"].as_array().is_some_and(|files| {
+        files
+            .iter()
+            .any(|f| f["output"] == conv::SEGMENTATION && !f["net"].is_null())
+    }))
 }
 
 /// The inpainter named by `--inpainter`.
@@ -934,6 +957,7 @@ pub fn infer_inputs(models: &Models, photo_path: &Path, work_size: u32) -> Resul
         photo: photo_img,
         elements,
         segmentation,
+        segmentation_estimated: true,
         envmap,
     })
 }

@@ -5,7 +5,8 @@
 //! - [`photo`]: the photograph read from any supported file, oriented, checked.
 //! - [`resample`], [`guided`]: the network outputs at the working resolution
 //!   are brought to the photo's resolution guided by the photo.
-//! - [`mask`]: pick → mask from the segmentation colour.
+//! - [`smooth`], [`mask`]: the segmentation smoothed along the photo; pick → mask
+//!   from its colour.
 //! - [`plane`], [`period`], [`reproject`]: texture coordinates (predicted UVs or a
 //!   rectified plane) and the scatter into the texture square with coverage.
 //! - inpainting ([`picker_inpaint`]) fills the unobserved texels, tileably.
@@ -31,6 +32,7 @@ pub mod report;
 pub mod reproject;
 pub mod resample;
 pub mod select;
+pub mod smooth;
 
 pub use error::{Error, Result};
 pub use material::{Material, MaterialParams, TextureResult, UvMode};

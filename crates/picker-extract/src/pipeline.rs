@@ -106,6 +106,10 @@ pub struct Inputs {
     pub elements: ElementImages,
     /// The segmentation at the working resolution (3 channels).
     pub segmentation: Image,
+    /// The segmentation is a network's estimate (`true`), not ground truth:
+    /// masks then read it smoothed along the photo
+    /// ([`crate::smooth::smooth_segmentation`]); ground truth is taken as exact.
+    pub segmentation_estimated: bool,
     /// The estimated environment map (camera space), if any.
     pub envmap: Option<EnvMap>,
 }
@@ -160,8 +164,11 @@ pub struct Prepared {
     /// The focal length from the photo's lines, found once at the first
     /// pick that needs it ([`Prepared::line_focal`]).
     line_focal: std::sync::OnceLock<(crate::lines::SmallLuma, Option<crate::lines::LineFocal>)>,
-    /// The mask's leak-guard relief of the segmentation, made at the first
-    /// automatic pick ([`mask::leak_guard_relief`]).
+    /// The segmentation the masks read ([`Prepared::mask_segmentation`]),
+    /// made at the first pick when it is an estimate.
+    smoothed: std::sync::OnceLock<Image>,
+    /// The mask's leak-guard relief of the mask segmentation, made at the
+    /// first automatic pick ([`mask::leak_guard_relief`]).
     relief: std::sync::OnceLock<Vec<f32>>,
 }
 
@@ -198,6 +205,7 @@ impl Prepared {
             valid,
             prepare_ms: t.elapsed().as_secs_f64() * 1e3,
             line_focal: std::sync::OnceLock::new(),
+            smoothed: std::sync::OnceLock::new(),
             relief: std::sync::OnceLock::new(),
         })
     }
@@ -248,14 +256,31 @@ impl Prepared {
     pub fn pick_mask(&self, pick: [u32; 2], opts: &MaskOptions) -> Result<PickMask> {
         self.check_pick(pick)?;
         let (x, y) = self.to_work(pick[0] as usize, pick[1] as usize);
-        let seg = &self.inputs.segmentation;
+        let seg = self.mask_segmentation();
         mask::pick_mask_on(seg, self.relief(), &self.valid, x, y, opts)
     }
 
-    /// The segmentation's leak-guard relief, computed once.
+    /// The segmentation that masks are cut from: an estimated one smoothed
+    /// along the photo ([`crate::smooth::smooth_segmentation`], computed
+    /// once), ground truth as it is.
+    pub fn mask_segmentation(&self) -> &Image {
+        if !self.inputs.segmentation_estimated {
+            return &self.inputs.segmentation;
+        }
+        self.smoothed.get_or_init(|| {
+            crate::smooth::smooth_segmentation(
+                &self.inputs.segmentation,
+                &self.photo_work,
+                &self.valid,
+            )
+            .expect("sizes checked in Prepared::new")
+        })
+    }
+
+    /// The mask segmentation's leak-guard relief, computed once.
     fn relief(&self) -> &[f32] {
         self.relief
-            .get_or_init(|| mask::leak_guard_relief(&self.inputs.segmentation))
+            .get_or_init(|| mask::leak_guard_relief(self.mask_segmentation()))
     }
 
     /// The material palette: masks of every material covering at least
@@ -264,7 +289,7 @@ impl Prepared {
     pub fn palette(&self, min_fraction: f64, max: usize) -> Vec<([u32; 2], PickMask)> {
         let (w, h) = self.work_size();
         let (fw, fh) = self.photo_size();
-        let seg = &self.inputs.segmentation;
+        let seg = self.mask_segmentation();
         let mut remaining = self.valid.clone();
         let mut out = Vec::new();
         while out.len() < max {
