@@ -713,6 +713,43 @@ pub fn pick_mask_on(
     })
 }
 
+/// The pixels of `mask` within `τ₀` ([`auto_tolerance`]'s spread of the
+/// pick's own pixels) of the pick colour in `seg`, another segmentation of
+/// the same photo (none when the pick has no surface). Masks are cut from
+/// the smoothed segmentation ([`crate::smooth`]), which keeps the
+/// photo-different parts of one material apart (a chessboard's black and
+/// white squares); the surest part of an automatic mask — what the texture
+/// is made of — adds these pixels of the network's own colours, which see
+/// the material as one ([`crate::Prepared::pick_mask`]).
+pub fn sure_in(seg: &Image, valid: &[bool], x: usize, y: usize, mask: &Mask) -> Result<Vec<bool>> {
+    let (w, h) = (seg.width, seg.height);
+    if seg.channels != 3 || mask.width != w || mask.height != h || valid.len() != w * h {
+        return Err(Error::Shape {
+            what: "segmentation, validity and mask for the sure pixels".into(),
+            expected: format!("3 channels, {} values and a mask at {}x{}", w * h, w, h),
+            found: format!(
+                "{} channels, {} values, a {}x{} mask",
+                seg.channels,
+                valid.len(),
+                mask.width,
+                mask.height
+            ),
+        });
+    }
+    if x >= w || y >= h {
+        return Err(Error::Invalid(format!(
+            "pick ({x}, {y}) is outside the {w}x{h} segmentation"
+        )));
+    }
+    let Some((c, sigma)) = pick_colour(seg, valid, x, y) else {
+        return Ok(vec![false; w * h]);
+    };
+    let tau0 = (TOLERANCE_MIN + 3.0 * sigma).clamp(TOLERANCE_MIN, TOLERANCE_MAX);
+    Ok((0..w * h)
+        .map(|i| mask.data[i] && valid[i] && dist(colour(seg, i), c) <= tau0)
+        .collect())
+}
+
 /// Refines a mask computed at a lower resolution to the photo's edges: the
 /// mask is guided-upsampled with the photo's luma `guide` (`fw×fh`) and
 /// thresholded at ½, then limited to pixels within one low-resolution pixel
@@ -1269,5 +1306,50 @@ mod tests {
             vec![2, 1, 0, 0, 1, 2, 2, 1]
         );
         assert_eq!(reflect(-5, 1), 0);
+    }
+
+    #[test]
+    fn sure_pixels_come_from_the_other_segmentation_within_the_picks_spread() {
+        // A 12×4 segmentation: columns 0..8 one material (ids 0, colour
+        // 0.5), columns 8..12 another (0.9); the mask given takes columns 0..10.
+        let (w, h) = (12, 4);
+        let ids: Vec<u8> = (0..w * h).map(|i| u8::from(i % w >= 8)).collect();
+        let seg = seg_from(&ids, w, h, &[[0.5; 3], [0.9; 3]]);
+        let valid = vec![true; w * h];
+        let mask = Mask {
+            width: w,
+            height: h,
+            data: (0..w * h).map(|i| i % w < 10).collect(),
+        };
+        let sure = sure_in(&seg, &valid, 2, 1, &mask).unwrap();
+        for i in 0..w * h {
+            assert_eq!(sure[i], i % w < 8, "pixel {i}");
+        }
+        // Invalid pixels are never sure.
+        let mut valid2 = valid.clone();
+        valid2[3] = false;
+        assert!(!sure_in(&seg, &valid2, 2, 1, &mask).unwrap()[3]);
+        // A pick whose colour the mask does not hold: none.
+        let only_right = Mask {
+            width: w,
+            height: h,
+            data: (0..w * h).map(|i| i % w >= 9).collect(),
+        };
+        assert!(!sure_in(&seg, &valid, 2, 1, &only_right)
+            .unwrap()
+            .contains(&true));
+        // No surface at the pick: none.
+        let none = vec![false; w * h];
+        assert!(!sure_in(&seg, &none, 2, 1, &mask).unwrap().contains(&true));
+        // Refusals: a pick outside, a mask of another size, a grey image.
+        assert!(sure_in(&seg, &valid, 12, 0, &mask).is_err());
+        let small = Mask {
+            width: 4,
+            height: 4,
+            data: vec![true; 16],
+        };
+        assert!(sure_in(&seg, &valid, 0, 0, &small).is_err());
+        let grey = Image::new(1, h, w, vec![0.5; w * h]).unwrap();
+        assert!(sure_in(&grey, &valid, 0, 0, &mask).is_err());
     }
 }

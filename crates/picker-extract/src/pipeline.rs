@@ -257,7 +257,16 @@ impl Prepared {
         self.check_pick(pick)?;
         let (x, y) = self.to_work(pick[0] as usize, pick[1] as usize);
         let seg = self.mask_segmentation();
-        mask::pick_mask_on(seg, self.relief(), &self.valid, x, y, opts)
+        let mut pm = mask::pick_mask_on(seg, self.relief(), &self.valid, x, y, opts)?;
+        if self.inputs.segmentation_estimated && opts.tolerance.is_none() {
+            // The surest part also takes the mask's pixels that the raw
+            // network colours put within the pick's spread ([`mask::sure_in`]).
+            let raw = mask::sure_in(&self.inputs.segmentation, &self.valid, x, y, &pm.mask)?;
+            for (s, r) in pm.sure.iter_mut().zip(raw) {
+                *s |= r;
+            }
+        }
+        Ok(pm)
     }
 
     /// The segmentation that masks are cut from: an estimated one smoothed
