@@ -1329,8 +1329,8 @@ mod tests {
             data: (0..w * h).map(|i| i % w < 10).collect(),
         };
         let sure = sure_in(&seg, &valid, 2, 1, &mask).unwrap();
-        for i in 0..w * h {
-            assert_eq!(sure[i], i % w < 8, "pixel {i}");
+        for (i, &s) in sure.iter().enumerate() {
+            assert_eq!(s, i % w < 8, "pixel {i}");
         }
         // Invalid pixels are never sure.
         let mut valid2 = valid.clone();
