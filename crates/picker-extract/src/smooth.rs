@@ -16,6 +16,7 @@
 
 use crate::{Error, Result};
 use picker_render::Image;
+use picker_tensor::Isa;
 use rayon::prelude::*;
 
 /// Range σ of the photo-colour weight, on `√linear` RGB (close to display
@@ -105,12 +106,12 @@ fn guide(photo: &Image) -> Vec<f32> {
 /// their values and weigh nothing. Each row is computed on its own, in a
 /// fixed order, so the result does not depend on the thread count.
 pub fn smooth_segmentation(seg: &Image, photo: &Image, valid: &[bool]) -> Result<Image> {
-    smooth_with(seg, photo, valid, has_avx2())
+    smooth_with(seg, photo, valid, Isa::best())
 }
 
-/// [`smooth_segmentation`] on the AVX2 path (`avx2`, which the caller has
-/// checked the CPU has) or the portable one.
-fn smooth_with(seg: &Image, photo: &Image, valid: &[bool], avx2: bool) -> Result<Image> {
+/// [`smooth_segmentation`] with the row loop compiled for `isa`, which this
+/// CPU must have.
+fn smooth_with(seg: &Image, photo: &Image, valid: &[bool], isa: Isa) -> Result<Image> {
     check(seg, photo, valid)?;
     let (w, h) = (seg.width, seg.height);
     let n = w * h;
@@ -139,14 +140,7 @@ fn smooth_with(seg: &Image, photo: &Image, valid: &[bool], avx2: bool) -> Result
         .into_par_iter()
         .map(|y| {
             let mut acc = vec![0f32; 4 * w];
-            #[cfg(target_arch = "x86_64")]
-            if avx2 {
-                // SAFETY: the CPU has AVX2 (`has_avx2`).
-                unsafe { smooth_row_avx2(&ctx, y, &mut acc) };
-                return acc;
-            }
-            let _ = avx2;
-            smooth_row(&ctx, y, &mut acc);
+            smooth_row_isa(isa, &ctx, y, &mut acc);
             acc
         })
         .collect();
@@ -180,28 +174,10 @@ struct Rows<'a> {
     kr: f32,
 }
 
-/// True when the CPU has AVX2 (rows then run their AVX2-compiled copy: the
-/// same operations in the same order, so the same bits; Rust never
-/// contracts `a * b + c` into an FMA).
-fn has_avx2() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    {
-        std::arch::is_x86_feature_detected!("avx2")
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        false
-    }
-}
-
-/// [`smooth_row`] compiled for AVX2 (8 lanes instead of 4).
-///
-/// # Safety
-/// The CPU has AVX2.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn smooth_row_avx2(ctx: &Rows<'_>, y: usize, acc: &mut [f32]) {
-    smooth_row(ctx, y, acc)
+picker_tensor::per_isa! {
+    /// [`smooth_row`] compiled for `isa`'s registers (AVX-512, AVX2 + FMA or
+    /// the baseline): the same operations in the same order, so the same bits.
+    fn smooth_row_isa<'a>(ctx: &Rows<'a>, y: usize, acc: &mut [f32]) => smooth_row
 }
 
 /// Row `y` of [`smooth_segmentation`]: `acc` (4 planes of `w`) receives the
@@ -392,19 +368,21 @@ mod tests {
     }
 
     #[test]
-    fn the_avx2_path_gives_the_portable_bits() {
-        if !has_avx2() {
-            eprintln!("skipped: this CPU has no AVX2 (the portable path is the one tested)");
-            return;
-        }
-        for &(w, h) in &[(1, 1), (5, 3), (33, 21), (130, 70)] {
-            let mut rng = Rng(w as u64 * 31 + h as u64);
-            let seg = img(w, h, |_, _, _| rng.next());
-            let photo = img(w, h, |_, _, _| rng.next());
-            let valid: Vec<bool> = (0..w * h).map(|_| rng.next() > 0.1).collect();
-            let a = smooth_with(&seg, &photo, &valid, true).unwrap();
-            let b = smooth_with(&seg, &photo, &valid, false).unwrap();
-            assert_eq!(a.data, b.data, "{w}x{h}");
+    fn every_isa_path_gives_the_portable_bits() {
+        for isa in Isa::ALL {
+            if !isa.is_available() {
+                eprintln!("skipped: this CPU has no {isa}");
+                continue;
+            }
+            for &(w, h) in &[(1, 1), (5, 3), (33, 21), (130, 70)] {
+                let mut rng = Rng(w as u64 * 31 + h as u64);
+                let seg = img(w, h, |_, _, _| rng.next());
+                let photo = img(w, h, |_, _, _| rng.next());
+                let valid: Vec<bool> = (0..w * h).map(|_| rng.next() > 0.1).collect();
+                let a = smooth_with(&seg, &photo, &valid, isa).unwrap();
+                let b = smooth_with(&seg, &photo, &valid, Isa::Portable).unwrap();
+                assert_eq!(a.data, b.data, "{isa} {w}x{h}");
+            }
         }
     }
 

@@ -90,11 +90,14 @@ impl std::fmt::Display for Isa {
 /// function `body(args…)` compiled with the target features of `isa`'s
 /// family (AVX-512F, AVX2 + FMA, or the baseline), so plain loops vectorise
 /// for the widest registers. `isa` must be available on this CPU (the family
-/// a layer was built for, or [`Isa::best`]).
+/// a layer was built for, or [`Isa::best`]). Exported for the other crates'
+/// loops (`picker_tensor::per_isa!`); Rust never contracts `a * b + c` into
+/// an FMA, so every family gives the same bits for the same operations.
+#[macro_export]
 macro_rules! per_isa {
     ($(#[$m:meta])* $vis:vis fn $name:ident $(<$lt:lifetime>)? ($($a:ident: $t:ty),* $(,)?) => $body:ident) => {
         $(#[$m])*
-        $vis fn $name $(<$lt>)? (isa: $crate::isa::Isa, $($a: $t),*) {
+        $vis fn $name $(<$lt>)? (isa: $crate::Isa, $($a: $t),*) {
             #[cfg(target_arch = "x86_64")]
             #[target_feature(enable = "avx512f,avx2,fma")]
             unsafe fn avx512 $(<$lt>)? ($($a: $t),*) {
@@ -109,16 +112,16 @@ macro_rules! per_isa {
             match isa {
                 // SAFETY: the CPU has the family's features (see the macro's contract).
                 #[cfg(target_arch = "x86_64")]
-                $crate::isa::Isa::Avx512 => unsafe { avx512($($a),*) },
+                $crate::Isa::Avx512 => unsafe { avx512($($a),*) },
                 // SAFETY: as above.
                 #[cfg(target_arch = "x86_64")]
-                $crate::isa::Isa::Avx2Fma => unsafe { avx2($($a),*) },
+                $crate::Isa::Avx2Fma => unsafe { avx2($($a),*) },
                 _ => $body($($a),*),
             }
         }
     };
 }
-pub(crate) use per_isa;
+pub(crate) use crate::per_isa;
 
 /// Bytes of the level-2 cache of one core, read once from Linux's sysfs
 /// (`/sys/devices/system/cpu/cpu0/cache/index*/`); 1 MiB where it cannot be
