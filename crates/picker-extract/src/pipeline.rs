@@ -257,11 +257,25 @@ impl Prepared {
         self.check_pick(pick)?;
         let (x, y) = self.to_work(pick[0] as usize, pick[1] as usize);
         let seg = self.mask_segmentation();
-        let mut pm = mask::pick_mask_on(seg, self.relief(), &self.valid, x, y, opts)?;
-        if self.inputs.segmentation_estimated && opts.tolerance.is_none() {
-            // The surest part also takes the mask's pixels that the raw
-            // network colours put within the pick's spread ([`mask::sure_in`]).
-            let raw = mask::sure_in(&self.inputs.segmentation, &self.valid, x, y, &pm.mask)?;
+        let pm = mask::pick_mask_on(seg, self.relief(), &self.valid, x, y, opts)?;
+        if opts.tolerance.is_some() {
+            return Ok(pm);
+        }
+        self.with_raw_sure(pm, &self.valid, x, y)
+    }
+
+    /// An automatic mask's surest part joined with the mask's pixels that
+    /// the network's raw colours put within the pick's spread
+    /// ([`mask::sure_in`]), when the masks read a smoothed segmentation.
+    fn with_raw_sure(
+        &self,
+        mut pm: PickMask,
+        valid: &[bool],
+        x: usize,
+        y: usize,
+    ) -> Result<PickMask> {
+        if self.inputs.segmentation_estimated {
+            let raw = mask::sure_in(&self.inputs.segmentation, valid, x, y, &pm.mask)?;
             for (s, r) in pm.sure.iter_mut().zip(raw) {
                 *s |= r;
             }
@@ -342,7 +356,8 @@ impl Prepared {
                 x,
                 y,
                 &MaskOptions::default(),
-            );
+            )
+            .and_then(|pm| self.with_raw_sure(pm, &remaining, x, y));
             let Ok(pm) = pm else {
                 remaining[seed] = false;
                 continue;
