@@ -67,7 +67,8 @@ pub struct Flags {
     /// Keep only the connected region at the pick.
     #[arg(long)]
     pub connected: bool,
-    /// Segmentation-colour tolerance (an RGB distance, 0 to 1); default automatic. A given
+    /// Segmentation-colour tolerance (an RGB distance, 0 to 1, in the segmentation the masks read:
+    /// the network's, smoothed along the photo); default automatic. A given
     /// tolerance is applied as it is: without the automatic mode's leak guard, which stops the
     /// mask at the segmentation's edge with clearly other colours (give one when the automatic
     /// mask stops short on a strongly shaded or vignetted surface).
