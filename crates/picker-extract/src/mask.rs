@@ -195,6 +195,12 @@ pub fn pick_colour(seg: &Image, valid: &[bool], x: usize, y: usize) -> Option<([
     Some((pick, sigma))
 }
 
+/// `τ₀ = clamp(τ_min + 3σ, τ_min, τ_max)`: the tolerance the pick's own
+/// colour spread `σ` ([`pick_colour`]) asks for.
+pub fn own_tolerance(sigma: f32) -> f32 {
+    (TOLERANCE_MIN + 3.0 * sigma).clamp(TOLERANCE_MIN, TOLERANCE_MAX)
+}
+
 /// The automatic tolerance, from `d`, the colour distances of the valid
 /// pixels to the pick colour (NaN and values beyond [`VALLEY_RANGE`] are
 /// ignored by the valley), and `sigma`, the spread of the pick's own pixels:
@@ -212,7 +218,7 @@ pub fn pick_colour(seg: &Image, valid: &[bool], x: usize, y: usize) -> Option<([
 ///
 /// Returns `(τ₀, τ)`.
 pub fn auto_tolerance(d: &[f32], sigma: f32) -> (f32, f32) {
-    let tau0 = (TOLERANCE_MIN + 3.0 * sigma).clamp(TOLERANCE_MIN, TOLERANCE_MAX);
+    let tau0 = own_tolerance(sigma);
     let tau = valley_tolerance(d, tau0);
     let mut within: Vec<f32> = d.iter().copied().filter(|&x| x <= tau).collect();
     within.sort_by(|a, b| a.total_cmp(b));
@@ -751,7 +757,7 @@ pub fn sure_in(seg: &Image, valid: &[bool], x: usize, y: usize, mask: &Mask) -> 
     let Some((c, sigma)) = pick_colour(seg, valid, x, y) else {
         return Ok(vec![false; w * h]);
     };
-    let tau0 = (TOLERANCE_MIN + 3.0 * sigma).clamp(TOLERANCE_MIN, TOLERANCE_MAX);
+    let tau0 = own_tolerance(sigma);
     Ok((0..w * h)
         .map(|i| mask.data[i] && valid[i] && dist(colour(seg, i), c) <= tau0)
         .collect())
