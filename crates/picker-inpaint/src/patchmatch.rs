@@ -43,6 +43,7 @@ use rayon::prelude::*;
 
 use crate::diffusion::diffuse_planes;
 use crate::{stream, validate, Image, InpaintOptions, Inpainter, Plan, Result};
+use picker_tensor::Isa;
 
 /// Multi-scale PatchMatch inpainting with patch voting (see the [module docs](self)).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -733,6 +734,7 @@ impl PatchMatchInpainter {
         for em in 0..em_iterations {
             for _ in 0..self.pm_iterations {
                 self.pm_pass(
+                    Isa::best(),
                     &ctx,
                     &pad,
                     &mut nnf,
@@ -765,9 +767,12 @@ impl PatchMatchInpainter {
     /// The operations of `pm_pass_reference` in the same order (the same
     /// candidates, random draws and distances, so the same field), with the
     /// rows and columns of the best match and of each candidate carried along
-    /// instead of divided out of their positions at every use.
+    /// instead of divided out of their positions at every use. `isa` picks
+    /// the compiled copy of the band loop (every family gives the same bits).
+    #[allow(clippy::too_many_arguments)]
     fn pm_pass(
         &self,
+        isa: Isa,
         ctx: &Ctx,
         pad: &[f32],
         nnf: &mut [u32],
@@ -793,20 +798,10 @@ impl PatchMatchInpainter {
             key,
             reverse,
         };
-        let avx2 = has_avx2();
         nnf.par_chunks_mut(band)
             .zip(dist.par_chunks_mut(band))
             .enumerate()
-            .for_each(|(b, (nb, db))| {
-                #[cfg(target_arch = "x86_64")]
-                if avx2 {
-                    // SAFETY: the CPU has AVX2 (checked above).
-                    unsafe { band_pass_avx2(&args, b, nb, db) };
-                    return;
-                }
-                let _ = avx2;
-                band_pass(&args, b, nb, db);
-            });
+            .for_each(|(b, (nb, db))| band_pass_isa(isa, &args, b, nb, db));
     }
 
     /// The plain implementation of [`PatchMatchInpainter::pm_pass`] (a
@@ -907,29 +902,13 @@ struct PassArgs<'a> {
     reverse: bool,
 }
 
-/// True when the CPU has AVX2 (the pass then runs its AVX2-compiled copy:
-/// the same operations in the same order, so the same bits; Rust never
-/// contracts `a * b + c` into an FMA).
-fn has_avx2() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    {
-        std::arch::is_x86_feature_detected!("avx2")
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        false
-    }
-}
-
-/// [`band_pass`] compiled for AVX2 (the patch distances' 8 lanes in one
-/// register instead of two).
-///
-/// # Safety
-/// The CPU has AVX2.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn band_pass_avx2(args: &PassArgs<'_>, b: usize, nb: &mut [u32], db: &mut [f32]) {
-    band_pass(args, b, nb, db)
+picker_tensor::per_isa! {
+    /// [`band_pass`] compiled for the CPU's instruction-set family
+    /// (AVX-512, AVX2 + FMA, or the portable baseline): the same operations
+    /// in the same order, so the same bits on every family (Rust never
+    /// contracts `a * b + c` into an FMA); wider registers for the patch
+    /// distances' lanes.
+    fn band_pass_isa<'a>(args: &PassArgs<'a>, b: usize, nb: &mut [u32], db: &mut [f32]) => band_pass
 }
 
 /// One band (`b`, its matches `nb` and distances `db`) of
@@ -1523,31 +1502,40 @@ mod tests {
 
     #[test]
     fn fast_pm_pass_matches_reference() {
-        let mut rng = Rng::new(44);
-        let pm = PatchMatchInpainter::default();
-        for (h, w, c, p) in shapes() {
-            for toroidal in [true, false] {
-                let mut case = Case::new(&mut rng, h, w, c, p, toroidal);
-                // Some inadmissible sources; non-toroidal sources inside the image.
-                let r = p / 2;
-                for (i, v) in case.valid.iter_mut().enumerate() {
-                    let (y, x) = (i / w, i % w);
-                    let inside = toroidal || (y >= r && y + r < h && x >= r && x + r < w);
-                    *v = inside && rng.f64() > 0.2;
-                }
-                let ctx = case.ctx();
-                let pad = ctx.pad(&case.img);
-                let mut dist = vec![0.0f32; h * w];
-                compute_distances(&ctx, &pad, &case.nnf, &mut dist);
-                let (mut na, mut da) = (case.nnf.clone(), dist.clone());
-                let (mut nb, mut db) = (case.nnf.clone(), dist);
-                for pass in 0..4u64 {
-                    let key = rng.next_u64();
-                    pm.pm_pass(&ctx, &pad, &mut na, &mut da, key, pass % 2 == 1);
-                    pm.pm_pass_reference(&ctx, &pad, &mut nb, &mut db, key, pass % 2 == 1);
-                    assert_eq!(na, nb, "{h}x{w}x{c} p{p} toroidal {toroidal} pass {pass}");
-                    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
-                    assert_eq!(bits(&da), bits(&db));
+        for isa in Isa::ALL {
+            if !isa.is_available() {
+                eprintln!("fast_pm_pass_matches_reference: SKIPPED {isa:?} (this CPU lacks it)");
+                continue;
+            }
+            let mut rng = Rng::new(44);
+            let pm = PatchMatchInpainter::default();
+            for (h, w, c, p) in shapes() {
+                for toroidal in [true, false] {
+                    let mut case = Case::new(&mut rng, h, w, c, p, toroidal);
+                    // Some inadmissible sources; non-toroidal sources inside the image.
+                    let r = p / 2;
+                    for (i, v) in case.valid.iter_mut().enumerate() {
+                        let (y, x) = (i / w, i % w);
+                        let inside = toroidal || (y >= r && y + r < h && x >= r && x + r < w);
+                        *v = inside && rng.f64() > 0.2;
+                    }
+                    let ctx = case.ctx();
+                    let pad = ctx.pad(&case.img);
+                    let mut dist = vec![0.0f32; h * w];
+                    compute_distances(&ctx, &pad, &case.nnf, &mut dist);
+                    let (mut na, mut da) = (case.nnf.clone(), dist.clone());
+                    let (mut nb, mut db) = (case.nnf.clone(), dist);
+                    for pass in 0..4u64 {
+                        let key = rng.next_u64();
+                        let reverse = pass % 2 == 1;
+                        pm.pm_pass(isa, &ctx, &pad, &mut na, &mut da, key, reverse);
+                        pm.pm_pass_reference(&ctx, &pad, &mut nb, &mut db, key, reverse);
+                        let at =
+                            format!("{isa:?} {h}x{w}x{c} p{p} toroidal {toroidal} pass {pass}");
+                        assert_eq!(na, nb, "{at}");
+                        let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                        assert_eq!(bits(&da), bits(&db), "{at}");
+                    }
                 }
             }
         }
