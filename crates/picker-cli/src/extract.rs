@@ -593,6 +593,16 @@ fn tone_mapped(linear: &Image) -> Image {
     }
 }
 
+/// Linear RGB shown with a known exposure (`conv::expose_rgb`).
+fn exposed(linear: &Image, exposure: f32) -> Image {
+    Image {
+        channels: 3,
+        height: linear.height,
+        width: linear.width,
+        data: conv::expose_rgb(&linear.data, exposure),
+    }
+}
+
 fn direction_colours(img: &Image) -> Image {
     let n = img.plane_len();
     let mut out = Image::zeros(3, img.height, img.width);
@@ -743,6 +753,7 @@ pub fn write_materials(
     let preview_env = env
         .clone()
         .unwrap_or_else(|| EnvMap::uniform(64, 32, glam::Vec3::ONE));
+    let exposure = pipeline::preview_exposure(&preview_env);
     let single = jobs.len() == 1 && !layout.always_subdirs;
     let export_opts = ExportOptions {
         sixteen_bit: flags.sixteen_bit,
@@ -765,7 +776,10 @@ pub fn write_materials(
         let (timed, images) = rayon::join(
             || -> Result<_> {
                 let t = Instant::now();
-                let preview = tone_mapped(&pipeline::preview_sphere(&m, &preview_env, 256, 2.0));
+                let preview = exposed(
+                    &pipeline::preview_sphere(&m, &preview_env, 256, 2.0),
+                    exposure,
+                );
                 rio::write_png(&dir.join("preview.png"), &preview)?;
                 let preview_ms = ms(t);
                 let t_sheet = Instant::now();
@@ -789,7 +803,7 @@ pub fn write_materials(
             "diagnostics": diagnostics,
             "picker_version": env!("CARGO_PKG_VERSION"),
             "seed": flags.seed,
-            "preview": {"file": "preview.png", "envmap": if env.is_some() { "estimated" } else { "uniform white (no envmap network given)" }, "texture_repeats": 2.0},
+            "preview": {"file": "preview.png", "envmap": if env.is_some() { "estimated" } else { "uniform white (no envmap network given)" }, "texture_repeats": 2.0, "exposure": exposure, "display": "linear radiance x exposure (a white diffuse sphere under this lighting averages 0.75), identity up to 0.8 then a soft roll-off towards 1, sRGB-encoded"},
             "report": "report.png",
         });
         if layout.timings {

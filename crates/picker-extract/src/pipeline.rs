@@ -1096,6 +1096,56 @@ pub fn preview_sphere(m: &Material, env: &EnvMap, size: usize, repeats: f32) -> 
     out
 }
 
+/// Linear level a white diffuse surface averages in a [`preview_sphere`] once
+/// exposed by [`preview_exposure`] (below the display curve's knee,
+/// `conv::SOFT_CLIP_KNEE`, so albedos up to 1 show as themselves).
+pub const PREVIEW_WHITE: f32 = 0.75;
+
+/// Normals per side of the grid over the sphere's visible disc that
+/// [`preview_exposure`] averages.
+const EXPOSURE_GRID: usize = 32;
+
+/// The exposure of [`preview_sphere`]'s images under `env`: the factor that
+/// makes a white Lambertian sphere (ρd = 1, no specular) under the same
+/// lighting average [`PREVIEW_WHITE`] over its visible disc. Exposing by the
+/// lighting, not by the rendered pixels, shows a material's own lightness (a
+/// dark material stays dark, a white one white, whatever the background
+/// share of the square) and makes the preview independent of the lighting's
+/// overall scale. Display: `conv::expose_rgb(planes, exposure)`. A lighting
+/// that leaves the white sphere black gives 1.
+pub fn preview_exposure(env: &EnvMap) -> f32 {
+    let shader = Shader::new(env, Quality::Fast);
+    let white = picker_render::PhongMaterial {
+        diffuse: Vec3::ONE,
+        specular: Vec3::ZERO,
+        exponent: 1.0,
+    };
+    let (mut sum, mut count) = (0.0f64, 0usize);
+    for row in 0..EXPOSURE_GRID {
+        for col in 0..EXPOSURE_GRID {
+            let x = (col as f32 + 0.5) / EXPOSURE_GRID as f32 * 2.0 - 1.0;
+            let y = 1.0 - (row as f32 + 0.5) / EXPOSURE_GRID as f32 * 2.0;
+            let r2 = x * x + y * y;
+            if r2 >= 1.0 {
+                continue;
+            }
+            let n = Vec3::new(x, y, (1.0 - r2).sqrt());
+            let c = shader.shade(n, Vec3::Z, &white);
+            let lum = 0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z;
+            if lum.is_finite() {
+                sum += lum.max(0.0) as f64;
+                count += 1;
+            }
+        }
+    }
+    let mean = if count > 0 { sum / count as f64 } else { 0.0 };
+    if mean > 1e-12 {
+        (PREVIEW_WHITE as f64 / mean) as f32
+    } else {
+        1.0
+    }
+}
+
 /// One pixel of [`preview_sphere`] (`None` off the sphere).
 fn preview_pixel(
     m: &Material,
@@ -1240,6 +1290,81 @@ mod tests {
             // Monotone.
             assert!((1..big).all(|i| cell_under(i - 1, big, small) <= cell_under(i, big, small)));
         }
+    }
+
+    /// A material of one colour (no texture) for the preview tests.
+    fn plain_material(diffuse: [f32; 3], specular: f32) -> Material {
+        Material {
+            name: "m".into(),
+            pick: None,
+            params: MaterialParams {
+                diffuse,
+                specular: [specular; 3],
+                glossiness: 0.5,
+                exponent: conv::phong_exponent(0.5),
+            },
+            textured: false,
+            texture: None,
+            mask: Image::zeros(1, 1, 1),
+            area_fraction: 1.0,
+            rerender_psnr: None,
+        }
+    }
+
+    #[test]
+    fn preview_exposure_shows_albedo_under_uniform_light() {
+        // Under a uniform environment of radiance L a Lambertian sphere of
+        // albedo ρ has radiance ρL everywhere: the exposure is WHITE / L and
+        // the exposed preview shows ρ·WHITE whatever L is.
+        for l in [0.01f32, 1.0, 37.0] {
+            let env = EnvMap::uniform(64, 32, Vec3::splat(l));
+            let e = preview_exposure(&env);
+            assert!(
+                (e * l / PREVIEW_WHITE - 1.0).abs() < 2e-2,
+                "L {l}: exposure {e}"
+            );
+            for rho in [0.05f32, 0.5, 0.9] {
+                let img = preview_sphere(&plain_material([rho; 3], 0.0), &env, 33, 2.0);
+                let shown = conv::expose_rgb(&img.data, e);
+                let centre = 16 * 33 + 16;
+                let want = conv::srgb_encode(conv::soft_clip(rho * PREVIEW_WHITE));
+                assert!(
+                    (shown[centre] - want).abs() < 1e-2,
+                    "L {l} rho {rho}: {} vs {want}",
+                    shown[centre]
+                );
+                // Off the sphere: black.
+                assert_eq!(shown[0], 0.0);
+            }
+        }
+    }
+
+    #[test]
+    fn preview_exposure_follows_the_lighting_not_the_material() {
+        let mut rng = picker_tensor::Rng::new(12);
+        let img = Image::new(3, 8, 16, rng.uniform_vec(3 * 8 * 16, 0.0, 3.0)).unwrap();
+        let env = EnvMap::from_image(&img).unwrap();
+        let brighter = EnvMap::from_image(
+            &Image::new(3, 8, 16, img.data.iter().map(|v| v * 20.0).collect()).unwrap(),
+        )
+        .unwrap();
+        let (e, e20) = (preview_exposure(&env), preview_exposure(&brighter));
+        assert!(e.is_finite() && e > 0.0);
+        assert!((e / e20 / 20.0 - 1.0).abs() < 1e-4, "{e} {e20}");
+        // The same material shows the same under both (scale invariance), and a
+        // darker material darker.
+        let m = plain_material([0.6, 0.4, 0.2], 0.04);
+        let a = conv::expose_rgb(&preview_sphere(&m, &env, 24, 2.0).data, e);
+        let b = conv::expose_rgb(&preview_sphere(&m, &brighter, 24, 2.0).data, e20);
+        assert!(a.iter().zip(&b).all(|(x, y)| (x - y).abs() < 1e-3));
+        let dark = conv::expose_rgb(
+            &preview_sphere(&plain_material([0.06, 0.04, 0.02], 0.04), &env, 24, 2.0).data,
+            e,
+        );
+        let mean = |v: &[f32]| v.iter().sum::<f32>() / v.len() as f32;
+        assert!(mean(&dark) < 0.5 * mean(&a), "{} {}", mean(&dark), mean(&a));
+        // A black environment: exposure 1, not a division by zero.
+        assert_eq!(preview_exposure(&EnvMap::uniform(8, 4, Vec3::ZERO)), 1.0);
     }
 
     #[test]

@@ -13,7 +13,9 @@
 //!   centre column (`x = W/2`) is straight ahead (−z), `x = 3W/4` is right (+x),
 //!   the left/right edges are behind (+z). See [`envmap_direction`].
 
-pub use crate::display::{srgb_encode, tone_map_rgb, TONE_MAP_KEY};
+pub use crate::display::{
+    expose_rgb, soft_clip, srgb_encode, tone_map_rgb, SOFT_CLIP_KNEE, TONE_MAP_KEY,
+};
 
 use picker_tensor::Tensor;
 

@@ -51,6 +51,44 @@ pub fn tone_map_rgb(planes: &[f32], n: usize) -> Vec<f32> {
         .collect()
 }
 
+/// Where [`soft_clip`] leaves the identity: linear values up to this are
+/// shown as they are, brighter ones roll off towards 1.
+pub const SOFT_CLIP_KNEE: f32 = 0.8;
+
+/// A display curve for exposed linear values: the identity up to
+/// [`SOFT_CLIP_KNEE`], then `k + (1 − k)(1 − e^{−(x − k)/(1 − k)})`, which
+/// meets it with the same slope and approaches 1, so highlights keep
+/// their gradation instead of clipping flat. Negative values give 0, NaN 0,
+/// +∞ 1.
+pub fn soft_clip(x: f32) -> f32 {
+    if x.is_nan() || x <= 0.0 {
+        return 0.0;
+    }
+    let k = SOFT_CLIP_KNEE;
+    if x <= k {
+        x
+    } else {
+        k + (1.0 - k) * -(-(x - k) / (1.0 - k)).exp_m1()
+    }
+}
+
+/// Planar linear RGB multiplied by `exposure`, then [`soft_clip`] and
+/// [`srgb_encode`] per value: the display of an image whose exposure is
+/// known (e.g. a material preview exposed by its lighting), unlike
+/// [`tone_map_rgb`], which measures it from the pixels themselves. A
+/// non-finite or negative `exposure` is treated as 0 (black).
+pub fn expose_rgb(planes: &[f32], exposure: f32) -> Vec<f32> {
+    let e = if exposure.is_finite() {
+        exposure.max(0.0)
+    } else {
+        0.0
+    };
+    planes
+        .iter()
+        .map(|&v| srgb_encode(soft_clip(v * e)))
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -70,5 +108,42 @@ mod tests {
         let d = tone_map_rgb(&planes, 3);
         assert!(d.iter().all(|v| (0.0..=1.0).contains(v)));
         assert!(d[0] < d[1] && d[1] < d[2]);
+    }
+
+    #[test]
+    fn soft_clip_is_the_identity_then_rolls_off() {
+        for x in [0.0, 0.01, 0.3, SOFT_CLIP_KNEE] {
+            assert_eq!(soft_clip(x), x);
+        }
+        assert_eq!(soft_clip(-2.0), 0.0);
+        assert_eq!(soft_clip(f32::NAN), 0.0);
+        assert_eq!(soft_clip(f32::INFINITY), 1.0);
+        // Continuous with slope 1 at the knee, monotone, below 1.
+        let e = 1e-3;
+        let slope = (soft_clip(SOFT_CLIP_KNEE + e) - soft_clip(SOFT_CLIP_KNEE)) / e;
+        assert!((slope - 1.0).abs() < 1e-2, "{slope}");
+        let mut last = soft_clip(SOFT_CLIP_KNEE);
+        for i in 1..200 {
+            let x = SOFT_CLIP_KNEE + i as f32 * 0.05;
+            let y = soft_clip(x);
+            // Strictly rising while f32 can tell (past ~4 it rounds to 1).
+            assert!(
+                if x < 3.0 { y > last } else { y >= last } && y <= 1.0,
+                "{i} {y}"
+            );
+            last = y;
+        }
+    }
+
+    #[test]
+    fn expose_scales_before_the_curve() {
+        let planes = [0.0, 0.1, 0.2, 10.0];
+        let d = expose_rgb(&planes, 2.0);
+        assert_eq!(d[0], 0.0);
+        assert!((d[1] - srgb_encode(0.2)).abs() < 1e-7);
+        assert!((d[2] - srgb_encode(0.4)).abs() < 1e-7);
+        assert!(d[3] < 1.0 && d[3] > srgb_encode(0.99));
+        assert!(expose_rgb(&planes, f32::NAN).iter().all(|&v| v == 0.0));
+        assert!(expose_rgb(&planes, -1.0).iter().all(|&v| v == 0.0));
     }
 }
