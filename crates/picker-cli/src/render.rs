@@ -13,6 +13,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
+use picker_nets::conventions as conv;
 use picker_render::render::HEATMAP_FULL_SCALE;
 use picker_render::{io, EnvMap, Image, PhongMaterial, Quality, Shader};
 use serde_json::json;
@@ -57,12 +58,40 @@ pub struct Args {
     /// Preview: optional diffuse texture for the tile (PNG, sRGB; or EXR, linear).
     #[arg(long, value_name = "FILE", requires = "preview")]
     pub texture: Option<PathBuf>,
+    /// Preview: exposure of the PNGs, `auto` (default: a white diffuse sphere under
+    /// the envmap averages 0.75, so a material shows its own lightness whatever the
+    /// map's scale) or a factor on the linear radiance (1: the radiance as it is);
+    /// then identity up to 0.8, a soft roll-off above, sRGB.
+    #[arg(long, value_name = "auto|FACTOR", default_value = "auto", value_parser = parse_exposure, requires = "preview")]
+    pub exposure: Exposure,
     /// Preview: image side in pixels.
     #[arg(long, default_value_t = 256, value_parser = clap::value_parser!(u32).range(1..=4096))]
     pub size: u32,
     /// Worker threads (default: one per logical core).
     #[arg(long)]
     pub threads: Option<usize>,
+}
+
+/// The `--exposure` of a preview.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Exposure {
+    /// Set by the lighting (`picker_render::preview_exposure`).
+    Auto,
+    /// This factor on the linear radiance.
+    Factor(f32),
+}
+
+/// Parses `auto` or a finite factor > 0.
+fn parse_exposure(s: &str) -> Result<Exposure, String> {
+    if s.trim().eq_ignore_ascii_case("auto") {
+        return Ok(Exposure::Auto);
+    }
+    match s.trim().parse::<f32>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(Exposure::Factor(v)),
+        _ => Err(format!(
+            "expected `auto` or a factor > 0 such as 0.5, got {s:?}"
+        )),
+    }
 }
 
 /// Parses `R,G,B` (three finite values in `[0, 1]`).
@@ -225,16 +254,18 @@ fn preview(a: &Args, env: &EnvMap, t_total: Instant) -> Result<()> {
     let shader = Shader::new(env, Quality::Fast);
     let sphere = picker_render::render::preview_sphere_with(&material, &shader, size);
     let tile = picker_render::render::preview_tile_with(&material, &shader, size, texture.as_ref());
-    io::write_png(
-        &a.out.join("preview_sphere.png"),
-        &picker_render::to_srgb(&sphere),
-    )?;
-    io::write_png(
-        &a.out.join("preview_tile.png"),
-        &picker_render::to_srgb(&tile),
-    )?;
+    let exposure = match a.exposure {
+        Exposure::Auto => picker_render::preview_exposure(&shader),
+        Exposure::Factor(f) => f,
+    };
+    let shown = |img: &Image| Image {
+        data: conv::expose_rgb(&img.data, exposure),
+        ..img.clone()
+    };
+    io::write_png(&a.out.join("preview_sphere.png"), &shown(&sphere))?;
+    io::write_png(&a.out.join("preview_tile.png"), &shown(&tile))?;
     println!(
-        "wrote preview_sphere.png and preview_tile.png ({size}x{size}) to {} in {:.2} s",
+        "wrote preview_sphere.png and preview_tile.png ({size}x{size}, exposure {exposure:.4}) to {} in {:.2} s",
         a.out.display(),
         t_total.elapsed().as_secs_f64()
     );
@@ -252,6 +283,13 @@ mod tests {
         assert!(parse_rgb("2,0,0").is_err());
         assert!(parse_rgb("a,b,c").is_err());
         assert_eq!(parse_exponent("64"), Ok(64.0));
+        assert_eq!(parse_exposure("auto"), Ok(Exposure::Auto));
+        assert_eq!(parse_exposure("AUTO"), Ok(Exposure::Auto));
+        assert_eq!(parse_exposure("0.5"), Ok(Exposure::Factor(0.5)));
+        assert!(parse_exposure("0").is_err());
+        assert!(parse_exposure("-1").is_err());
+        assert!(parse_exposure("nan").is_err());
+        assert!(parse_exposure("bright").is_err());
         assert!(parse_exponent("-1").is_err());
         assert!(parse_exponent("inf").is_err());
     }

@@ -139,6 +139,70 @@ fn preview_writes_sphere_and_tile() {
         assert_eq!((img.height, img.width), (24, 24), "{name}");
         assert!(img.data.iter().any(|&v| v > 0.1), "{name} is black");
     }
+    // The automatic exposure follows the lighting: the same envmap 50 times
+    // brighter gives the same pictures (to 8-bit rounding); a fixed exposure
+    // does not.
+    let env = io::read_exr(&d.join("env.exr")).unwrap();
+    let bright = Image {
+        data: env.data.iter().map(|v| v * 50.0).collect(),
+        ..env
+    };
+    io::write_exr(&d.join("bright.exr"), &bright).unwrap();
+    let run = |env: &str, out: &str, exposure: &str| {
+        let o = picker(&[
+            "render",
+            "--preview",
+            "--diffuse",
+            "0.6,0.3,0.2",
+            "--specular",
+            "0.2,0.2,0.2",
+            "--exponent",
+            "64",
+            "--envmap",
+            d.join(env).to_str().unwrap(),
+            "--out",
+            d.join(out).to_str().unwrap(),
+            "--size",
+            "24",
+            "--exposure",
+            exposure,
+        ]);
+        assert_ok(&o);
+        io::read_png(&d.join(out).join("preview_sphere.png"))
+            .unwrap()
+            .data
+    };
+    let close = |a: &[f32], b: &[f32]| a.iter().zip(b).all(|(x, y)| (x - y).abs() <= 2.5 / 255.0);
+    let (a, b) = (
+        run("env.exr", "pa", "auto"),
+        run("bright.exr", "pb", "auto"),
+    );
+    assert!(
+        close(&a, &b),
+        "auto exposure changed with the lighting's scale"
+    );
+    let (f, g) = (run("env.exr", "pf", "1"), run("bright.exr", "pg", "1"));
+    assert!(
+        !close(&f, &g),
+        "a fixed exposure ignored the lighting's scale"
+    );
+    let o = picker(&[
+        "render",
+        "--preview",
+        "--diffuse",
+        "0.6,0.3,0.2",
+        "--specular",
+        "0.2,0.2,0.2",
+        "--exponent",
+        "64",
+        "--envmap",
+        d.join("env.exr").to_str().unwrap(),
+        "--out",
+        d.join("px").to_str().unwrap(),
+        "--exposure",
+        "-2",
+    ]);
+    assert!(!o.status.success(), "a negative exposure was accepted");
 }
 
 #[test]

@@ -15,7 +15,8 @@
 //! - [`PrefilteredEnv`]: the fast path (irradiance grid + prefiltered Phong
 //!   lobes), tested against `shade_exact`.
 //! - [`rerender`] a photo from its render elements ([`ElementImages`]),
-//!   [`preview_sphere`] / [`preview_tile`] of a material, [`compare`] against a reference.
+//!   [`preview_sphere`] / [`preview_tile`] of a material (exposed by [`preview_exposure`]),
+//!   [`compare`] against a reference.
 //! - [`io`]: planar `f32` images ↔ EXR / PNG, atomic writes.
 //!
 //! ```
@@ -47,6 +48,6 @@ pub use io::Image;
 pub use phong::{brdf, shade_exact, EnvQuadrature, PhongMaterial};
 pub use prefilter::PrefilteredEnv;
 pub use render::{
-    compare, error_heatmap, preview_sphere, preview_tile, rerender, rerender_with, to_srgb,
-    ElementImages, ErrorScore, Quality, Shader,
+    compare, error_heatmap, preview_exposure, preview_sphere, preview_tile, rerender,
+    rerender_with, to_srgb, ElementImages, ErrorScore, Quality, Shader, PREVIEW_WHITE,
 };

@@ -236,6 +236,55 @@ pub fn rerender_with(elements: &ElementImages, shader: &Shader) -> Image {
     out
 }
 
+/// Linear level a white diffuse surface averages in a [`preview_sphere`] once
+/// exposed by [`preview_exposure`] (below the display curve's knee,
+/// `conv::SOFT_CLIP_KNEE`, so albedos up to 1 show as themselves).
+pub const PREVIEW_WHITE: f32 = 0.75;
+
+/// Normals per side of the grid over the sphere's visible disc that
+/// [`preview_exposure`] averages.
+const EXPOSURE_GRID: usize = 32;
+
+/// The exposure of a material preview drawn with `shader` ([`preview_sphere`], [`preview_tile`]): the factor that
+/// makes a white Lambertian sphere (ρd = 1, no specular) under the same
+/// lighting average [`PREVIEW_WHITE`] over its visible disc. Exposing by the
+/// lighting, not by the rendered pixels, shows a material's own lightness (a
+/// dark material stays dark, a white one white, whatever the background
+/// share of the square) and makes the preview independent of the lighting's
+/// overall scale. Display: `conv::expose_rgb(planes, exposure)`. A lighting
+/// that leaves the white sphere black gives 1.
+pub fn preview_exposure(shader: &Shader) -> f32 {
+    let white = PhongMaterial {
+        diffuse: Vec3::ONE,
+        specular: Vec3::ZERO,
+        exponent: 1.0,
+    };
+    let (mut sum, mut count) = (0.0f64, 0usize);
+    for row in 0..EXPOSURE_GRID {
+        for col in 0..EXPOSURE_GRID {
+            let x = (col as f32 + 0.5) / EXPOSURE_GRID as f32 * 2.0 - 1.0;
+            let y = 1.0 - (row as f32 + 0.5) / EXPOSURE_GRID as f32 * 2.0;
+            let r2 = x * x + y * y;
+            if r2 >= 1.0 {
+                continue;
+            }
+            let n = Vec3::new(x, y, (1.0 - r2).sqrt());
+            let c = shader.shade(n, Vec3::Z, &white);
+            let lum = 0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z;
+            if lum.is_finite() {
+                sum += lum.max(0.0) as f64;
+                count += 1;
+            }
+        }
+    }
+    let mean = if count > 0 { sum / count as f64 } else { 0.0 };
+    if mean > 1e-12 {
+        (PREVIEW_WHITE as f64 / mean) as f32
+    } else {
+        1.0
+    }
+}
+
 /// A preview of `material` on a sphere under `env` (fast path): an
 /// orthographic view of a unit sphere filling a `size × size` image, camera
 /// space (normal `(x, y, √(1−x²−y²))` at image position `(x, y) ∈ [−1, 1]²`,

@@ -382,3 +382,31 @@ fn previews() {
             < 0.05
     );
 }
+
+#[test]
+fn preview_exposure_is_set_by_the_lighting() {
+    use picker_render::{preview_exposure, Quality, Shader, PREVIEW_WHITE};
+    // Uniform radiance L: a white Lambertian sphere shows L, so the exposure
+    // is WHITE / L, for any L.
+    for l in [0.02f32, 1.0, 250.0] {
+        let e = preview_exposure(&Shader::new(
+            &EnvMap::uniform(32, 16, Vec3::splat(l)),
+            Quality::Fast,
+        ));
+        assert!((e * l / PREVIEW_WHITE - 1.0).abs() < 2e-2, "L {l}: {e}");
+    }
+    // Light from one side only: half the disc is dark, the exposure rises
+    // above that of uniform light of the same radiance.
+    let mut img = Image::zeros(3, 16, 32);
+    for y in 0..16 {
+        for x in 16..32 {
+            img.set_rgb(y * 32 + x, Vec3::ONE);
+        }
+    }
+    let half = EnvMap::from_image(&img).unwrap();
+    let e = preview_exposure(&Shader::new(&half, Quality::Fast));
+    assert!(e > PREVIEW_WHITE * 1.2, "{e}");
+    // No light: 1 (no division by zero).
+    let dark = Shader::new(&EnvMap::uniform(8, 4, Vec3::ZERO), Quality::Fast);
+    assert_eq!(preview_exposure(&dark), 1.0);
+}
