@@ -111,13 +111,10 @@ fn render_writes_image_error_map_and_score() {
     }
 }
 
-#[test]
-fn preview_writes_sphere_and_tile() {
-    let tmp = tempfile::tempdir().unwrap();
-    let d = tmp.path();
-    make_scene(d);
-    let out = d.join("preview");
-    let o = picker(&[
+/// `picker render --preview` of one material under `d/env` into `d/out`, with `extra` flags.
+fn preview(d: &Path, env: &str, out: &str, extra: &[&str]) -> Output {
+    let (env, out) = (d.join(env), d.join(out));
+    let mut args = vec![
         "render",
         "--preview",
         "--diffuse",
@@ -127,15 +124,22 @@ fn preview_writes_sphere_and_tile() {
         "--exponent",
         "64",
         "--envmap",
-        d.join("env.exr").to_str().unwrap(),
+        env.to_str().unwrap(),
         "--out",
         out.to_str().unwrap(),
-        "--size",
-        "24",
-    ]);
-    assert_ok(&o);
+    ];
+    args.extend_from_slice(extra);
+    picker(&args)
+}
+
+#[test]
+fn preview_writes_sphere_and_tile() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    make_scene(d);
+    assert_ok(&preview(d, "env.exr", "preview", &["--size", "24"]));
     for name in ["preview_sphere.png", "preview_tile.png"] {
-        let img = io::read_png(&out.join(name)).unwrap();
+        let img = io::read_png(&d.join("preview").join(name)).unwrap();
         assert_eq!((img.height, img.width), (24, 24), "{name}");
         assert!(img.data.iter().any(|&v| v > 0.1), "{name} is black");
     }
@@ -149,25 +153,12 @@ fn preview_writes_sphere_and_tile() {
     };
     io::write_exr(&d.join("bright.exr"), &bright).unwrap();
     let run = |env: &str, out: &str, exposure: &str| {
-        let o = picker(&[
-            "render",
-            "--preview",
-            "--diffuse",
-            "0.6,0.3,0.2",
-            "--specular",
-            "0.2,0.2,0.2",
-            "--exponent",
-            "64",
-            "--envmap",
-            d.join(env).to_str().unwrap(),
-            "--out",
-            d.join(out).to_str().unwrap(),
-            "--size",
-            "24",
-            "--exposure",
-            exposure,
-        ]);
-        assert_ok(&o);
+        assert_ok(&preview(
+            d,
+            env,
+            out,
+            &["--size", "24", "--exposure", exposure],
+        ));
         io::read_png(&d.join(out).join("preview_sphere.png"))
             .unwrap()
             .data
@@ -186,22 +177,7 @@ fn preview_writes_sphere_and_tile() {
         !close(&f, &g),
         "a fixed exposure ignored the lighting's scale"
     );
-    let o = picker(&[
-        "render",
-        "--preview",
-        "--diffuse",
-        "0.6,0.3,0.2",
-        "--specular",
-        "0.2,0.2,0.2",
-        "--exponent",
-        "64",
-        "--envmap",
-        d.join("env.exr").to_str().unwrap(),
-        "--out",
-        d.join("px").to_str().unwrap(),
-        "--exposure",
-        "-2",
-    ]);
+    let o = preview(d, "env.exr", "px", &["--exposure", "-2"]);
     assert!(!o.status.success(), "a negative exposure was accepted");
 }
 

@@ -1113,13 +1113,7 @@ fn preview_pixel(
     row: usize,
     col: usize,
 ) -> Option<Vec3> {
-    let x = (col as f32 + 0.5) / size as f32 * 2.0 - 1.0;
-    let y = 1.0 - (row as f32 + 0.5) / size as f32 * 2.0;
-    let r2 = x * x + y * y;
-    if r2 >= 1.0 {
-        return None;
-    }
-    let n = Vec3::new(x, y, (1.0 - r2).sqrt());
+    let n = picker_render::sphere_normal(size, row, col)?;
     if let Some(t) = &m.texture {
         let u = (n.x.atan2(n.z) / std::f32::consts::TAU + 0.5) * repeats;
         let v = n.y.clamp(-1.0, 1.0).acos() / std::f32::consts::PI * repeats / 2.0;

@@ -49,5 +49,6 @@ pub use phong::{brdf, shade_exact, EnvQuadrature, PhongMaterial};
 pub use prefilter::PrefilteredEnv;
 pub use render::{
     compare, error_heatmap, preview_exposure, preview_sphere, preview_tile, rerender,
-    rerender_with, to_srgb, ElementImages, ErrorScore, Quality, Shader, PREVIEW_WHITE,
+    rerender_with, sphere_normal, to_srgb, ElementImages, ErrorScore, Quality, Shader,
+    PREVIEW_WHITE,
 };

@@ -236,6 +236,18 @@ pub fn rerender_with(elements: &ElementImages, shader: &Shader) -> Image {
     out
 }
 
+/// The camera-space unit normal at pixel (`row`, `col`) of an orthographic
+/// view of a unit sphere filling a `size × size` image: image position
+/// `(x, y) ∈ [−1, 1]²` of the pixel's centre (y up), normal
+/// `(x, y, √(1 − x² − y²))`; `None` off the sphere (`x² + y² ≥ 1`). The view
+/// vector is `+z` everywhere. Shared by the material previews.
+pub fn sphere_normal(size: usize, row: usize, col: usize) -> Option<Vec3> {
+    let x = (col as f32 + 0.5) / size as f32 * 2.0 - 1.0;
+    let y = 1.0 - (row as f32 + 0.5) / size as f32 * 2.0;
+    let r2 = x * x + y * y;
+    (r2 < 1.0).then(|| Vec3::new(x, y, (1.0 - r2).sqrt()))
+}
+
 /// Linear level a white diffuse surface averages in a [`preview_sphere`] once
 /// exposed by [`preview_exposure`] (below the display curve's knee,
 /// `conv::SOFT_CLIP_KNEE`, so albedos up to 1 show as themselves).
@@ -262,13 +274,9 @@ pub fn preview_exposure(shader: &Shader) -> f32 {
     let (mut sum, mut count) = (0.0f64, 0usize);
     for row in 0..EXPOSURE_GRID {
         for col in 0..EXPOSURE_GRID {
-            let x = (col as f32 + 0.5) / EXPOSURE_GRID as f32 * 2.0 - 1.0;
-            let y = 1.0 - (row as f32 + 0.5) / EXPOSURE_GRID as f32 * 2.0;
-            let r2 = x * x + y * y;
-            if r2 >= 1.0 {
+            let Some(n) = sphere_normal(EXPOSURE_GRID, row, col) else {
                 continue;
-            }
-            let n = Vec3::new(x, y, (1.0 - r2).sqrt());
+            };
             let c = shader.shade(n, Vec3::Z, &white);
             let lum = 0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z;
             if lum.is_finite() {
@@ -298,14 +306,9 @@ pub fn preview_sphere_with(material: &PhongMaterial, shader: &Shader, size: usiz
     let mut out = Image::zeros(3, size, size);
     let px: Vec<Vec3> = (0..size * size)
         .into_par_iter()
-        .map(|i| {
-            let x = ((i % size) as f32 + 0.5) / size as f32 * 2.0 - 1.0;
-            let y = 1.0 - ((i / size) as f32 + 0.5) / size as f32 * 2.0;
-            let r2 = x * x + y * y;
-            if r2 > 1.0 {
-                return Vec3::ZERO;
-            }
-            shader.shade(Vec3::new(x, y, (1.0 - r2).sqrt()), Vec3::Z, material)
+        .map(|i| match sphere_normal(size, i / size, i % size) {
+            Some(n) => shader.shade(n, Vec3::Z, material),
+            None => Vec3::ZERO,
         })
         .collect();
     for (i, v) in px.into_iter().enumerate() {
