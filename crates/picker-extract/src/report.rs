@@ -426,9 +426,33 @@ pub fn marked_tile(label: String, img: &Image, x: f32, y: f32, radius: f32) -> L
     }
 }
 
-/// A [`LazyTile`] of `img` with every value outside `mask` (a plane of the
-/// image's size; outside: `≤ 0.5`) multiplied by `factor`, computed row by
-/// row instead of as a copy of the image.
+/// Share of a pixel's own colour kept outside the mask by [`dimmed_tile`]
+/// (the rest is its grey), so the masked part stands out by colour as well
+/// as by brightness, also in dark photos.
+pub const DIM_SATURATION: f32 = 0.3;
+
+/// Blue added outside the mask by [`dimmed_tile`] (display value), so that
+/// dimmed black and masked black differ.
+pub const DIM_TINT: f32 = 0.06;
+
+/// The colour [`dimmed_tile`] shows for channel `ch` of a pixel outside the
+/// mask: the pixel desaturated to [`DIM_SATURATION`] (grey = Rec. 709 weights
+/// of the displayed RGB), times `factor`, plus [`DIM_TINT`] in blue. One- or
+/// two-channel images are only multiplied by `factor`.
+fn dimmed_value(img: &Image, ch: usize, i: usize, factor: f32) -> f32 {
+    let v = img.plane(ch)[i];
+    if img.channels < 3 {
+        return v * factor;
+    }
+    let grey = 0.2126 * img.plane(0)[i] + 0.7152 * img.plane(1)[i] + 0.0722 * img.plane(2)[i];
+    let tint = if ch == 2 { DIM_TINT } else { 0.0 };
+    factor * (DIM_SATURATION * v + (1.0 - DIM_SATURATION) * grey) + tint
+}
+
+/// A [`LazyTile`] of `img` (display values) with every pixel outside `mask` (a
+/// plane of the image's size; outside: `≤ 0.5`) dimmed by `factor`,
+/// desaturated and tinted blue ([`DIM_SATURATION`], [`DIM_TINT`]), computed
+/// row by row instead of as a copy of the image.
 pub fn dimmed_tile<'a>(
     label: String,
     img: &'a Image,
@@ -445,8 +469,13 @@ pub fn dimmed_tile<'a>(
         render: Box::new(move |th, tw| {
             resize_rows((c, h, w), th, tw, false, |ch, r, out| {
                 let src = &img.plane(ch)[r * w..(r + 1) * w];
-                for ((o, &v), &m) in out.iter_mut().zip(src).zip(&mask[r * w..(r + 1) * w]) {
-                    *o = if m <= 0.5 { v * factor } else { v };
+                let row = &mask[r * w..(r + 1) * w];
+                for (x, ((o, &v), &m)) in out.iter_mut().zip(src).zip(row).enumerate() {
+                    *o = if m <= 0.5 {
+                        dimmed_value(img, ch, r * w + x, factor)
+                    } else {
+                        v
+                    };
                 }
             })
         }),
@@ -669,18 +698,35 @@ mod tests {
                 );
             }
         }
+        // Dimmed: outside the mask the pixel's grey (Rec. 709) mixed with 30 %
+        // of its colour, a quarter as bright, plus a blue tint; inside as is.
         let mut dimmed = img.clone();
-        for plane in dimmed.data.chunks_mut(h * w) {
-            for (v, &m) in plane.iter_mut().zip(&mask) {
-                if m <= 0.5 {
-                    *v *= 0.25;
-                }
+        for (i, _) in mask.iter().enumerate().filter(|(_, &m)| m <= 0.5) {
+            let rgb = [0, 1, 2].map(|c| img.data[c * h * w + i]);
+            let grey = 0.2126 * rgb[0] + 0.7152 * rgb[1] + 0.0722 * rgb[2];
+            for (c, v) in rgb.into_iter().enumerate() {
+                let tint = if c == 2 { DIM_TINT } else { 0.0 };
+                dimmed.data[c * h * w + i] =
+                    0.25 * (DIM_SATURATION * v + (1.0 - DIM_SATURATION) * grey) + tint;
             }
         }
         let lazy = dimmed_tile("d".into(), &img, &mask, 0.25);
         assert_eq!(
             bits(&(lazy.render)(48, 64)),
             bits(&resize(&dimmed, 48, 64, false))
+        );
+        // A one-channel image is only multiplied.
+        let grey_img = Image::new(1, h, w, img.data[..h * w].to_vec()).unwrap();
+        let mut grey_dim = grey_img.clone();
+        for (v, &m) in grey_dim.data.iter_mut().zip(&mask) {
+            if m <= 0.5 {
+                *v *= 0.25;
+            }
+        }
+        let lazy = dimmed_tile("g".into(), &grey_img, &mask, 0.25);
+        assert_eq!(
+            bits(&(lazy.render)(48, 64)),
+            bits(&resize(&grey_dim, 48, 64, false))
         );
         let mut tiled = Image::zeros(3, 2 * h, 2 * w);
         for c in 0..3 {
