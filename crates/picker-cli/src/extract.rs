@@ -23,7 +23,7 @@ use picker_inpaint::{DiffusionInpainter, Inpainter, LearnedInpainter, PatchMatch
 use picker_nets::conventions as conv;
 use picker_nets::{Net, NetKind};
 use picker_render::io::{self as rio, Image};
-use picker_render::{ElementImages, EnvMap};
+use picker_render::{ElementImages, EnvMap, Quality, Shader};
 use picker_tensor::Tensor;
 use serde_json::{json, Value};
 
@@ -753,7 +753,9 @@ pub fn write_materials(
     let preview_env = env
         .clone()
         .unwrap_or_else(|| EnvMap::uniform(64, 32, glam::Vec3::ONE));
-    let exposure = pipeline::preview_exposure(&preview_env);
+    // One prefiltered lighting for every preview of the run and their exposure.
+    let preview_shader = Shader::new(&preview_env, Quality::Fast);
+    let exposure = picker_render::preview_exposure(&preview_shader);
     let single = jobs.len() == 1 && !layout.always_subdirs;
     let export_opts = ExportOptions {
         sixteen_bit: flags.sixteen_bit,
@@ -777,7 +779,7 @@ pub fn write_materials(
             || -> Result<_> {
                 let t = Instant::now();
                 let preview = exposed(
-                    &pipeline::preview_sphere(&m, &preview_env, 256, 2.0),
+                    &pipeline::preview_sphere_with(&m, &preview_shader, 256, 2.0),
                     exposure,
                 );
                 rio::write_png(&dir.join("preview.png"), &preview)?;

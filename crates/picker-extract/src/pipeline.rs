@@ -1073,7 +1073,12 @@ pub fn extract(
 /// texture wraps `repeats` times around the equator with the sphere's
 /// longitude/latitude mapping), shaded by eq. 3.7 with the fast path.
 pub fn preview_sphere(m: &Material, env: &EnvMap, size: usize, repeats: f32) -> Image {
-    let shader = Shader::new(env, Quality::Fast);
+    preview_sphere_with(m, &Shader::new(env, Quality::Fast), size, repeats)
+}
+
+/// [`preview_sphere`] with a prepared shader (one per lighting: several
+/// materials' previews and `picker_render::preview_exposure` share it).
+pub fn preview_sphere_with(m: &Material, shader: &Shader, size: usize, repeats: f32) -> Image {
     let mut out = Image::zeros(3, size, size);
     // Rows in parallel: every pixel is shaded alone (the same bits whatever
     // the threads; `tests::parallel_preview_matches_reference`).
@@ -1088,19 +1093,12 @@ pub fn preview_sphere(m: &Material, env: &EnvMap, size: usize, repeats: f32) -> 
         .for_each(|(row, ((r, g), b))| {
             let mut phong = m.params.phong();
             for col in 0..size {
-                if let Some(c) = preview_pixel(m, &shader, &mut phong, size, repeats, row, col) {
+                if let Some(c) = preview_pixel(m, shader, &mut phong, size, repeats, row, col) {
                     (r[col], g[col], b[col]) = (c.x, c.y, c.z);
                 }
             }
         });
     out
-}
-
-/// The exposure of [`preview_sphere`]'s images under `env`
-/// (`picker_render::render::preview_exposure` with the fast shader the
-/// preview uses). Display: `conv::expose_rgb(planes, exposure)`.
-pub fn preview_exposure(env: &EnvMap) -> f32 {
-    picker_render::render::preview_exposure(&Shader::new(env, Quality::Fast))
 }
 
 /// One pixel of [`preview_sphere`] (`None` off the sphere).
@@ -1260,6 +1258,11 @@ mod tests {
             area_fraction: 1.0,
             rerender_psnr: None,
         }
+    }
+
+    /// The exposure of the previews under `env` (the fast shader they use).
+    fn preview_exposure(env: &EnvMap) -> f32 {
+        picker_render::preview_exposure(&Shader::new(env, Quality::Fast))
     }
 
     #[test]
