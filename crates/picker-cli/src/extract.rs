@@ -593,6 +593,9 @@ fn tone_mapped(linear: &Image) -> Image {
     }
 }
 
+/// Side of `preview.png` in pixels.
+const PREVIEW_SIZE: usize = 256;
+
 /// Linear RGB shown with a known exposure (`conv::expose_rgb`).
 fn exposed(linear: &Image, exposure: f32) -> Image {
     Image {
@@ -779,7 +782,12 @@ pub fn write_materials(
             || -> Result<_> {
                 let t = Instant::now();
                 let preview = exposed(
-                    &pipeline::preview_sphere_with(&m, &preview_shader, 256, 2.0),
+                    &pipeline::preview_sphere_with(
+                        &m,
+                        &preview_shader,
+                        PREVIEW_SIZE,
+                        pipeline::material_preview_repeats(&m, PREVIEW_SIZE),
+                    ),
                     exposure,
                 );
                 rio::write_png(&dir.join("preview.png"), &preview)?;
@@ -805,7 +813,7 @@ pub fn write_materials(
             "diagnostics": diagnostics,
             "picker_version": env!("CARGO_PKG_VERSION"),
             "seed": flags.seed,
-            "preview": {"file": "preview.png", "envmap": if env.is_some() { "estimated" } else { "uniform white (no envmap network given)" }, "texture_repeats": 2.0, "exposure": exposure, "display": "linear radiance x exposure (a white diffuse sphere under this lighting averages 0.75), identity up to 0.8 then a soft roll-off towards 1, sRGB-encoded"},
+            "preview": {"file": "preview.png", "envmap": if env.is_some() { "estimated" } else { "uniform white (no envmap network given)" }, "texture_repeats": pipeline::material_preview_repeats(&m, PREVIEW_SIZE), "texture_repeats_rule": "about one texel per preview pixel at the sphere's centre (pi x 256 / texture side, whole, 1 to 8)", "exposure": exposure, "display": "linear radiance x exposure (a white diffuse sphere under this lighting averages 0.75), identity up to 0.8 then a soft roll-off towards 1, sRGB-encoded"},
             "report": "report.png",
         });
         if layout.timings {

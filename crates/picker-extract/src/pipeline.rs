@@ -1069,6 +1069,36 @@ pub fn extract(
     ))
 }
 
+/// Most times the texture wraps around the preview sphere
+/// ([`preview_repeats`]): a tiny texture (a 16-texel tile) is shown larger
+/// than its texels rather than as a fine noise.
+pub const PREVIEW_MAX_REPEATS: usize = 8;
+
+/// How many times a `side`-texel texture wraps around a preview sphere
+/// `size` pixels wide ([`preview_sphere`]) so that at the sphere's centre one
+/// texel spans about one preview pixel: `π·size/side` (a longitude radian is
+/// `size/2` pixels there and holds `repeats·side/2π` texels), rounded, in
+/// `[1, PREVIEW_MAX_REPEATS]`. The automatic texture side follows the
+/// photo's pixel density ([`reproject::texture_size`]), so the preview shows
+/// the material at about the scale it had in the photo: a large texture
+/// once, a folded one-period tile (a chessboard's two squares) as many
+/// periods, not as two huge checks. `side` 0 (no texture) gives 1.
+pub fn preview_repeats(side: usize, size: usize) -> f32 {
+    if side == 0 {
+        return 1.0;
+    }
+    let r = (std::f64::consts::PI * size as f64 / side as f64).round();
+    r.clamp(1.0, PREVIEW_MAX_REPEATS as f64) as f32
+}
+
+/// The repeats of [`preview_repeats`] for material `m`'s texture (1 for a
+/// single-colour material).
+pub fn material_preview_repeats(m: &Material, size: usize) -> f32 {
+    m.texture.as_ref().map_or(1.0, |t| {
+        preview_repeats(t.texture.width.max(t.texture.height), size)
+    })
+}
+
 /// A textured preview sphere (orthographic, `size × size`, linear RGB; the
 /// texture wraps `repeats` times around the equator with the sphere's
 /// longitude/latitude mapping), shaded by eq. 3.7 with the fast path.
@@ -1319,6 +1349,71 @@ mod tests {
         assert!(mean(&dark) < 0.5 * mean(&a), "{} {}", mean(&dark), mean(&a));
         // A black environment: exposure 1, not a division by zero.
         assert_eq!(preview_exposure(&EnvMap::uniform(8, 4, Vec3::ZERO)), 1.0);
+    }
+
+    #[test]
+    fn preview_repeats_give_about_a_texel_per_pixel() {
+        // π·size/side, whole, within [1, PREVIEW_MAX_REPEATS].
+        assert_eq!(preview_repeats(256, 256), 3.0);
+        assert_eq!(preview_repeats(128, 256), 6.0);
+        assert_eq!(preview_repeats(100, 256), 8.0);
+        assert_eq!(preview_repeats(16, 256), PREVIEW_MAX_REPEATS as f32);
+        assert_eq!(preview_repeats(1024, 256), 1.0);
+        assert_eq!(preview_repeats(4096, 1), 1.0);
+        assert_eq!(preview_repeats(0, 256), 1.0);
+        assert_eq!(preview_repeats(usize::MAX, usize::MAX), 3.0);
+        // On the sphere: a texture black on its left half and white on its
+        // right shows, along the centre row, one edge per half period of
+        // u·r within the row's longitudes (counted inside 0.9 of the radius,
+        // away from the limb, where a longitude φ has x = R·sin φ and
+        // u = φ/2π + ½).
+        let env = EnvMap::uniform(16, 8, Vec3::ONE);
+        let side = 64;
+        let tex = Image::new(
+            3,
+            side,
+            side,
+            (0..3 * side * side)
+                .map(|i| if i % side < side / 2 { 0.0 } else { 1.0 })
+                .collect(),
+        )
+        .unwrap();
+        let mut m = plain_material([0.5; 3], 0.0);
+        m.texture = Some(crate::TextureResult {
+            seam: seam_score(&tex),
+            seam_corrected: false,
+            texture: tex.clone(),
+            raw: tex.clone(),
+            coverage: Image::zeros(1, side, side),
+            coverage_fraction: 1.0,
+            uv_mode: UvMode::Plane,
+            inpainter: "test".into(),
+        });
+        m.textured = true;
+        assert_eq!(material_preview_repeats(&m, 256), 8.0);
+        assert_eq!(
+            material_preview_repeats(&plain_material([0.5; 3], 0.0), 256),
+            1.0
+        );
+        let size = 401;
+        let reach = 0.9f64;
+        let span = reach.asin() / std::f64::consts::TAU;
+        for r in 1..=PREVIEW_MAX_REPEATS {
+            let img = preview_sphere(&m, &env, size, r as f32);
+            let row = size / 2;
+            let half = size as f64 / 2.0;
+            let bright: Vec<bool> = (0..size)
+                .filter(|&c| ((c as f64 + 0.5 - half) / half).abs() < reach)
+                .map(|c| img.data[row * size + c] > 0.2)
+                .collect();
+            let edges = bright.windows(2).filter(|p| p[0] != p[1]).count();
+            let rf = r as f64;
+            let (lo, hi) = (rf * (0.5 - span), rf * (0.5 + span));
+            let want = (1..4 * r)
+                .filter(|&k| (k as f64 / 2.0) > lo && (k as f64 / 2.0) < hi)
+                .count();
+            assert_eq!(edges, want, "repeats {r}");
+        }
     }
 
     #[test]
