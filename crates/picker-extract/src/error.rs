@@ -23,6 +23,11 @@ pub enum Error {
     /// A request that cannot be served (pick outside the image, bad size, ...).
     #[error("{0}")]
     Invalid(String),
+    /// The picked material's texture cannot be reprojected: no texture
+    /// coordinates reach the texture square (`--uv auto` then falls back to
+    /// a single colour, see `pipeline::extract`).
+    #[error("the texture cannot be reprojected: {0}")]
+    NoTexture(String),
     /// Inputs whose shapes do not agree.
     #[error("{what}: expected {expected}, found {found}")]
     Shape {

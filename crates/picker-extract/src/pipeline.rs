@@ -508,6 +508,11 @@ pub struct Diagnostics {
     pub uv: Option<UvDecision>,
     /// Texels per unit of texture square at the median observed density.
     pub texture_size: Option<usize>,
+    /// Why a material flagged textured came out as a single colour under
+    /// `--uv auto`: neither mode's coordinates reached the texture square
+    /// ([`Error::NoTexture`]); absent otherwise.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub texture_fallback: Option<String>,
     /// Timings, ms.
     pub timings_ms: std::collections::BTreeMap<String, f64>,
 }
@@ -536,12 +541,38 @@ pub fn sample_wrapped(tex: &Image, u: f32, v: f32) -> Vec3 {
 }
 
 /// Extracts the material of the mask `pm` (working resolution), picked at `pick`.
+///
+/// Under `--uv auto` ([`UvChoice::Auto`]) a material whose texture cannot be
+/// reprojected ([`Error::NoTexture`]: the predicted UVs unusable and no
+/// plane to fall back on, e.g. one seen edge-on or from behind, as noisy
+/// normals can make it) comes out as a single colour, with the reason in
+/// [`Diagnostics::texture_fallback`], so that one such material does not
+/// fail a palette or a batch; an explicit `--uv net|plane` reports the error.
 pub fn extract(
     p: &Prepared,
     name: &str,
     pick: Option<[u32; 2]>,
     pm: &PickMask,
     opts: &Options,
+) -> Result<(Material, Diagnostics)> {
+    match extract_as(p, name, pick, pm, opts, false) {
+        Err(Error::NoTexture(why)) if opts.uv == UvChoice::Auto => {
+            let (m, mut diag) = extract_as(p, name, pick, pm, opts, true)?;
+            diag.texture_fallback = Some(why);
+            Ok((m, diag))
+        }
+        r => r,
+    }
+}
+
+/// [`extract`], as a single colour whatever the textured flag when `plain`.
+fn extract_as(
+    p: &Prepared,
+    name: &str,
+    pick: Option<[u32; 2]>,
+    pm: &PickMask,
+    opts: &Options,
+    plain: bool,
 ) -> Result<(Material, Diagnostics)> {
     let mut timings = std::collections::BTreeMap::new();
     let mut lap = {
@@ -657,13 +688,14 @@ pub fn extract(
     lap("delight", &mut timings);
 
     let textured_by_flag = t_flag >= conv::TEXTURED_THRESHOLD && el.uv.is_some();
-    let textured = textured_by_flag || opts.uv == UvChoice::Plane;
+    let textured = !plain && (textured_by_flag || opts.uv == UvChoice::Plane);
     let mut diag = Diagnostics {
         segmentation_colour: pm.colour,
         tolerance: pm.tolerance,
         textured_flag: t_flag,
         uv: None,
         texture_size: None,
+        texture_fallback: None,
         timings_ms: Default::default(),
     };
     let mut texture = None;
@@ -807,7 +839,18 @@ pub fn extract(
             } else {
                 (n, None)
             };
-            Some(plane::plane_coords(fw, fh, &full.data, n, f, along))
+            // A plane seen edge-on or from behind at every picked pixel
+            // gives no coordinates: no plane.
+            let c = plane::plane_coords(fw, fh, &full.data, n, f, along);
+            c.u.iter().any(|u| u.is_finite()).then_some(c)
+        };
+        // Why auto finds no coordinates, if it finds none.
+        let neither = || {
+            Error::NoTexture(if el.uv.is_some() && collapsed {
+                "the predicted texture coordinates have collapsed and no plane fits the picked pixels (none, or seen edge-on or from behind)".into()
+            } else {
+                "no texture coordinates and no plane fits the picked pixels (none, or seen edge-on or from behind)".into()
+            })
         };
         let mut focal = None;
         let mut lines = None;
@@ -824,7 +867,7 @@ pub fn extract(
                     Some(c) => (UvMode::Plane, c),
                     None => {
                         return Err(Error::Invalid(
-                            "--uv plane: the picked pixels have no usable normals".into(),
+                            "--uv plane: no usable plane (the picked pixels have no normals, or the fitted plane is seen edge-on or from behind)".into(),
                         ))
                     }
                 },
@@ -836,11 +879,7 @@ pub fn extract(
                             Some(c) => (UvMode::Net, c),
                             None => (
                                 UvMode::Plane,
-                                plane_coords(&mut focal, &mut lines).ok_or_else(|| {
-                                    Error::Invalid(
-                                        "no texture coordinates and no usable normals".into(),
-                                    )
-                                })?,
+                                plane_coords(&mut focal, &mut lines).ok_or_else(neither)?,
                             ),
                         }
                     } else {
@@ -848,11 +887,7 @@ pub fn extract(
                             Some(c) => (UvMode::Plane, c),
                             None => (
                                 UvMode::Net,
-                                net_coords.ok_or_else(|| {
-                                    Error::Invalid(
-                                        "no texture coordinates and no usable normals".into(),
-                                    )
-                                })?,
+                                net_coords.ok_or_else(neither)?,
                             ),
                         }
                     }
@@ -930,9 +965,13 @@ pub fn extract(
         lap("reproject", &mut timings);
         let known_fraction = r.known_fraction();
         if known_fraction == 0.0 {
-            return Err(Error::Invalid(
-                "no picked pixel landed in the texture square (texture coordinates unusable); try --uv plane or --uv net".into(),
-            ));
+            return Err(Error::NoTexture(format!(
+                "no picked pixel landed in the texture square ({} coordinates unusable); try --uv plane or --uv net",
+                match mode {
+                    UvMode::Net => "the predicted texture",
+                    UvMode::Plane => "the plane's",
+                }
+            )));
         }
         let inpaint = |t: &Image, known: &[bool]| {
             opts.inpainter.inpaint(
@@ -1414,6 +1453,76 @@ mod tests {
                 .count();
             assert_eq!(edges, want, "repeats {r}");
         }
+    }
+
+    /// A 24×32 material with a textured flag but UVs that are all NaN and
+    /// normals facing away from the camera (no plane can be rectified).
+    fn unreprojectable() -> Prepared {
+        let (h, w) = (24, 32);
+        let mut rng = picker_tensor::Rng::new(21);
+        let fill = |c: usize, v: &[f32]| {
+            Image::new(c, h, w, (0..c).flat_map(|k| vec![v[k]; h * w]).collect()).unwrap()
+        };
+        let photo = Image::new(3, h, w, rng.uniform_vec(3 * h * w, 0.3, 0.7)).unwrap();
+        let elements = ElementImages::new(
+            fill(3, &[0.5, 0.4, 0.3]),
+            fill(3, &[0.04; 3]),
+            fill(1, &[0.5]),
+            fill(3, &[0.0, 0.0, -1.0]),
+            fill(3, &[0.0, 0.0, 1.0]),
+            Some(fill(3, &[f32::NAN, f32::NAN, 1.0])),
+        )
+        .unwrap();
+        Prepared::new(Inputs {
+            photo,
+            elements,
+            segmentation: fill(3, &[0.2, 0.5, 0.7]),
+            segmentation_estimated: false,
+            envmap: None,
+        })
+        .unwrap()
+    }
+
+    #[test]
+    fn auto_falls_back_to_a_single_colour_when_no_texture_can_be_reprojected() {
+        let p = unreprojectable();
+        let pm = p.pick_mask([16, 12], &MaskOptions::default()).unwrap();
+        let inpainter = picker_inpaint::DiffusionInpainter::default();
+        let opts = |uv| Options {
+            mask: MaskOptions::default(),
+            uv,
+            size: None,
+            max_size: 256,
+            fov_deg: None,
+            line_refine: false,
+            fold_period: true,
+            tileable: true,
+            seamless: false,
+            seed: 1,
+            inpainter: &inpainter,
+        };
+        let (m, diag) = extract(&p, "m", Some([16, 12]), &pm, &opts(UvChoice::Auto)).unwrap();
+        assert!(!m.textured && m.texture.is_none());
+        assert!(diag.textured_flag >= conv::TEXTURED_THRESHOLD);
+        let why = diag.texture_fallback.expect("the fallback is recorded");
+        assert!(
+            why.contains("collapsed") && why.contains("edge-on or from behind"),
+            "{why}"
+        );
+        // The single colour is the material's de-lit colour (photo ÷ shading
+        // with the albedo as the shading's reference: the albedo here).
+        for (c, want) in m.params.diffuse.iter().zip([0.5, 0.4, 0.3]) {
+            assert!((c - want).abs() < 1e-3, "{:?}", m.params.diffuse);
+        }
+        // Asked for explicitly, either mode reports why it cannot.
+        let e = extract(&p, "m", None, &pm, &opts(UvChoice::Plane)).unwrap_err();
+        assert!(e.to_string().contains("no usable plane"), "{e}");
+        let e = extract(&p, "m", None, &pm, &opts(UvChoice::Net)).unwrap_err();
+        assert!(matches!(e, Error::NoTexture(_)), "{e}");
+        assert!(
+            e.to_string().contains("landed in the texture square"),
+            "{e}"
+        );
     }
 
     #[test]

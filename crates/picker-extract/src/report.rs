@@ -195,13 +195,18 @@ pub fn draw_text(img: &mut Image, x: usize, y: usize, text: &str, value: f32, ma
     }
 }
 
+/// Widest tile of a sheet, in multiples of its tile height ([`compose_sheet`]).
+pub const MAX_TILE_ASPECT: usize = 4;
+
 /// A grid sheet of `tiles`, `columns` per row (clamped to `1..=tiles.len()`),
 /// on a neutral background ([`SHEET_BACKGROUND`]), always 3 channels.
 ///
 /// Every tile is resized to `tile_height` rows (at least 1), keeping its
 /// aspect ratio (area-average filter when shrinking, bilinear when
-/// enlarging), and centred in a cell as wide as the widest resized tile or
-/// label; its label is drawn above it. A 1-channel tile is expanded to grey.
+/// enlarging), or, if that would make it wider than [`MAX_TILE_ASPECT`]
+/// times `tile_height`, to that width (and fewer rows, centred vertically:
+/// a 1×4000 photo must not make a sheet millions of pixels wide), and
+/// centred in a cell as wide as the widest resized tile or label; its label is drawn above it. A 1-channel tile is expanded to grey.
 /// Cells are separated by [`SHEET_MARGIN`] pixels.
 ///
 /// **Empty input** gives an empty `3 × 0 × 0` image (nothing to show; the
@@ -265,13 +270,22 @@ pub fn compose_lazy_sheet(tiles: &[LazyTile<'_>], columns: usize, tile_height: u
     let tile_height = tile_height.max(1);
     let columns = columns.clamp(1, tiles.len());
     let rows = tiles.len().div_ceil(columns);
-    let resized_width = |t: &LazyTile<'_>| -> usize {
+    let max_width = tile_height.saturating_mul(MAX_TILE_ASPECT);
+    // (rows, columns) a tile is shown at: `tile_height` rows, or fewer for a
+    // picture wider than MAX_TILE_ASPECT, which is fitted to `max_width`.
+    let fitted = |t: &LazyTile<'_>| -> (usize, usize) {
         if t.width == 0 || t.height == 0 {
-            0
+            return (0, 0);
+        }
+        let w = (t.width as f64 * tile_height as f64 / t.height as f64).round();
+        if w <= max_width as f64 {
+            (tile_height, (w as usize).max(1))
         } else {
-            ((t.width as f64 * tile_height as f64 / t.height as f64).round() as usize).max(1)
+            let h = (t.height as f64 * max_width as f64 / t.width as f64).round() as usize;
+            (h.clamp(1, tile_height), max_width)
         }
     };
+    let resized_width = |t: &LazyTile<'_>| fitted(t).1;
     let cell_w = tiles
         .iter()
         .map(|t| resized_width(t).max(text_width(&t.label)))
@@ -291,8 +305,8 @@ pub fn compose_lazy_sheet(tiles: &[LazyTile<'_>], columns: usize, tile_height: u
     let smalls: Vec<Option<Image>> = tiles
         .par_iter()
         .map(|t| {
-            let tw = resized_width(t);
-            (tw != 0 && t.channels != 0).then(|| (t.render)(tile_height, tw))
+            let (th, tw) = fitted(t);
+            (tw != 0 && t.channels != 0).then(|| (t.render)(th, tw))
         })
         .collect();
     for (k, (tile, small)) in tiles.iter().zip(&smalls).enumerate() {
@@ -302,12 +316,12 @@ pub fn compose_lazy_sheet(tiles: &[LazyTile<'_>], columns: usize, tile_height: u
         let Some(small) = small else {
             continue;
         };
-        let tw = resized_width(tile);
+        let (th, tw) = fitted(tile);
         let xoff = x0 + (cell_w - tw) / 2;
-        let yoff = y0 + LABEL_BAND;
+        let yoff = y0 + LABEL_BAND + (tile_height - th) / 2;
         for ch in 0..3 {
             let src = small.plane(ch.min(small.channels - 1));
-            for r in 0..tile_height {
+            for r in 0..th {
                 let dst = ch * n + (yoff + r) * width + xoff;
                 sheet.data[dst..dst + tw].copy_from_slice(&src[r * tw..(r + 1) * tw]);
             }

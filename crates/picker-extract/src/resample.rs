@@ -285,51 +285,71 @@ pub fn nearest_weighted(weight: &[f32], w: usize, h: usize) -> Vec<usize> {
     idx
 }
 
-/// Upsamples wrapped texture coordinates `(u, v, t)` without averaging across
-/// the wrap: `u` and `v` go through their circular encoding
-/// `(cos 2πu, sin 2πu)`, are resampled with [`masked_bilinear`] and decoded
-/// with `atan2`; `t` is resampled as is.
-pub fn upsample_uv(uv: &Image, weight: &[f32], dw: usize, dh: usize) -> Image {
+/// The circular encoding of [`upsample_uv`]: `(cos 2πu, sin 2πu, cos 2πv,
+/// sin 2πv, t)` per pixel, and the weights with every pixel whose `u` or `v`
+/// is not finite set to 0 (its encoding 0), so that it never reaches a
+/// resampled value (a 0 weight times NaN would still be NaN).
+fn encode_uv(uv: &Image, weight: &[f32]) -> (Image, Vec<f32>) {
     use std::f32::consts::TAU;
     let n = uv.plane_len();
     let mut enc = Image::zeros(5, uv.height, uv.width);
+    let mut w = weight.to_vec();
     for i in 0..n {
         let (u, v) = (uv.at(0, i), uv.at(1, i));
-        enc.data[i] = (TAU * u).cos();
-        enc.data[n + i] = (TAU * u).sin();
-        enc.data[2 * n + i] = (TAU * v).cos();
-        enc.data[3 * n + i] = (TAU * v).sin();
+        if u.is_finite() && v.is_finite() {
+            enc.data[i] = (TAU * u).cos();
+            enc.data[n + i] = (TAU * u).sin();
+            enc.data[2 * n + i] = (TAU * v).cos();
+            enc.data[3 * n + i] = (TAU * v).sin();
+        } else if let Some(x) = w.get_mut(i) {
+            *x = 0.0;
+        }
         enc.data[4 * n + i] = uv.at(2, i);
     }
-    let up = masked_bilinear(&enc, weight, dw, dh);
+    (enc, w)
+}
+
+/// `(u, v)` of pixel `i` of an upsampled encoding ([`encode_uv`], `m`
+/// pixels a plane): NaN where the encoded directions vanish (no finite
+/// coordinates reached the pixel, or opposite ones cancelled).
+#[inline]
+fn decode_uv(up: &[f32], m: usize, i: usize) -> (f32, f32) {
+    use std::f32::consts::TAU;
+    let (cu, su, cv, sv) = (up[i], up[m + i], up[2 * m + i], up[3 * m + i]);
+    if cu.hypot(su) < 1e-6 || cv.hypot(sv) < 1e-6 {
+        return (f32::NAN, f32::NAN);
+    }
+    (
+        picker_nets::conventions::wrap_unit(su.atan2(cu) / TAU),
+        picker_nets::conventions::wrap_unit(sv.atan2(cv) / TAU),
+    )
+}
+
+/// Upsamples wrapped texture coordinates `(u, v, t)` without averaging across
+/// the wrap: `u` and `v` go through their circular encoding
+/// `(cos 2πu, sin 2πu)`, are resampled with [`masked_bilinear`] and decoded
+/// with `atan2`; `t` is resampled as is. Pixels whose `u` or `v` is not
+/// finite weigh nothing (they are filled like unweighted pixels); with no
+/// finite coordinates at all, or where opposite directions cancel, `u` and
+/// `v` are NaN (no coordinates, which reprojection skips).
+pub fn upsample_uv(uv: &Image, weight: &[f32], dw: usize, dh: usize) -> Image {
+    let (enc, w) = encode_uv(uv, weight);
+    let up = masked_bilinear(&enc, &w, dw, dh);
     let m = dw * dh;
     let mut out = Image::zeros(3, dh, dw);
     for i in 0..m {
-        let u = up.data[m + i].atan2(up.data[i]) / TAU;
-        let v = up.data[3 * m + i].atan2(up.data[2 * m + i]) / TAU;
-        out.data[i] = picker_nets::conventions::wrap_unit(u);
-        out.data[m + i] = picker_nets::conventions::wrap_unit(v);
+        (out.data[i], out.data[m + i]) = decode_uv(&up.data, m, i);
         out.data[2 * m + i] = up.data[4 * m + i];
     }
     out
 }
 
 /// [`upsample_uv`] evaluated only where `keep` is true (the other pixels get
-/// `NaN`, "no coordinates"): the same values there, via
-/// [`masked_bilinear_where`], rows in parallel.
+/// NaN coordinates); the kept pixels equal the full version's (the same
+/// operations in the same order).
 pub fn upsample_uv_where(uv: &Image, weight: &[f32], dw: usize, dh: usize, keep: &[bool]) -> Image {
-    use std::f32::consts::TAU;
-    let n = uv.plane_len();
-    let mut enc = Image::zeros(5, uv.height, uv.width);
-    for i in 0..n {
-        let (u, v) = (uv.at(0, i), uv.at(1, i));
-        enc.data[i] = (TAU * u).cos();
-        enc.data[n + i] = (TAU * u).sin();
-        enc.data[2 * n + i] = (TAU * v).cos();
-        enc.data[3 * n + i] = (TAU * v).sin();
-        enc.data[4 * n + i] = uv.at(2, i);
-    }
-    let up = masked_bilinear_where(&enc, weight, dw, dh, keep);
+    let (enc, w) = encode_uv(uv, weight);
+    let up = masked_bilinear_where(&enc, &w, dw, dh, keep);
     let m = dw * dh;
     let mut out = Image {
         channels: 3,
@@ -350,10 +370,7 @@ pub fn upsample_uv_where(uv: &Image, weight: &[f32], dw: usize, dh: usize, keep:
                 if !keep[i] {
                     continue;
                 }
-                let u = up.data[m + i].atan2(up.data[i]) / TAU;
-                let v = up.data[3 * m + i].atan2(up.data[2 * m + i]) / TAU;
-                ru[x] = picker_nets::conventions::wrap_unit(u);
-                rv[x] = picker_nets::conventions::wrap_unit(v);
+                (ru[x], rv[x]) = decode_uv(&up.data, m, i);
                 rt[x] = up.data[4 * m + i];
             }
         });
@@ -484,6 +501,32 @@ mod tests {
         for x in 0..4 {
             let u = up.at(0, x);
             assert!(!(0.2..0.8).contains(&u), "u = {u}");
+        }
+    }
+
+    #[test]
+    fn non_finite_uvs_weigh_nothing() {
+        // Left pixel NaN, right pixel fine: the NaN pixel weighs nothing, so
+        // every output has the finite pixel's coordinates (as an unweighted
+        // pixel would); before, NaN became u = v = 0 through `wrap_unit`.
+        let uv = Image::new(3, 1, 2, vec![f32::NAN, 0.3, f32::NAN, 0.6, 1.0, 1.0]).unwrap();
+        let keep = vec![true; 4];
+        for up in [
+            upsample_uv(&uv, &[1.0, 1.0], 4, 1),
+            upsample_uv_where(&uv, &[1.0, 1.0], 4, 1, &keep),
+        ] {
+            for x in 0..4 {
+                assert!((up.at(0, x) - 0.3).abs() < 1e-5, "{:?}", up.data);
+                assert!((up.at(1, x) - 0.6).abs() < 1e-5, "{:?}", up.data);
+            }
+        }
+        // No finite coordinates at all: none anywhere (NaN), not 0.
+        let nan = Image::new(3, 2, 2, vec![f32::NAN; 12]).unwrap();
+        for up in [
+            upsample_uv(&nan, &[1.0; 4], 3, 3),
+            upsample_uv_where(&nan, &[1.0; 4], 3, 3, &[true; 9]),
+        ] {
+            assert!(up.data[..18].iter().all(|v| v.is_nan()), "{:?}", up.data);
         }
     }
 

@@ -1,7 +1,8 @@
 //! Tests of `picker_extract::report`: sheet layout, labels, the pick marker.
 
 use picker_extract::report::{
-    compose_sheet, draw_marker, draw_text, text_width, Tile, SHEET_BACKGROUND, SHEET_MARGIN,
+    compose_sheet, draw_marker, draw_text, text_width, Tile, MAX_TILE_ASPECT, SHEET_BACKGROUND,
+    SHEET_MARGIN,
 };
 use picker_render::io::Image;
 
@@ -109,6 +110,42 @@ fn grey_tiles_are_expanded() {
     for c in 0..3 {
         assert!((sheet.data[c * n + i] - 0.7).abs() < 1e-6);
     }
+}
+
+#[test]
+fn very_wide_tiles_are_fitted_to_the_widest_cell() {
+    // A 1×4000 picture at tile height 50 would be 200 000 pixels wide: it is
+    // fitted to MAX_TILE_ASPECT·50 columns and 1 row, centred in the band.
+    let th = 50;
+    let wide = solid(3, 1, 4000, 0.7);
+    let sheet = compose_sheet(&[tile("", wide), tile("", solid(3, 10, 10, 0.2))], 2, th);
+    let cell_w = MAX_TILE_ASPECT * th;
+    assert_eq!(sheet.width, SHEET_MARGIN + 2 * (cell_w + SHEET_MARGIN));
+    assert_eq!(sheet.height, SHEET_MARGIN + BAND + th + SHEET_MARGIN);
+    let n = sheet.plane_len();
+    let at = |row: usize, col: usize| sheet.data[row * sheet.width + col];
+    let mid = SHEET_MARGIN + BAND + (th - 1) / 2;
+    for col in [
+        SHEET_MARGIN,
+        SHEET_MARGIN + cell_w / 2,
+        SHEET_MARGIN + cell_w - 1,
+    ] {
+        for c in 0..3 {
+            assert!((sheet.data[c * n + mid * sheet.width + col] - 0.7).abs() < 1e-6);
+        }
+        // Only that row: the rest of the band is background.
+        assert_eq!(at(mid - 1, col), SHEET_BACKGROUND);
+        assert_eq!(at(mid + 1, col), SHEET_BACKGROUND);
+    }
+    // A picture of exactly MAX_TILE_ASPECT keeps its full height.
+    let edge = compose_sheet(&[tile("", solid(3, 10, 10 * MAX_TILE_ASPECT, 0.3))], 1, th);
+    assert_eq!(edge.width, SHEET_MARGIN + cell_w + SHEET_MARGIN);
+    for row in [SHEET_MARGIN + BAND, SHEET_MARGIN + BAND + th - 1] {
+        assert!((edge.data[row * edge.width + SHEET_MARGIN] - 0.3).abs() < 1e-6);
+    }
+    // A very tall one stays at the tile height, one column wide.
+    let tall = compose_sheet(&[tile("", solid(3, 4000, 1, 0.4))], 1, th);
+    assert_eq!(tall.height, SHEET_MARGIN + BAND + th + SHEET_MARGIN);
 }
 
 #[test]
