@@ -625,6 +625,45 @@ fn regressions_extract_without_error() {
     }
 }
 
+#[test]
+fn one_pixel_high_and_wide_photos_extract_with_a_bounded_report() {
+    // A 1×600 photo made a report sheet ~115 000 pixels wide per tile (an
+    // out-of-memory abort at 1×4000), and `--all` failed on a material whose
+    // plane was seen from behind; both now run, with the embedded weights.
+    let tmp = tempfile::tempdir().unwrap();
+    let mut rng = picker_tensor::Rng::new(5);
+    for (w, h) in [(600usize, 1usize), (1, 600)] {
+        let photo = tmp.path().join(format!("strip_{w}x{h}.png"));
+        let img =
+            picker_render::io::Image::new(3, h, w, rng.uniform_vec(3 * w * h, 0.0, 1.0)).unwrap();
+        picker_render::io::write_png(&photo, &img).unwrap();
+        for args in [vec!["--pick", "0,0"], vec!["--all", "--min-area", "0.001"]] {
+            let out = tmp.path().join(format!("out_{w}x{h}_{}", args[0]));
+            let mut a = vec![
+                "extract",
+                photo.to_str().unwrap(),
+                "--out",
+                out.to_str().unwrap(),
+            ];
+            a.extend(args.iter().copied());
+            ok(&a);
+            // One material: its files are in --out itself.
+            let report = [out.join("report.png"), out.join("material_0/report.png")]
+                .into_iter()
+                .find(|p| p.exists())
+                .expect("a report sheet");
+            let sheet = read_png(&report).unwrap();
+            assert!(
+                sheet.width <= 4 * (4 * 192 + 16) && sheet.height <= 4000,
+                "{}: {}x{}",
+                report.display(),
+                sheet.width,
+                sheet.height
+            );
+        }
+    }
+}
+
 /// Runs `picker extract fixtures/examples/EXAMPLE --pick PICK` with the
 /// embedded weights (no `--weights`); returns the temporary folder and the
 /// output folder inside it (one pick: the material's files are directly there).
