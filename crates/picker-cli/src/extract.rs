@@ -769,6 +769,7 @@ pub fn write_materials(
         let (m, diag) = pipeline::extract(prepared, name, *pick, pm, &opts)
             .with_context(|| format!("extracting {name} from {label}"))?;
         let extract_ms = ms(t);
+        let repeats = pipeline::material_preview_repeats(&m, PREVIEW_SIZE);
         let dir = if single {
             out_dir.to_path_buf()
         } else {
@@ -782,12 +783,7 @@ pub fn write_materials(
             || -> Result<_> {
                 let t = Instant::now();
                 let preview = exposed(
-                    &pipeline::preview_sphere_with(
-                        &m,
-                        &preview_shader,
-                        PREVIEW_SIZE,
-                        pipeline::material_preview_repeats(&m, PREVIEW_SIZE),
-                    ),
+                    &pipeline::preview_sphere_with(&m, &preview_shader, PREVIEW_SIZE, repeats),
                     exposure,
                 );
                 rio::write_png(&dir.join("preview.png"), &preview)?;
@@ -813,7 +809,7 @@ pub fn write_materials(
             "diagnostics": diagnostics,
             "picker_version": env!("CARGO_PKG_VERSION"),
             "seed": flags.seed,
-            "preview": {"file": "preview.png", "envmap": if env.is_some() { "estimated" } else { "uniform white (no envmap network given)" }, "texture_repeats": pipeline::material_preview_repeats(&m, PREVIEW_SIZE), "texture_repeats_rule": "about one texel per preview pixel at the sphere's centre (pi x 256 / texture side, whole, 1 to 8)", "exposure": exposure, "display": "linear radiance x exposure (a white diffuse sphere under this lighting averages 0.75), identity up to 0.8 then a soft roll-off towards 1, sRGB-encoded"},
+            "preview": {"file": "preview.png", "envmap": if env.is_some() { "estimated" } else { "uniform white (no envmap network given)" }, "texture_repeats": repeats, "texture_repeats_rule": "about one texel per preview pixel at the sphere's centre (pi x 256 / texture side, whole, 1 to 8)", "exposure": exposure, "display": "linear radiance x exposure (a white diffuse sphere under this lighting averages 0.75), identity up to 0.8 then a soft roll-off towards 1, sRGB-encoded"},
             "report": "report.png",
         });
         if layout.timings {

@@ -1329,6 +1329,22 @@ mod tests {
         }
     }
 
+    /// `m` with the texture `tex` (fully observed, plane mode, as if inpainted by "test").
+    fn with_texture(mut m: Material, tex: &Image) -> Material {
+        m.textured = true;
+        m.texture = Some(crate::TextureResult {
+            seam: seam_score(tex),
+            seam_corrected: false,
+            texture: tex.clone(),
+            raw: tex.clone(),
+            coverage: Image::zeros(1, tex.height, tex.width),
+            coverage_fraction: 1.0,
+            uv_mode: UvMode::Plane,
+            inpainter: "test".into(),
+        });
+        m
+    }
+
     /// The exposure of the previews under `env` (the fast shader they use).
     fn preview_exposure(env: &EnvMap) -> f32 {
         picker_render::preview_exposure(&Shader::new(env, Quality::Fast))
@@ -1417,18 +1433,7 @@ mod tests {
                 .collect(),
         )
         .unwrap();
-        let mut m = plain_material([0.5; 3], 0.0);
-        m.texture = Some(crate::TextureResult {
-            seam: seam_score(&tex),
-            seam_corrected: false,
-            texture: tex.clone(),
-            raw: tex.clone(),
-            coverage: Image::zeros(1, side, side),
-            coverage_fraction: 1.0,
-            uv_mode: UvMode::Plane,
-            inpainter: "test".into(),
-        });
-        m.textured = true;
+        let m = with_texture(plain_material([0.5; 3], 0.0), &tex);
         assert_eq!(material_preview_repeats(&m, 256), 8.0);
         assert_eq!(
             material_preview_repeats(&plain_material([0.5; 3], 0.0), 256),
@@ -1533,30 +1538,7 @@ mod tests {
         )
         .unwrap();
         let tex = Image::new(3, 8, 8, rng.uniform_vec(3 * 64, 0.0, 1.0)).unwrap();
-        let mut m = Material {
-            name: "m".into(),
-            pick: None,
-            params: MaterialParams {
-                diffuse: [0.5, 0.3, 0.2],
-                specular: [0.04, 0.04, 0.04],
-                glossiness: 0.5,
-                exponent: conv::phong_exponent(0.5),
-            },
-            textured: true,
-            texture: Some(crate::TextureResult {
-                seam: seam_score(&tex),
-                seam_corrected: false,
-                texture: tex.clone(),
-                raw: tex.clone(),
-                coverage: Image::zeros(1, 8, 8),
-                coverage_fraction: 1.0,
-                uv_mode: UvMode::Plane,
-                inpainter: "test".into(),
-            }),
-            mask: Image::zeros(1, 1, 1),
-            area_fraction: 1.0,
-            rerender_psnr: None,
-        };
+        let mut m = with_texture(plain_material([0.5, 0.3, 0.2], 0.04), &tex);
         let bits = |v: &Image| v.data.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
         for size in [1, 2, 17, 64] {
             assert_eq!(
