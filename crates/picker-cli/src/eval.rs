@@ -67,7 +67,7 @@ pub struct Args {
     /// A folder of synthetic scenes (`picker synth --out DIR`), or one scene folder.
     #[arg(value_name = "DIR")]
     pub dir: PathBuf,
-    /// Smallest image fraction of a material to evaluate.
+    /// Smallest image fraction of a material to evaluate (materials the image does not show are never evaluated).
     #[arg(long, default_value_t = 0.05)]
     pub min_area: f64,
     /// Network weights (else the ground-truth elements stand in for the networks).
@@ -149,6 +149,12 @@ pub struct Row {
 fn scene_dirs(dir: &Path) -> Result<Vec<PathBuf>> {
     if dir.join("scene.json").exists() {
         return Ok(vec![dir.to_path_buf()]);
+    }
+    if dir.exists() && !dir.is_dir() {
+        bail!(
+            "{}: not a folder; give a folder of `picker synth` scenes or one scene folder",
+            dir.display()
+        );
     }
     let mut v: Vec<PathBuf> = std::fs::read_dir(dir)
         .with_context(|| format!("reading {}", dir.display()))?
@@ -386,7 +392,9 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
         let id = m["id"].as_u64().unwrap_or(0) as u32;
         let true_mask: Vec<bool> = ids.iter().map(|&i| i == id).collect();
         let area = true_mask.iter().filter(|&&b| b).count() as f64 / (w * h) as f64;
-        if area < a.min_area {
+        // A material the image does not show has no pick to score (even
+        // with --min-area 0).
+        if area == 0.0 || area < a.min_area {
             continue;
         }
         let dist = inner_distance(&true_mask, w, h);

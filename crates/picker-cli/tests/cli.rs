@@ -628,6 +628,19 @@ fn error_missing_photo() {
 }
 
 #[test]
+fn error_a_folder_given_as_a_weights_file_or_a_file_as_scenes() {
+    let dir = tempfile::tempdir().unwrap();
+    let folder = dir.path().join("not-weights");
+    std::fs::create_dir(&folder).unwrap();
+    let o = picker(["weights", "inspect", folder.to_str().unwrap()]);
+    assert_error_names(&o, "not-weights");
+    assert!(stderr(&o).contains("is a directory"), "{}", stderr(&o));
+    let o = picker(["eval", example_photo().to_str().unwrap()]);
+    assert_error_names(&o, "coffee.jpg");
+    assert!(stderr(&o).contains("not a folder"), "{}", stderr(&o));
+}
+
+#[test]
 fn error_corrupt_png() {
     let dir = tempfile::tempdir().unwrap();
     let photo = dir.path().join("noise.png");

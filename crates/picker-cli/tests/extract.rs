@@ -626,6 +626,32 @@ fn regressions_extract_without_error() {
 }
 
 #[test]
+fn eval_never_scores_a_material_the_image_does_not_show() {
+    // 1×1 scenes show one material each; with --min-area 0 the others (area
+    // 0) used to be "picked" at pixel 0, another material's, and scored 0.
+    let tmp = tempfile::tempdir().unwrap();
+    let scenes = tmp.path().join("s");
+    ok(&[
+        "synth",
+        "--count",
+        "2",
+        "--size",
+        "1x1",
+        "--seed",
+        "1",
+        "--out",
+        scenes.to_str().unwrap(),
+    ]);
+    let (_, report) = eval_report(&scenes, &["--min-area", "0"], &tmp.path().join("e.json"));
+    let rows = report["rows"].as_array().unwrap();
+    assert_eq!(rows.len(), 2, "{report}");
+    for r in rows {
+        assert_eq!(r["area"].as_f64(), Some(1.0), "{r}");
+        assert_eq!(r["iou"].as_f64(), Some(1.0), "{r}");
+    }
+}
+
+#[test]
 fn one_pixel_high_and_wide_photos_extract_with_a_bounded_report() {
     // A 1×600 photo made a report sheet ~115 000 pixels wide per tile (an
     // out-of-memory abort at 1×4000), and `--all` failed on a material whose

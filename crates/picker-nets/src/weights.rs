@@ -323,7 +323,14 @@ impl Weights {
             source,
         };
         let file = std::fs::File::open(path).map_err(|e| io("open", e))?;
-        let size = file.metadata().map_err(|e| io("stat", e))?.len();
+        let meta = file.metadata().map_err(|e| io("stat", e))?;
+        if meta.is_dir() {
+            return Err(io(
+                "open",
+                std::io::Error::other("it is a directory, not a weights (.safetensors) file"),
+            ));
+        }
+        let size = meta.len();
         if size < 8 {
             // Mapping an empty file fails on some platforms; say what is wrong instead.
             return Self::parse(path.to_path_buf(), Storage::Owned(vec![0; size as usize]));
