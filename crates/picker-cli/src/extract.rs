@@ -829,6 +829,9 @@ pub fn write_materials(
                 name.clone()
             };
             o.insert("dir".into(), json!(shown));
+            if let Some(why) = &diag.texture_fallback {
+                o.insert("texture_fallback".into(), json!(why));
+            }
             let mut names: Vec<String> = files
                 .iter()
                 .filter_map(|f| f.file_name().map(|n| n.to_string_lossy().into_owned()))
@@ -949,14 +952,14 @@ pub fn run(a: Args) -> Result<()> {
         println!("{text}");
     } else {
         for s in summary["materials"].as_array().cloned().unwrap_or_default() {
+            let kind = match (s["textured"].as_bool(), s["texture_fallback"].as_str()) {
+                (Some(true), _) => "textured".to_string(),
+                (_, Some(why)) => format!("single colour (its texture could not be taken: {why})"),
+                _ => "single colour".to_string(),
+            };
             println!(
-                "{}: {} -> {}",
+                "{}: {kind} -> {}",
                 s["name"].as_str().unwrap_or("?"),
-                if s["textured"].as_bool().unwrap_or(false) {
-                    "textured"
-                } else {
-                    "single colour"
-                },
                 s["dir"].as_str().unwrap_or("?")
             );
         }

@@ -653,39 +653,52 @@ fn eval_never_scores_a_material_the_image_does_not_show() {
 
 #[test]
 fn one_pixel_high_and_wide_photos_extract_with_a_bounded_report() {
-    // A 1×600 photo made a report sheet ~115 000 pixels wide per tile (an
-    // out-of-memory abort at 1×4000), and `--all` failed on a material whose
-    // plane was seen from behind; both now run, with the embedded weights.
+    // fixtures/regress/strip_4000x1.png made a report sheet 768 000 pixels
+    // wide per tile (an out-of-memory abort), and `--all` on it failed on a
+    // material whose plane was seen from behind; both now run, with the
+    // embedded weights, as do generated 600×1 and 1×600 photos.
     let tmp = tempfile::tempdir().unwrap();
     let mut rng = picker_tensor::Rng::new(5);
+    let mut photos = vec![repo().join("fixtures/regress/strip_4000x1.png")];
     for (w, h) in [(600usize, 1usize), (1, 600)] {
         let photo = tmp.path().join(format!("strip_{w}x{h}.png"));
         let img =
             picker_render::io::Image::new(3, h, w, rng.uniform_vec(3 * w * h, 0.0, 1.0)).unwrap();
         picker_render::io::write_png(&photo, &img).unwrap();
+        photos.push(photo);
+    }
+    for photo in &photos {
+        let stem = photo.file_stem().unwrap().to_string_lossy().into_owned();
         for args in [vec!["--pick", "0,0"], vec!["--all", "--min-area", "0.001"]] {
-            let out = tmp.path().join(format!("out_{w}x{h}_{}", args[0]));
+            let out = tmp.path().join(format!("out_{stem}_{}", args[0]));
             let mut a = vec![
                 "extract",
                 photo.to_str().unwrap(),
                 "--out",
                 out.to_str().unwrap(),
+                "--json",
             ];
             a.extend(args.iter().copied());
-            ok(&a);
-            // One material: its files are in --out itself.
-            let report = [out.join("report.png"), out.join("material_0/report.png")]
-                .into_iter()
-                .find(|p| p.exists())
-                .expect("a report sheet");
-            let sheet = read_png(&report).unwrap();
-            assert!(
-                sheet.width <= 4 * (4 * 192 + 16) && sheet.height <= 4000,
-                "{}: {}x{}",
-                report.display(),
-                sheet.width,
-                sheet.height
-            );
+            let o = ok(&a);
+            let summary: Value = serde_json::from_slice(&o.stdout).expect("--json prints JSON");
+            for m in summary["materials"].as_array().unwrap() {
+                let dir = PathBuf::from(m["dir"].as_str().unwrap());
+                // A material that fell back to a single colour says why, in
+                // the summary and in its material.json.
+                if let Some(why) = m.get("texture_fallback") {
+                    assert_eq!(m["textured"], false, "{m}");
+                    let j = json_file(&dir.join("material.json"));
+                    assert_eq!(&j["diagnostics"]["texture_fallback"], why, "{j}");
+                }
+                let sheet = read_png(&dir.join("report.png")).unwrap();
+                assert!(
+                    sheet.width <= 4 * (4 * 192 + 16) && sheet.height <= 4000,
+                    "{}: {}x{}",
+                    dir.display(),
+                    sheet.width,
+                    sheet.height
+                );
+            }
         }
     }
 }
