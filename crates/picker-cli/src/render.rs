@@ -131,9 +131,18 @@ fn num(v: f64) -> serde_json::Value {
     }
 }
 
-/// Reads an image in linear values: EXR as is, PNG decoded from sRGB.
+/// Reads an image in linear values: EXR as is, PNG decoded from sRGB; refuses
+/// NaN or infinite values (a corrupt EXR), naming the file.
 fn read_linear(path: &Path) -> Result<Image> {
     let img = io::read_image(path)?;
+    let bad = img.data.iter().filter(|v| !v.is_finite()).count();
+    if bad > 0 {
+        bail!(
+            "{}: {bad} of its {} values are NaN or infinite; give finite colours",
+            path.display(),
+            img.data.len()
+        );
+    }
     let is_png = path
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("png"));
@@ -265,7 +274,8 @@ fn preview(a: &Args, env: &EnvMap, t_total: Instant) -> Result<()> {
     io::write_png(&a.out.join("preview_sphere.png"), &shown(&sphere))?;
     io::write_png(&a.out.join("preview_tile.png"), &shown(&tile))?;
     println!(
-        "wrote preview_sphere.png and preview_tile.png ({size}x{size}, exposure {exposure:.4}) to {} in {:.2} s",
+        "wrote preview_sphere.png and preview_tile.png ({size}x{size}, exposure {}) to {} in {:.2} s",
+        if (1e-3..1e4).contains(&exposure) { format!("{exposure:.4}") } else { format!("{exposure:.3e}") },
         a.out.display(),
         t_total.elapsed().as_secs_f64()
     );

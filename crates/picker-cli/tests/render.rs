@@ -182,6 +182,36 @@ fn preview_writes_sphere_and_tile() {
 }
 
 #[test]
+fn non_finite_envmaps_and_textures_are_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    make_scene(d);
+    let mut env = io::read_exr(&d.join("env.exr")).unwrap();
+    env.data[5] = f32::NAN;
+    env.data[6] = f32::INFINITY;
+    io::write_exr(&d.join("nan-env.exr"), &env).unwrap();
+    let o = preview(d, "nan-env.exr", "o1", &[]);
+    assert_eq!(o.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("nan-env.exr") && err.contains("NaN or infinite"),
+        "{err}"
+    );
+    assert!(!d.join("o1/preview_sphere.png").exists());
+    let mut tex = rgb_image(|i| [0.2, 0.3, (i % 3) as f32 / 3.0]);
+    tex.data[2] = f32::NAN;
+    io::write_exr(&d.join("nan-tex.exr"), &tex).unwrap();
+    let t = d.join("nan-tex.exr");
+    let o = preview(d, "env.exr", "o2", &["--texture", t.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("nan-tex.exr") && err.contains("NaN or infinite"),
+        "{err}"
+    );
+}
+
+#[test]
 fn errors_name_the_file() {
     let tmp = tempfile::tempdir().unwrap();
     let d = tmp.path();

@@ -21,7 +21,9 @@ pub struct EnvMap {
 }
 
 impl EnvMap {
-    /// A map from row-major radiance values; refuses a zero size or a wrong length.
+    /// A map from row-major radiance values; refuses a zero size, a wrong
+    /// length, or NaN or infinite values (a corrupt map: its NaN would reach
+    /// every shaded pixel through the prefiltering and the exposure).
     pub fn new(width: usize, height: usize, data: Vec<Vec3>) -> Result<Self> {
         if width == 0 || height == 0 {
             return Err(Error::Invalid {
@@ -35,6 +37,19 @@ impl EnvMap {
                 format!("{} pixels", width * height),
                 data.len(),
             ));
+        }
+        let bad = data.iter().filter(|v| !v.is_finite()).count();
+        if let Some(first) = data.iter().position(|v| !v.is_finite()) {
+            return Err(Error::Invalid {
+                what: "environment map radiance",
+                reason: format!(
+                    "{bad} of its {} pixels are NaN or infinite (the first at row {}, column {}); \
+                     an environment map must be finite",
+                    data.len(),
+                    first / width,
+                    first % width
+                ),
+            });
         }
         Ok(Self {
             width,
@@ -343,6 +358,25 @@ mod tests {
             })
             .collect();
         EnvMap::new(w, h, data).unwrap()
+    }
+
+    #[test]
+    fn non_finite_radiance_is_refused_with_its_place() {
+        for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+            let mut data = vec![Vec3::splat(0.5); 12];
+            data[7] = Vec3::new(0.1, bad, 0.2);
+            data[9] = Vec3::splat(bad);
+            let e = EnvMap::new(4, 3, data).unwrap_err().to_string();
+            assert!(
+                e.contains("2 of its 12 pixels") && e.contains("row 1, column 3"),
+                "{e}"
+            );
+        }
+        // Negative and huge finite values are radiance the caller chose.
+        let mut data = vec![Vec3::splat(0.5); 12];
+        data[0] = Vec3::splat(-1.0);
+        data[1] = Vec3::splat(3e38);
+        assert!(EnvMap::new(4, 3, data).is_ok());
     }
 
     /// A smooth map (so bilinear sampling is accurate): a sky gradient and a soft lobe.
