@@ -57,23 +57,29 @@ fn eval_report(scenes: &Path, extra: &[&str], report: &Path) -> (String, Value) 
     )
 }
 
+/// `picker synth --count COUNT --size SIZE --seed SEED --threads 2 --out DIR`.
+fn synth_scenes(dir: &Path, count: usize, size: &str, seed: u64) {
+    let (count, seed) = (count.to_string(), seed.to_string());
+    ok(&[
+        "synth",
+        "--count",
+        &count,
+        "--size",
+        size,
+        "--seed",
+        &seed,
+        "--threads",
+        "2",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+}
+
 #[test]
 fn ground_truth_extraction_recovers_masks_and_textures() {
     let tmp = tempfile::tempdir().unwrap();
     let scenes = tmp.path().join("scenes");
-    ok(&[
-        "synth",
-        "--count",
-        "6",
-        "--size",
-        "180x240",
-        "--seed",
-        "31337",
-        "--threads",
-        "2",
-        "--out",
-        scenes.to_str().unwrap(),
-    ]);
+    synth_scenes(&scenes, 6, "180x240", 31337);
     let (text, r) = eval_report(&scenes, &[], &tmp.path().join("eval.json"));
     println!("{text}");
     let rows = r["rows"].as_array().unwrap();
@@ -631,17 +637,7 @@ fn eval_never_scores_a_material_the_image_does_not_show() {
     // 0) used to be "picked" at pixel 0, another material's, and scored 0.
     let tmp = tempfile::tempdir().unwrap();
     let scenes = tmp.path().join("s");
-    ok(&[
-        "synth",
-        "--count",
-        "2",
-        "--size",
-        "1x1",
-        "--seed",
-        "1",
-        "--out",
-        scenes.to_str().unwrap(),
-    ]);
+    synth_scenes(&scenes, 2, "1x1", 1);
     let (_, report) = eval_report(&scenes, &["--min-area", "0"], &tmp.path().join("e.json"));
     let rows = report["rows"].as_array().unwrap();
     assert_eq!(rows.len(), 2, "{report}");
