@@ -312,7 +312,14 @@ def augment_photometric(x, seed, step, params):
     photos darken towards their corners, and a network that takes that fall-off for a change of material
     splits one table into two (the stop-30 real-photo sheets). The targets (albedos, normals,
     segmentation: properties of the surfaces) do not change. Deterministic in (seed, step); with
-    ``vignette`` 0 the result is that of the recipes made before it existed, bit for bit."""
+    ``vignette`` 0 the result is that of the recipes made before it existed, bit for bit.
+
+    Camera effects beyond those (each off by default, drawn after everything above, so the recipes made
+    before them are unchanged): ``blur`` = b, a Gaussian blur of σ uniform in [0, b] pixels in linear light
+    (lens softness, defocus, resampling); ``tone`` = t, the encoded values raised to γ log-uniform in
+    [1/(1 + t), 1 + t] (a camera's tone curve); ``saturation`` = s, a saturation gain uniform in
+    [1 − s, 1 + s] around each pixel's grey; ``jpeg`` = [lo, hi], a JPEG round trip at a quality uniform in
+    [lo, hi] after the noise (Pillow on the CPU)."""
     n = x.shape[0]
     rng = np.random.default_rng([int(seed), 3 << 32, int(step)])
     p = float(params.get("p", 0.8))
@@ -342,10 +349,75 @@ def augment_photometric(x, seed, step, params):
         r2 = (((ys[None, :, None] - cy) * h) ** 2 + ((xs[None, None, :] - cx) * w) ** 2) / (0.25 * (h * h + w * w))
         fall = 1.0 - torch.from_numpy(k).float().to(x.device)[:, None, None] * r2.clamp(max=1.0)
         lin = lin * fall[:, None, :, :]
-    out = sd.srgb_encode(lin) + s[:, None, None, None] * torch.randn(x.shape, generator=gen, device=x.device)
+    blur = float(params.get("blur", 0.0))
+    if blur > 0.0:
+        # Drawn after the vignetting's numbers: lens softness, defocus, a photo scaled down and up.
+        bs = np.where(on, rng.uniform(0.0, blur, n), 0.0)
+        lin = gaussian_blur(lin, bs)
+    encoded = sd.srgb_encode(lin)
+    tone = float(params.get("tone", 0.0))
+    saturation = float(params.get("saturation", 0.0))
+    if tone > 0.0 or saturation > 0.0:
+        # A camera's own tone curve and colour rendering: a power of the encoded values (γ log-uniform in
+        # [1/(1 + tone), 1 + tone]) and a saturation gain around the grey of each pixel.
+        gamma = np.where(on, np.exp(rng.uniform(-np.log1p(tone), np.log1p(tone), n)), 1.0)
+        sat = np.where(on, rng.uniform(1.0 - saturation, 1.0 + saturation, n), 1.0)
+        gm = torch.from_numpy(gamma).float().to(x.device)[:, None, None, None]
+        st = torch.from_numpy(sat).float().to(x.device)[:, None, None, None]
+        encoded = encoded.clamp(0.0, 1.0) ** gm
+        grey = encoded.mean(dim=1, keepdim=True)
+        encoded = grey + st * (encoded - grey)
+    out = encoded + s[:, None, None, None] * torch.randn(x.shape, generator=gen, device=x.device)
     out = out.clamp(0.0, 1.0)
+    jpeg = params.get("jpeg")
+    if jpeg:
+        # JPEG compression at a quality uniform in [lo, hi], with probability ``p`` again (most real
+        # photos are JPEGs: 8×8 blocks, ringing, chroma subsampling).
+        qlo, qhi = jpeg
+        q = rng.integers(int(qlo), int(qhi) + 1, n)
+        out = jpeg_roundtrip(out, np.where(on, q, 0))
     keep = torch.from_numpy(~on).to(x.device)[:, None, None, None]
     return torch.where(keep, x, 2.0 * out - 1.0)
+
+
+def gaussian_blur(x, sigmas):
+    """Each image ``x[i]`` ([N, C, H, W]) blurred by a Gaussian of σ ``sigmas[i]`` pixels (separable, radius
+    ⌈3σ⌉, borders reflected); σ below 0.05 leaves the image as it is."""
+    out = x.clone()
+    h, w = x.shape[2], x.shape[3]
+    for i, sigma in enumerate(sigmas):
+        if sigma < 0.05:
+            continue
+        r = max(1, min(int(np.ceil(3.0 * sigma)), h - 1, w - 1))
+        t = torch.arange(-r, r + 1, dtype=torch.float32, device=x.device)
+        k = torch.exp(-0.5 * (t / float(sigma)) ** 2)
+        k = k / k.sum()
+        c = x.shape[1]
+        img = torch.nn.functional.pad(x[i:i + 1], (r, r, r, r), mode="reflect")
+        img = torch.nn.functional.conv2d(img, k.view(1, 1, 1, -1).repeat(c, 1, 1, 1), groups=c)
+        img = torch.nn.functional.conv2d(img, k.view(1, 1, -1, 1).repeat(c, 1, 1, 1), groups=c)
+        out[i] = img[0]
+    return out
+
+
+def jpeg_roundtrip(x, qualities):
+    """Each image ``x[i]`` ([N, 3, H, W], values in [0, 1]) encoded as a JPEG of quality ``qualities[i]`` and
+    decoded (Pillow, 4:2:0 chroma subsampling); quality 0 leaves the image as it is."""
+    import io
+
+    from PIL import Image
+
+    out = x.clone()
+    for i, q in enumerate(qualities):
+        if q <= 0:
+            continue
+        a = (x[i].detach().cpu().permute(1, 2, 0).numpy() * 255.0 + 0.5).clip(0, 255).astype(np.uint8)
+        buf = io.BytesIO()
+        Image.fromarray(a).save(buf, format="JPEG", quality=int(q), subsampling=2)
+        buf.seek(0)
+        b = np.asarray(Image.open(buf).convert("RGB"), dtype=np.float32) / 255.0
+        out[i] = torch.from_numpy(b).permute(2, 0, 1).to(x.device)
+    return out
 
 
 def source_seeds(sources):

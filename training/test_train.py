@@ -358,6 +358,30 @@ def test_augment():
     assert (corners <= 0.6 + 1e-5).all() and (corners < 0.6 - 1e-3).any(), corners
     assert (v[:, :, 14:16, 19:21] - 0.6).abs().max() < 0.05
     assert v.min() >= -1 and (v <= 0.6 + 1e-5).all()
+    # Camera effects: absent or zero is the old behaviour bit for bit; each is deterministic and stays in range.
+    zero = {"p": 1.0, "vignette": 0.0, "blur": 0.0, "tone": 0.0, "saturation": 0.0, "jpeg": None}
+    assert torch.equal(device_data.augment_photometric(x, 1, 5, zero), a)
+    cam = {"p": 1.0, "blur": 1.5, "tone": 0.3, "saturation": 0.3, "jpeg": [40, 90]}
+    e = device_data.augment_photometric(x, 3, 9, cam)
+    assert torch.equal(e, device_data.augment_photometric(x, 3, 9, cam))
+    assert e.min() >= -1 and e.max() <= 1 and not torch.equal(e, device_data.augment_photometric(x, 3, 10, cam))
+    # Blur keeps a flat image flat and the mean of any image (reflected borders: nearly), and smooths.
+    bl = device_data.gaussian_blur(flat, [0.0, 0.7, 1.5, 3.0])
+    close(bl, flat, 1e-5)
+    step = torch.zeros(2, 3, 20, 20)
+    step[:, :, :, 10:] = 1.0
+    sm = device_data.gaussian_blur(step, [0.0, 2.0])
+    assert torch.equal(sm[0], step[0])
+    assert 0.05 < sm[1, 0, 5, 9] < 0.5 < sm[1, 0, 5, 10] < 0.95 and sm[1, 0, 5, 0] < 1e-4
+    # JPEG: quality 0 is the identity; a smooth image survives a high quality closely.
+    grad = torch.linspace(0, 1, 32)[None, None, None, :].repeat(2, 3, 16, 1)
+    j = device_data.jpeg_roundtrip(grad, [0, 95])
+    assert torch.equal(j[0], grad[0]) and (j[1] - grad[1]).abs().max() < 0.03
+    # Tone and saturation alone keep grey pixels grey and black black.
+    g = torch.full((3, 3, 4, 4), -1.0)
+    g[:, :, :2] = 0.2
+    t = device_data.augment_photometric(g, 4, 1, dict(plain, tone=0.4, saturation=0.5))
+    assert (t[:, 0] - t[:, 1]).abs().max() < 1e-6 and (t[:, :, 2:] == -1).all()
 
 
 def test_device_training(tmp):

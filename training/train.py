@@ -160,7 +160,7 @@ def effective_config(args, base=None):
     if cfg["augment"] and cfg["net"] == "envmap":
         raise SystemExit("augment: not for the EnvMap net (an exposure change would have to change its target)")
     if cfg["augment"]:
-        known = {"p", "exposure", "white_balance", "noise", "vignette"}
+        known = {"p", "exposure", "white_balance", "noise", "vignette", "blur", "tone", "saturation", "jpeg"}
         unknown = set(cfg["augment"]) - known
         if unknown:
             raise SystemExit(f"augment: unknown keys {sorted(unknown)}; known: {', '.join(sorted(known))}")

@@ -10,7 +10,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use picker_synth::assets::AssetLibrary;
-use picker_synth::scene::SceneConfig;
+use picker_synth::scene::{SceneConfig, Views};
 use rayon::prelude::*;
 
 /// Arguments of `picker synth`.
@@ -35,12 +35,27 @@ pub struct Args {
     /// procedural textures and skies only without it.
     #[arg(long, value_name = "DIR")]
     pub assets: Option<PathBuf>,
+    /// Camera views: `room` (eye level across the room: pitch ±20°, nothing within 1.2 m ahead; what
+    /// every dataset before this option used, and the same scenes) or `wide` (half room views, a
+    /// quarter looking down at a floor or table top at pitch −80…−30°, a quarter close-ups of a
+    /// surface 0.3–1.5 m ahead; roll ±12°, field of view 30–75°).
+    #[arg(long, value_enum, default_value_t = ViewsArg::Room)]
+    pub views: ViewsArg,
     /// Also write a contact sheet of the first (up to) 16 images, 4 per row, at half size.
     #[arg(long, value_name = "PNG")]
     pub contact_sheet: Option<PathBuf>,
     /// Worker threads (default: one per logical core).
     #[arg(long)]
     pub threads: Option<usize>,
+}
+
+/// `--views` ([`Views`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum ViewsArg {
+    /// Eye-level views across the room.
+    Room,
+    /// Room views, views down at a floor or table and close-ups.
+    Wide,
 }
 
 /// Runs `picker synth`.
@@ -57,7 +72,13 @@ pub fn run(a: Args) -> Result<()> {
     std::fs::create_dir_all(&a.out)
         .with_context(|| format!("creating output directory {}", a.out.display()))?;
     let (h, w) = a.size;
-    let config = SceneConfig::for_size(h, w);
+    let config = SceneConfig {
+        views: match a.views {
+            ViewsArg::Room => Views::Room,
+            ViewsArg::Wide => Views::Wide,
+        },
+        ..SceneConfig::for_size(h, w)
+    };
     let n = a.count;
 
     let tty = std::io::stderr().is_terminal();

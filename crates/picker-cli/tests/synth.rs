@@ -150,4 +150,54 @@ fn synth_writes_scene_folders_and_a_contact_sheet() {
         .output()
         .unwrap();
     assert_eq!(st.status.code(), Some(2));
+
+    // --views: recorded in scene.json; the default is room views; an unknown name is refused.
+    let views_of = |dir: &Path| -> (String, String) {
+        let j: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.join("scene.json")).unwrap())
+                .unwrap();
+        let c = &j["camera"];
+        (
+            c["views"].as_str().unwrap().into(),
+            c["view"].as_str().unwrap().into(),
+        )
+    };
+    assert_eq!(
+        views_of(&tmp.path().join("run/scene_000005")),
+        ("room".into(), "room".into())
+    );
+    let st = picker()
+        .args([
+            "synth", "--count", "12", "--size", "16x24", "--seed", "9", "--views", "wide",
+        ])
+        .arg("--out")
+        .arg(tmp.path().join("wide"))
+        .output()
+        .unwrap();
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    let kinds: std::collections::BTreeSet<String> = (0..12)
+        .map(|i| {
+            let (views, view) = views_of(&tmp.path().join(format!("wide/scene_{i:06}")));
+            assert_eq!(views, "wide");
+            view
+        })
+        .collect();
+    assert!(
+        kinds.len() >= 2
+            && kinds
+                .iter()
+                .all(|k| ["room", "down", "close"].contains(&k.as_str())),
+        "{kinds:?}"
+    );
+    let st = picker()
+        .args(["synth", "--views", "aerial", "--out"])
+        .arg(tmp.path())
+        .output()
+        .unwrap();
+    assert_eq!(st.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&st.stderr).contains("aerial"));
 }

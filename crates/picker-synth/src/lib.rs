@@ -30,7 +30,9 @@ use std::path::{Path, PathBuf};
 
 /// Version of the generator, recorded in every `scene.json`; bump it whenever
 /// the output of a given seed changes (and re-bless the golden fixtures).
-pub const GENERATOR_VERSION: &str = "1";
+/// Version 2 added the camera's `views` and `view` to `scene.json` (`--views`);
+/// with the default room views every image and element is that of version 1.
+pub const GENERATOR_VERSION: &str = "2";
 
 /// Errors of the generator.
 #[derive(Debug, thiserror::Error)]

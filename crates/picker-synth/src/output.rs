@@ -98,6 +98,8 @@ pub fn scene_json(scene: &Scene, b: &Buffers) -> serde_json::Value {
             "fov_y_deg": cam.fov_y.to_degrees(),
             "camera_to_world": [vec3(cam.rotation.x_axis), vec3(cam.rotation.y_axis), vec3(cam.rotation.z_axis)],
             "camera_to_world_layout": "columns: the camera's x, y, z axes in world coordinates; the camera looks along -z",
+            "views": scene.config.views.name(),
+            "view": scene.view.name(),
         },
         "primitives": primitives,
         "objects": objects,

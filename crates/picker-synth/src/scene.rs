@@ -27,6 +27,58 @@ pub struct SceneConfig {
     pub texture_size: usize,
     /// Sky (world-frame environment map) height; its width is twice that.
     pub sky_height: usize,
+    /// Which camera views are drawn.
+    pub views: Views,
+}
+
+/// The distribution of camera views a scene is drawn from.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Views {
+    /// Eye-level views into the room: pitch ±20°, roll ±3°, field of view
+    /// 40–75°, no surface nearer than 1.2 m straight ahead (every dataset
+    /// made before the option existed; the same draws, so old seeds make the
+    /// same scenes).
+    #[default]
+    Room,
+    /// Half [`View::Room`] views, a quarter looking down ([`View::Down`]:
+    /// pitch −80…−30°, at a floor or a table top), a quarter close-ups
+    /// ([`View::Close`]: a surface 0.3–1.5 m straight ahead); roll ±12° and a
+    /// field of view of 30–75° for the latter two. Photos people take to pick
+    /// a material look at it from above or from near as often as across a
+    /// room.
+    Wide,
+}
+
+impl Views {
+    /// The name `picker synth --views` takes and `scene.json` records.
+    pub fn name(self) -> &'static str {
+        match self {
+            Views::Room => "room",
+            Views::Wide => "wide",
+        }
+    }
+}
+
+/// The kind of camera view a scene was drawn with ([`Views`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum View {
+    /// Eye level, across the room.
+    Room,
+    /// Looking down at the floor or a table top.
+    Down,
+    /// A surface close ahead.
+    Close,
+}
+
+impl View {
+    /// The name `scene.json` records.
+    pub fn name(self) -> &'static str {
+        match self {
+            View::Room => "room",
+            View::Down => "down",
+            View::Close => "close",
+        }
+    }
 }
 
 impl SceneConfig {
@@ -39,6 +91,7 @@ impl SceneConfig {
             width,
             texture_size: if tiny { 32 } else { 128 },
             sky_height: if tiny { 16 } else { 64 },
+            views: Views::Room,
         }
     }
 }
@@ -262,6 +315,8 @@ pub struct Scene {
     pub lamps: Vec<Lamp>,
     /// Camera.
     pub camera: Camera,
+    /// The kind of view the camera was drawn as.
+    pub view: View,
     /// Sky, world frame (centre column = world −z).
     pub sky: EnvMap,
     /// How the sky was made.
@@ -605,6 +660,20 @@ pub fn generate(
     // Camera: inside the room, clear of every object by 0.4 m (so the near plane never
     // clips), and not staring at a surface closer than 1.2 m.
     let clearance = 0.4;
+    // The view kind: drawn only for `Views::Wide`, so `Room` makes the draws it always made.
+    let view = match config.views {
+        Views::Room => View::Room,
+        Views::Wide => {
+            let u = rng.f64();
+            if u < 0.5 {
+                View::Room
+            } else if u < 0.75 {
+                View::Down
+            } else {
+                View::Close
+            }
+        }
+    };
     let mut camera = None;
     for _ in 0..500 {
         let p = Vec3::new(
@@ -615,21 +684,52 @@ pub fn generate(
         // Look roughly towards the room's centre (±75°) so most views show the room.
         let to_centre = Vec3::new(room.x / 2.0, p.y, room.z / 2.0) - p;
         let yaw = (-to_centre.x).atan2(-to_centre.z) + uniform(rng, -75.0, 75.0).to_radians();
-        let pitch = uniform(rng, -20.0, 20.0).to_radians();
-        let roll = uniform(rng, -3.0, 3.0).to_radians();
-        let fov = uniform(rng, 40.0, 75.0).to_radians();
+        let (pitch, roll, fov) = match view {
+            View::Room => (
+                uniform(rng, -20.0, 20.0),
+                uniform(rng, -3.0, 3.0),
+                uniform(rng, 40.0, 75.0),
+            ),
+            View::Down => (
+                uniform(rng, -80.0, -30.0),
+                uniform(rng, -12.0, 12.0),
+                uniform(rng, 30.0, 75.0),
+            ),
+            View::Close => (
+                uniform(rng, -30.0, 20.0),
+                uniform(rng, -12.0, 12.0),
+                uniform(rng, 30.0, 75.0),
+            ),
+        };
+        let (pitch, roll, fov) = (pitch.to_radians(), roll.to_radians(), fov.to_radians());
+        // Down and close views look any way (a wall close ahead is one the room's centre is behind).
+        let yaw = match view {
+            View::Room => yaw,
+            View::Down | View::Close => uniform(rng, -180.0, 180.0).to_radians(),
+        };
         if objects.iter().any(|(_, b, _)| b.distance(p) < clearance) {
             continue;
         }
         let cam = Camera::new(p, yaw, pitch, roll, fov);
         let forward = cam.rotation * Vec3::NEG_Z;
-        if nearest(&shapes, p, forward, 0.0, 1.2).is_some() {
+        // Nothing nearer than this straight ahead, and (close-ups) something within `reach`.
+        let (free, reach) = match view {
+            View::Room => (1.2, None),
+            View::Down => (0.3, None),
+            View::Close => (0.3, Some(1.5)),
+        };
+        if nearest(&shapes, p, forward, 0.0, free).is_some() {
+            continue;
+        }
+        if reach.is_some_and(|r| nearest(&shapes, p, forward, free, r).is_none()) {
             continue;
         }
         camera = Some(cam);
         break;
     }
-    // Every draw failed (a crowded room): take the point of a grid at 1.5 m height
+    // Every draw failed (a crowded room; a close-up with nothing in reach): an eye-level view.
+    let view = if camera.is_some() { view } else { View::Room };
+    // Take the point of a grid at 1.5 m height
     // farthest from all objects, looking horizontally along the room's longer side.
     let camera = camera.unwrap_or_else(|| {
         let mut best = (
@@ -704,6 +804,7 @@ pub fn generate(
         openings,
         lamps,
         camera,
+        view,
         sky,
         sky_info,
         objects: objects.into_iter().map(|(k, b, _)| (k, b)).collect(),

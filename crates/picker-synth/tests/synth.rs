@@ -9,7 +9,7 @@ use glam::Vec3;
 use picker_render::{io, rerender, ElementImages, EnvMap, Quality};
 use picker_synth::geometry::Shape;
 use picker_synth::render::render;
-use picker_synth::scene::{generate, SceneConfig};
+use picker_synth::scene::{generate, SceneConfig, View, Views};
 
 fn files(dir: &Path) -> BTreeMap<String, Vec<u8>> {
     let mut out = BTreeMap::new();
@@ -64,45 +64,110 @@ fn same_seed_same_bytes_on_any_thread_count() {
 
 #[test]
 fn camera_never_inside_or_clipping_geometry() {
-    let cfg = SceneConfig {
-        height: 24,
-        width: 32,
-        texture_size: 8,
-        sky_height: 8,
-    };
     let near = 0.05;
-    for index in 0..150 {
-        let s = generate(3, index, cfg, None).unwrap();
-        let cam = &s.camera;
-        let p = cam.position;
-        assert!(
-            p.cmpgt(Vec3::splat(0.0)).all() && p.cmplt(s.room).all(),
-            "scene {index}: camera {p} outside the room {}",
-            s.room
-        );
-        let fov = cam.fov_y.to_degrees();
-        assert!((40.0..=75.0).contains(&fov), "fov {fov}");
-        assert!(cam.pitch.to_degrees().abs() <= 20.0 && cam.roll.to_degrees().abs() <= 3.0);
-        for prim in &s.primitives {
-            let d = prim.shape.aabb().distance(p);
+    for views in [Views::Room, Views::Wide] {
+        let cfg = SceneConfig {
+            height: 24,
+            width: 32,
+            texture_size: 8,
+            sky_height: 8,
+            views,
+        };
+        let mut kinds = BTreeMap::new();
+        for index in 0..150 {
+            let s = generate(3, index, cfg, None).unwrap();
+            *kinds.entry(s.view.name()).or_insert(0) += 1;
+            let cam = &s.camera;
+            let p = cam.position;
             assert!(
-                d >= 0.4 - 1e-4,
-                "scene {index}: camera {d} m from {:?}",
-                prim.shape
+                p.cmpgt(Vec3::splat(0.0)).all() && p.cmplt(s.room).all(),
+                "scene {index}: camera {p} outside the room {}",
+                s.room
             );
-            if let Shape::Sphere { center, radius } = prim.shape {
-                assert!((p - center).length() > radius + 0.4 - 1e-4);
+            let (fov, pitch, roll) = (
+                cam.fov_y.to_degrees(),
+                cam.pitch.to_degrees(),
+                cam.roll.to_degrees(),
+            );
+            let forward = cam.rotation * Vec3::NEG_Z;
+            let ahead = picker_synth::geometry::nearest(&s.shapes, p, forward, 0.0, f32::INFINITY)
+                .map_or(f32::INFINITY, |(_, h)| h.t);
+            match s.view {
+                View::Room => {
+                    assert!((40.0..=75.0).contains(&fov), "fov {fov}");
+                    assert!(pitch.abs() <= 20.0 && roll.abs() <= 3.0);
+                    assert!(ahead >= 1.2, "scene {index}: {ahead} m ahead");
+                }
+                View::Down => {
+                    assert_eq!(views, Views::Wide);
+                    assert!((30.0..=75.0).contains(&fov), "fov {fov}");
+                    assert!((-80.0..=-30.0).contains(&pitch) && roll.abs() <= 12.0);
+                    assert!(ahead >= 0.3, "scene {index}: {ahead} m ahead");
+                }
+                View::Close => {
+                    assert_eq!(views, Views::Wide);
+                    assert!((30.0..=75.0).contains(&fov), "fov {fov}");
+                    assert!((-30.0..=20.0).contains(&pitch) && roll.abs() <= 12.0);
+                    assert!(
+                        (0.3..=1.5).contains(&ahead),
+                        "scene {index}: {ahead} m ahead"
+                    );
+                }
+            }
+            for prim in &s.primitives {
+                let d = prim.shape.aabb().distance(p);
+                assert!(
+                    d >= 0.4 - 1e-4,
+                    "scene {index}: camera {d} m from {:?}",
+                    prim.shape
+                );
+                if let Shape::Sphere { center, radius } = prim.shape {
+                    assert!((p - center).length() > radius + 0.4 - 1e-4);
+                }
+            }
+            // The near plane's corners and centre see every surface beyond it.
+            for (row, col) in [(0, 0), (0, 31), (23, 0), (23, 31), (12, 16)] {
+                let d = cam.rotation * cam.pixel_direction(row, col, 24, 32);
+                let hit = picker_synth::geometry::nearest(&s.shapes, p, d, 0.0, f32::INFINITY);
+                if let Some((_, h)) = hit {
+                    assert!(h.t > near, "scene {index}: surface at {} m", h.t);
+                }
             }
         }
-        // The near plane's corners and centre see every surface beyond it.
-        for (row, col) in [(0, 0), (0, 31), (23, 0), (23, 31), (12, 16)] {
-            let d = cam.rotation * cam.pixel_direction(row, col, 24, 32);
-            let hit = picker_synth::geometry::nearest(&s.shapes, p, d, 0.0, f32::INFINITY);
-            if let Some((_, h)) = hit {
-                assert!(h.t > near, "scene {index}: surface at {} m", h.t);
+        // Room views only make room views; wide ones make every kind, about half room views.
+        match views {
+            Views::Room => assert_eq!(kinds.len(), 1, "{kinds:?}"),
+            Views::Wide => {
+                assert_eq!(kinds.len(), 3, "{kinds:?}");
+                assert!((50..=100).contains(&kinds["room"]), "{kinds:?}");
+                assert!(kinds["down"] >= 20 && kinds["close"] >= 15, "{kinds:?}");
             }
         }
     }
+}
+
+/// `Views::Room` is the default, and a wide scene differs from the room scene of the same seed only
+/// in its camera (the room, materials and lights are drawn before it).
+#[test]
+fn wide_views_change_only_the_camera() {
+    let room = SceneConfig::for_size(24, 32);
+    assert_eq!(room.views, Views::Room);
+    let wide = SceneConfig {
+        views: Views::Wide,
+        ..room
+    };
+    let mut moved = 0;
+    for index in 0..20 {
+        let (a, b) = (
+            generate(5, index, room, None).unwrap(),
+            generate(5, index, wide, None).unwrap(),
+        );
+        assert_eq!(a.room, b.room);
+        assert_eq!(a.materials.len(), b.materials.len());
+        assert_eq!(a.primitives.len(), b.primitives.len());
+        moved += usize::from(a.camera.position != b.camera.position);
+    }
+    assert!(moved >= 10, "{moved}");
 }
 
 #[test]
