@@ -15,6 +15,7 @@
 #   test100     the first 100 scenes of the test split (seed 4242, photographic assets)
 #   proc-4242, proc-9191, proc-6161   40 scenes each, procedural textures and skies only
 #   assets-5151 40 scenes, photographic assets
+#   wide-7171   40 scenes, photographic assets, `--views wide` (views down at floors and tables, close-ups)
 #   blender     BLENDER_SCENES (a scripts/blender-scenes.sh output folder), when given
 # The test split for training.evaluate: 300 scenes of seed 4242 (EVAL_DATA/test).
 #
@@ -41,12 +42,13 @@ for c in "$@"; do
     [ "$w" = embedded ] || [ -d "$w" ] || { echo "eval-weights: $name: no weights folder $w" >&2; exit 2; }
 done
 
-gen() {  # DIR SEED COUNT [assets]
+gen() {  # DIR SEED COUNT [assets] [VIEWS]
     [ -f "$1/.done" ] && return 0
     rm -rf "$1"
     local a=()
     if [ "${4:-}" = assets ]; then a=(--assets "$ASSETS"); fi
-    "$PICKER" synth --count "$3" --size 240x320 --seed "$2" "${a[@]}" --out "$1" --threads "$THREADS" > "$1.log" 2>&1
+    "$PICKER" synth --count "$3" --size 240x320 --seed "$2" "${a[@]}" --views "${5:-room}" --out "$1" \
+        --threads "$THREADS" > "$1.log" 2>&1
     touch "$1/.done"
 }
 gen "$EVAL_DATA/test" 4242 300 assets
@@ -57,9 +59,11 @@ if [ ! -d "$EVAL_DATA/test100" ]; then
 fi
 for s in 4242 9191 6161; do gen "$EVAL_DATA/proc-$s" $s 40; done
 gen "$EVAL_DATA/assets-5151" 5151 40 assets
-SETS=(test100 proc-4242 proc-9191 proc-6161 assets-5151)
+gen "$EVAL_DATA/wide-7171" 7171 40 assets wide
+SETS=(test100 proc-4242 proc-9191 proc-6161 assets-5151 wide-7171)
 declare -A DIRS=([test100]="$EVAL_DATA/test100" [proc-4242]="$EVAL_DATA/proc-4242" [proc-9191]="$EVAL_DATA/proc-9191"
-                 [proc-6161]="$EVAL_DATA/proc-6161" [assets-5151]="$EVAL_DATA/assets-5151")
+                 [proc-6161]="$EVAL_DATA/proc-6161" [assets-5151]="$EVAL_DATA/assets-5151"
+                 [wide-7171]="$EVAL_DATA/wide-7171")
 if [ -n "${BLENDER_SCENES:-}" ]; then SETS+=(blender); DIRS[blender]="$BLENDER_SCENES"; fi
 
 PHOTO_DATA=""
