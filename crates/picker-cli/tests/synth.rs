@@ -19,6 +19,24 @@ fn picker() -> Command {
     Command::new(env!("CARGO_BIN_EXE_picker"))
 }
 
+/// Runs `cmd` and requires it to succeed (the panic shows its stderr).
+fn succeed(cmd: &mut Command) -> std::process::Output {
+    let out = cmd.output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+/// Runs `cmd` and requires it to be refused as a usage error (exit code 2); returns its stderr.
+fn refused(cmd: &mut Command) -> String {
+    let out = cmd.output().unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
 fn repo() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
 }
@@ -45,22 +63,17 @@ fn copy_dir(from: &Path, to: &Path) {
 #[test]
 fn golden_scenes_regenerate_bit_exactly() {
     let tmp = tempfile::tempdir().unwrap();
-    let st = picker()
-        .args([
-            "synth",
-            "--count",
-            &GOLDEN_COUNT.to_string(),
-            "--size",
-            GOLDEN_SIZE,
-        ])
-        .args(["--seed", GOLDEN_SEED, "--threads", "2", "--out"])
-        .arg(tmp.path())
-        .output()
-        .unwrap();
-    assert!(
-        st.status.success(),
-        "{}",
-        String::from_utf8_lossy(&st.stderr)
+    succeed(
+        picker()
+            .args([
+                "synth",
+                "--count",
+                &GOLDEN_COUNT.to_string(),
+                "--size",
+                GOLDEN_SIZE,
+            ])
+            .args(["--seed", GOLDEN_SEED, "--threads", "2", "--out"])
+            .arg(tmp.path()),
     );
     let fixtures = repo().join("fixtures/synth");
     let bless = std::env::var_os("PICKER_BLESS").is_some_and(|v| v == "1");
@@ -110,20 +123,15 @@ fn golden_scenes_regenerate_bit_exactly() {
 fn synth_writes_scene_folders_and_a_contact_sheet() {
     let tmp = tempfile::tempdir().unwrap();
     let sheet = tmp.path().join("sheet.png");
-    let st = picker()
-        .args([
-            "synth", "--count", "2", "--size", "16x24", "--seed", "9", "--start", "5",
-        ])
-        .arg("--out")
-        .arg(tmp.path().join("run"))
-        .arg("--contact-sheet")
-        .arg(&sheet)
-        .output()
-        .unwrap();
-    assert!(
-        st.status.success(),
-        "{}",
-        String::from_utf8_lossy(&st.stderr)
+    let st = succeed(
+        picker()
+            .args([
+                "synth", "--count", "2", "--size", "16x24", "--seed", "9", "--start", "5",
+            ])
+            .arg("--out")
+            .arg(tmp.path().join("run"))
+            .arg("--contact-sheet")
+            .arg(&sheet),
     );
     let err = String::from_utf8_lossy(&st.stderr);
     assert!(err.contains("wrote 2 scenes"), "{err}");
@@ -144,12 +152,11 @@ fn synth_writes_scene_folders_and_a_contact_sheet() {
     let img = image::open(&sheet).unwrap();
     assert_eq!((img.width(), img.height()), (2 * 12, 8));
 
-    let st = picker()
-        .args(["synth", "--size", "0x5", "--out"])
-        .arg(tmp.path())
-        .output()
-        .unwrap();
-    assert_eq!(st.status.code(), Some(2));
+    refused(
+        picker()
+            .args(["synth", "--size", "0x5", "--out"])
+            .arg(tmp.path()),
+    );
 
     // --views: recorded in scene.json; the default is room views; an unknown name is refused.
     let views_of = |dir: &Path| -> (String, String) {
@@ -166,18 +173,13 @@ fn synth_writes_scene_folders_and_a_contact_sheet() {
         views_of(&tmp.path().join("run/scene_000005")),
         ("room".into(), "room".into())
     );
-    let st = picker()
-        .args([
-            "synth", "--count", "12", "--size", "16x24", "--seed", "9", "--views", "wide",
-        ])
-        .arg("--out")
-        .arg(tmp.path().join("wide"))
-        .output()
-        .unwrap();
-    assert!(
-        st.status.success(),
-        "{}",
-        String::from_utf8_lossy(&st.stderr)
+    succeed(
+        picker()
+            .args([
+                "synth", "--count", "12", "--size", "16x24", "--seed", "9", "--views", "wide",
+            ])
+            .arg("--out")
+            .arg(tmp.path().join("wide")),
     );
     let kinds: std::collections::BTreeSet<String> = (0..12)
         .map(|i| {
@@ -193,11 +195,10 @@ fn synth_writes_scene_folders_and_a_contact_sheet() {
                 .all(|k| ["room", "down", "close"].contains(&k.as_str())),
         "{kinds:?}"
     );
-    let st = picker()
-        .args(["synth", "--views", "aerial", "--out"])
-        .arg(tmp.path())
-        .output()
-        .unwrap();
-    assert_eq!(st.status.code(), Some(2));
-    assert!(String::from_utf8_lossy(&st.stderr).contains("aerial"));
+    let err = refused(
+        picker()
+            .args(["synth", "--views", "aerial", "--out"])
+            .arg(tmp.path()),
+    );
+    assert!(err.contains("aerial"), "{err}");
 }
