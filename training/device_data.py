@@ -382,18 +382,19 @@ def augment_photometric(x, seed, step, params):
 
 def gaussian_blur(x, sigmas):
     """Each image ``x[i]`` ([N, C, H, W]) blurred by a Gaussian of σ ``sigmas[i]`` pixels (separable, radius
-    ⌈3σ⌉, borders reflected); σ below 0.05 leaves the image as it is."""
+    ⌈3σ⌉, borders reflected, or extended by their edge pixels where the image is not wider than the radius,
+    so any size works); σ below 0.05 leaves it as it is."""
     out = x.clone()
-    h, w = x.shape[2], x.shape[3]
     for i, sigma in enumerate(sigmas):
         if sigma < 0.05:
             continue
-        r = max(1, min(int(np.ceil(3.0 * sigma)), h - 1, w - 1))
+        r = int(np.ceil(3.0 * sigma))
         t = torch.arange(-r, r + 1, dtype=torch.float32, device=x.device)
         k = torch.exp(-0.5 * (t / float(sigma)) ** 2)
         k = k / k.sum()
         c = x.shape[1]
-        img = torch.nn.functional.pad(x[i:i + 1], (r, r, r, r), mode="reflect")
+        mode = "reflect" if r < min(x.shape[2], x.shape[3]) else "replicate"
+        img = torch.nn.functional.pad(x[i:i + 1], (r, r, r, r), mode=mode)
         img = torch.nn.functional.conv2d(img, k.view(1, 1, 1, -1).repeat(c, 1, 1, 1), groups=c)
         img = torch.nn.functional.conv2d(img, k.view(1, 1, -1, 1).repeat(c, 1, 1, 1), groups=c)
         out[i] = img[0]

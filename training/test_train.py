@@ -373,6 +373,10 @@ def test_augment():
     sm = device_data.gaussian_blur(step, [0.0, 2.0])
     assert torch.equal(sm[0], step[0])
     assert 0.05 < sm[1, 0, 5, 9] < 0.5 < sm[1, 0, 5, 10] < 0.95 and sm[1, 0, 5, 0] < 1e-4
+    # Any size, a single row or pixel too (a blur wider than the image).
+    one = torch.rand(2, 3, 1, 5)
+    assert device_data.gaussian_blur(one, [2.0, 0.0]).shape == one.shape
+    close(device_data.gaussian_blur(torch.full((1, 3, 1, 1), 0.3), [1.5]), torch.full((1, 3, 1, 1), 0.3), 1e-6)
     # JPEG: quality 0 is the identity; a smooth image survives a high quality closely.
     grad = torch.linspace(0, 1, 32)[None, None, None, :].repeat(2, 3, 16, 1)
     j = device_data.jpeg_roundtrip(grad, [0, 95])

@@ -70,7 +70,54 @@ pub enum View {
     Close,
 }
 
+/// What a [`View`] draws: degrees for the angles, metres for distances.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ViewBounds {
+    /// Pitch range (positive looks up).
+    pub pitch: [f32; 2],
+    /// Largest roll either way.
+    pub roll: f32,
+    /// Vertical field-of-view range.
+    pub fov: [f32; 2],
+    /// No surface nearer than this straight ahead.
+    pub free: f32,
+    /// Some surface within this straight ahead (close-ups).
+    pub reach: Option<f32>,
+    /// The heading is any (else towards the room's centre ±75°).
+    pub any_heading: bool,
+}
+
 impl View {
+    /// Its bounds (the one table the generator and its tests read).
+    pub fn bounds(self) -> ViewBounds {
+        match self {
+            View::Room => ViewBounds {
+                pitch: [-20.0, 20.0],
+                roll: 3.0,
+                fov: [40.0, 75.0],
+                free: 1.2,
+                reach: None,
+                any_heading: false,
+            },
+            View::Down => ViewBounds {
+                pitch: [-80.0, -30.0],
+                roll: 12.0,
+                fov: [30.0, 75.0],
+                free: 0.3,
+                reach: None,
+                any_heading: true,
+            },
+            View::Close => ViewBounds {
+                pitch: [-30.0, 20.0],
+                roll: 12.0,
+                fov: [30.0, 75.0],
+                free: 0.3,
+                reach: Some(1.5),
+                any_heading: true,
+            },
+        }
+    }
+
     /// The name `scene.json` records.
     pub fn name(self) -> &'static str {
         match self {
@@ -684,44 +731,29 @@ pub fn generate(
         // Look roughly towards the room's centre (±75°) so most views show the room.
         let to_centre = Vec3::new(room.x / 2.0, p.y, room.z / 2.0) - p;
         let yaw = (-to_centre.x).atan2(-to_centre.z) + uniform(rng, -75.0, 75.0).to_radians();
-        let (pitch, roll, fov) = match view {
-            View::Room => (
-                uniform(rng, -20.0, 20.0),
-                uniform(rng, -3.0, 3.0),
-                uniform(rng, 40.0, 75.0),
-            ),
-            View::Down => (
-                uniform(rng, -80.0, -30.0),
-                uniform(rng, -12.0, 12.0),
-                uniform(rng, 30.0, 75.0),
-            ),
-            View::Close => (
-                uniform(rng, -30.0, 20.0),
-                uniform(rng, -12.0, 12.0),
-                uniform(rng, 30.0, 75.0),
-            ),
-        };
-        let (pitch, roll, fov) = (pitch.to_radians(), roll.to_radians(), fov.to_radians());
+        let b = view.bounds();
+        // Drawn in this order (pitch, roll, field of view; then any heading), so room views make
+        // the draws they always made.
+        let pitch = uniform(rng, b.pitch[0], b.pitch[1]).to_radians();
+        let roll = uniform(rng, -b.roll, b.roll).to_radians();
+        let fov = uniform(rng, b.fov[0], b.fov[1]).to_radians();
         // Down and close views look any way (a wall close ahead is one the room's centre is behind).
-        let yaw = match view {
-            View::Room => yaw,
-            View::Down | View::Close => uniform(rng, -180.0, 180.0).to_radians(),
+        let yaw = if b.any_heading {
+            uniform(rng, -180.0, 180.0).to_radians()
+        } else {
+            yaw
         };
         if objects.iter().any(|(_, b, _)| b.distance(p) < clearance) {
             continue;
         }
         let cam = Camera::new(p, yaw, pitch, roll, fov);
         let forward = cam.rotation * Vec3::NEG_Z;
-        // Nothing nearer than this straight ahead, and (close-ups) something within `reach`.
-        let (free, reach) = match view {
-            View::Room => (1.2, None),
-            View::Down => (0.3, None),
-            View::Close => (0.3, Some(1.5)),
-        };
-        if nearest(&shapes, p, forward, 0.0, free).is_some() {
+        if nearest(&shapes, p, forward, 0.0, b.free).is_some() {
             continue;
         }
-        if reach.is_some_and(|r| nearest(&shapes, p, forward, free, r).is_none()) {
+        if b.reach
+            .is_some_and(|r| nearest(&shapes, p, forward, b.free, r).is_none())
+        {
             continue;
         }
         camera = Some(cam);
