@@ -61,6 +61,7 @@ class Fixture:
     odd_shape: tuple
     acts: tuple
     extra_inputs: dict = field(default_factory=dict)  # suffix → shape, run through forward_any
+    config: dict = field(default_factory=dict)  # changes to the tiny preset (the weights' preset is then "custom")
 
 
 IRN_ACTS = ("enc", "heads.normals.blocks.0", "heads.normals.dec.up.0")
@@ -77,6 +78,8 @@ FIXTURES = (
     Fixture("msn_tiny_f16", "msn", 4, torch.float16, (2, 3, 20, 28), (1, 3, 21, 27), MSN_ACTS),
     Fixture("envmap_tiny_bf16", "envmap", 6, torch.bfloat16, (1, 3, 40, 56), (1, 3, 13, 30), ENVMAP_ACTS,
             {"large": (1, 3, 72, 136)}),
+    Fixture("msn_tiny_embed", "msn", 8, torch.float32, (1, 3, 20, 28), (1, 3, 21, 27), MSN_ACTS,
+            config={"out_channels": 6}),
     Fixture("inpaint_tiny", "inpaint", 7, torch.float32, (2, 4, 20, 28), (1, 4, 21, 27), INPAINT_ACTS,
             {"small": (1, 4, 2, 3)}),
 )
@@ -201,7 +204,8 @@ def make_fixture(fx, out_dir):
     """Writes ``<name>.safetensors`` and ``<name>_io.safetensors``; returns the io tensors."""
     torch.manual_seed(fx.seed)
     rng = np.random.default_rng(fx.seed)
-    config = preset(fx.net, "tiny")
+    config = {**preset(fx.net, "tiny"), **fx.config}
+    label = "custom" if fx.config else "tiny"
     model = build(fx.net, config)
     init_weights(model)
     inputs = {"": test_input(rng, fx.net, fx.input_shape), "_odd": test_input(rng, fx.net, fx.odd_shape)}
@@ -211,7 +215,7 @@ def make_fixture(fx, out_dir):
 
     weights = os.path.join(out_dir, f"{fx.name}.safetensors")
     meta = {"created_by": CREATED_BY, "seed": str(fx.seed)}
-    save_weights(model, fx.net, "tiny", config, weights, dtype=fx.dtype, extra_metadata=meta)
+    save_weights(model, fx.net, label, config, weights, dtype=fx.dtype, extra_metadata=meta)
     model.load_state_dict(stored_state(weights))  # the reference runs on the stored (rounded) values
 
     io = {}

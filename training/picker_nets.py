@@ -302,8 +302,14 @@ OUTPUT_NAMES = {"msn": "segmentation", "envmap": "envmap", "inpaint": "inpainted
 
 
 def named_outputs(net, out):
-    """The output of a ``net`` forward pass as a dict output name → tensor."""
-    return out if net == "irn" else {OUTPUT_NAMES[net]: out}
+    """The output of a ``net`` forward pass as a dict output name → tensor. An MSN with more than three
+    output channels gives ``segmentation`` (the first three) and ``embedding`` (the rest; see
+    :mod:`training.embedding`)."""
+    if net == "irn":
+        return out
+    if net == "msn" and out.shape[1] > 3:
+        return {"segmentation": out[:, :3], "embedding": out[:, 3:]}
+    return {OUTPUT_NAMES[net]: out}
 
 
 def conv_modules(model):

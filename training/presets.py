@@ -42,7 +42,7 @@ PRESETS = {
     "msn": {
         "thesis": {"widths": [64, 128, 256], "blocks": 9, "out_channels": 3, "conv_bias": False,
                    "bn_eps": 1e-5},
-        "lite": {"widths": [24, 48, 96], "blocks": 4, "out_channels": 3, "conv_bias": False, "bn_eps": 1e-5},
+        "lite": {"widths": [24, 48, 96], "blocks": 4, "out_channels": 6, "conv_bias": False, "bn_eps": 1e-5},
         "tiny": {"widths": [8, 12, 16], "blocks": 2, "out_channels": 3, "conv_bias": False, "bn_eps": 1e-5},
     },
     "envmap": {

@@ -437,6 +437,11 @@ def picture(name, y):
         return conv.texture_coords(y).clamp(0, 1)
     if name == "segmentation":
         return conv.to_unit(y).clamp(0, 1)
+    if name == "embedding":  # the first three channels of the material embedding as RGB (zeros if fewer)
+        y = y[:, :3]
+        if y.shape[1] < 3:
+            y = torch.cat([y, y.new_zeros(y.shape[0], 3 - y.shape[1], *y.shape[2:])], 1)
+        return conv.to_unit(y).clamp(0, 1)
     if name == "envmap":
         return tone_map(conv.env_radiance(y))
     raise ValueError(name)

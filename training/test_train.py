@@ -227,6 +227,74 @@ def test_init(tmp, msn_path):
              "differs from the run's", "a tiny file started a lite run")
 
 
+def test_embedding():
+    """Material labels from the target colours; the discriminative loss is 0 for well-separated materials,
+    positive for merged or spread ones, and its gradient is finite."""
+    from training import embedding as em
+
+    h, w = 6, 8
+    seg = torch.full((2, 3, h, w), -0.5)
+    seg[0, :, :, 4:] = 0.25                # image 0: two materials, left and right
+    seg[0, :, 0, 0] = 0.9                  # one pixel of a rare colour: ignored
+    surface = torch.ones(2, 1, h, w)
+    surface[1, :, :3] = 0                  # image 1: one material, top half sky
+    lab = em.labels_of(seg, surface)
+    assert lab.shape == (2, h, w) and lab.dtype == torch.long
+    assert lab[0, 0, 0] == -1 and (lab[1, :3] == -1).all() and (lab[1, 3:] == lab[1, 3, 0]).all()
+    left, right = int(lab[0, 1, 0]), int(lab[0, 1, 7])
+    assert left != right and (lab[0, 1:, :4] == left).all() and (lab[0, :, 4:] == right).all()
+    emb = torch.zeros(2, 3, h, w)
+    emb[0, 0, :, :4], emb[0, 0, :, 4:] = -0.5, 0.5   # 1.0 apart ≥ 2·δd = 0.8, no spread
+    pull, push, reg = em.discriminative_loss(emb, lab)
+    assert float(pull) == 0.0 and float(push) == 0.0, (pull, push)
+    assert abs(float(reg) - 0.25) < 1e-6, reg  # image 0: means 0.5 from the origin; image 1: at it
+    merged = torch.zeros(2, 3, h, w)
+    pull, push, _ = em.discriminative_loss(merged, lab)
+    assert float(pull) == 0.0 and abs(float(push) - 0.8 ** 2) < 1e-6, push
+    spread = emb.clone()
+    spread[0, 1, :, 1] = 0.6                          # one column 0.6 off its mean (minus its own share)
+    assert float(em.discriminative_loss(spread, lab)[0]) > 0
+    x = (torch.randn(2, 3, h, w) * 0.1).requires_grad_()
+    em.embedding_loss(x, seg, surface).backward()
+    assert torch.isfinite(x.grad).all() and x.grad.abs().sum() > 0
+    # No material anywhere: zero loss, still differentiable.
+    none = em.embedding_loss(x, seg, torch.zeros(2, 1, h, w))
+    assert float(none) == 0.0 and none.requires_grad
+
+
+def test_init_widen(tmp, msn_path):
+    """An MSN run with a material embedding (6 outputs) starts from a 3-output file: its colours as the file's
+    (the first loss equals the file's on the same batch), the embedding trained alongside."""
+    cfg_path = os.path.join(tmp, "embed.json")
+    model = {"widths": [8, 12, 16], "blocks": 2, "out_channels": 6, "conv_bias": False, "bn_eps": 1e-5}
+    with open(cfg_path, "w") as f:
+        json.dump({"model": model}, f)
+    out = os.path.join(tmp, "msn-embed")
+    path = train.main(["--net", "msn", "--config", cfg_path, "--data", FIXTURES, "--size", "24x32", "--batch",
+                       "2", "--threads", "1", "--log-every", "1", "--quiet", "--no-flip", "--steps", "2",
+                       "--init", msn_path, "--out", out])
+    with open(os.path.join(out, "train.csv"), newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert "embedding" in rows[0] and float(rows[0]["embedding"]) > 0, rows[0]
+    _, start, _ = evaluate.load_weights(msn_path)
+    ds = sd.SynthDataset(sd.list_scenes([FIXTURES]), "msn", 0, lambda k: (24, 32), flip=False)
+    b = torch.utils.data.default_collate([ds[0], ds[1]])
+    start.train()
+    with torch.no_grad():
+        expect = float(train.losses("msn", start, b, ["segmentation"], {})[0])
+    first = float(rows[0]["segmentation"])
+    assert abs(first - expect) < 1e-4 * max(1.0, expect), (first, expect)
+    _, done, meta = evaluate.load_weights(path)
+    assert json.loads(meta["config"])["out_channels"] == 6
+    with torch.no_grad():
+        y = done(b["input"])
+    assert y.shape[1] == 6 and set(train.named_outputs("msn", y)) == {"segmentation", "embedding"}
+    # Only the output may widen: a file of another width is refused.
+    assert not train.widens("msn", {**model, "out_channels": 3, "blocks": 3}, model)
+    assert not train.widens("envmap", {**model, "out_channels": 3}, model)
+    assert train.widens("msn", {**model, "out_channels": 3}, model)
+
+
 def test_stage_lr(tmp):
     """A stage's own "lr" applies to its steps (a step schedule), the run's elsewhere; bad values are refused."""
     cfg = os.path.join(tmp, "sched.json")
@@ -512,6 +580,8 @@ def main():
         others = step("msn and envmap runs lower the loss", test_other_nets, tmp)
         step("a stage's lr is a step schedule", test_stage_lr, tmp)
         step("--init fine-tunes from a weights file", test_init, tmp, others["msn"])
+        step("material embedding: labels and discriminative loss", test_embedding)
+        step("--init widens an MSN's output to a material embedding", test_init_widen, tmp, others["msn"])
         step("export loads and runs in picker", test_export_loads_in_rust, tmp, irn, others)
         step("evaluate", test_evaluate, tmp, irn, others)
         step("device data: the CPU reader's batches, packs", test_device_batches, tmp)

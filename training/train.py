@@ -39,6 +39,7 @@ import torch
 
 from training import device_data
 from training import synth_data as sd
+from training.embedding import embedding_loss
 from training.picker_nets import build, named_outputs, save_weights
 from training.presets import PRESETS, preset, validate_config
 
@@ -342,7 +343,9 @@ def atomic_save(obj, path):
 def elements_of(net, model_config):
     if net == "irn":
         return [h["name"] for h in model_config["heads"]]
-    return ["segmentation"] if net == "msn" else ["envmap"]
+    if net == "msn":
+        return ["segmentation"] + (["embedding"] if model_config["out_channels"] > 3 else [])
+    return ["envmap"]
 
 
 def to_device(batch, device):
@@ -354,6 +357,9 @@ def losses(net, model, batch, elements, weights):
     out = named_outputs(net, model(batch["input"]))
     per = {}
     for name in elements:
+        if name == "embedding":  # no target of its own: the materials of the target segmentation
+            per[name] = embedding_loss(out[name].float(), batch["segmentation"], batch["surface"])
+            continue
         if name not in batch:
             raise KeyError(f"the data has no target for head {name!r} (synth writes {sd.IRN_ELEMENTS})")
         per[name] = sd.element_loss(name, out[name].float(), batch)
@@ -425,6 +431,10 @@ def save_samples(path, net, model, scenes, size, elements, device):
 
     cols = [sd.picture("input", b["input"].cpu())]
     for name in elements:
+        if name == "embedding":  # no target picture: the material labels' colours stand in
+            cols += [full(sd.picture("segmentation", b["segmentation"].cpu())),
+                     full(sd.picture(name, out[name].float().cpu()))]
+            continue
         cols += [full(sd.picture(name, b[name].cpu())), full(sd.picture(name, out[name].float().cpu()))]
     gap = 2
     grid = torch.ones(3, len(items) * (h + gap) - gap, len(cols) * (w + gap) - gap)
@@ -454,9 +464,38 @@ def read_init(path, net, config):
         file_config = json.loads(meta.get("config", "null"))
     except json.JSONDecodeError:
         raise SystemExit(f"--init {path}: metadata 'config' is not JSON") from None
-    if file_config != config:
+    if file_config != config and not widens(net, file_config, config):
         raise SystemExit(f"--init {path}: config {file_config} differs from the run's {config}")
     return {k: (v.float() if v.is_floating_point() else v) for k, v in state.items()}, meta
+
+
+def widens(net, file_config, config):
+    """Whether a run of ``config`` may start from weights of ``file_config`` by widening the output: an MSN
+    that adds material-embedding channels (:mod:`training.embedding`) to the three colours of a file, all else
+    equal."""
+    if net != "msn" or not isinstance(file_config, dict):
+        return False
+    rest = {k: v for k, v in file_config.items() if k != "out_channels"}
+    return (rest == {k: v for k, v in config.items() if k != "out_channels"}
+            and file_config.get("out_channels") == 3 and config["out_channels"] > 3)
+
+
+def widen_output(state, mine, seed):
+    """``state`` with the MSN's ``dec.conv_out`` widened to the shapes of ``mine`` (the run's state dict): the
+    file's channels first, the new ones' weights drawn from N(0, 0.01²) (seeded), their biases 0."""
+    g = torch.Generator().manual_seed(seed)
+    out = dict(state)
+    for key in ("dec.conv_out.weight", "dec.conv_out.bias"):
+        old, shape = state[key], mine[key].shape
+        c = old.shape[0]
+        if old.shape[1:] != shape[1:] or c > shape[0]:
+            raise SystemExit(f"--init: {key} has shape {tuple(old.shape)}, cannot widen to {tuple(shape)}")
+        new = torch.zeros(shape, dtype=old.dtype)
+        new[:c] = old
+        if key.endswith("weight"):
+            new[c:] = torch.randn((shape[0] - c, *shape[1:]), generator=g) * 0.01
+        out[key] = new
+    return out
 
 
 def init_history(path, meta):
@@ -572,6 +611,9 @@ def main(argv=None):
         missing, extra_keys = sorted(set(mine) - set(state)), sorted(set(state) - set(mine))
         if missing or extra_keys:
             raise SystemExit(f"--init {cfg['init']}: missing tensors {missing}, unexpected {extra_keys}")
+        if json.loads(init_meta["config"]) != cfg["model"]:  # read_init allowed it: widen the output
+            state = widen_output(state, mine, cfg["seed"])
+            say(f"widened {cfg['init']}'s output to {cfg['model']['out_channels']} channels")
         bad = [k for k in mine if tuple(mine[k].shape) != tuple(state[k].shape)]
         if bad:
             raise SystemExit(f"--init {cfg['init']}: misshaped tensors {bad}")

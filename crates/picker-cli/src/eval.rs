@@ -349,6 +349,7 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
             photo: rio::read_png(&photo_path)?,
             elements: truth.clone(),
             segmentation: rio::read_exr(&dir.join("segmentation.exr"))?,
+            embedding: None,
             segmentation_estimated: false,
             envmap: Some(
                 EnvMap::from_image(&rio::read_exr(&env_path)?)

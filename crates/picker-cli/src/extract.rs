@@ -68,7 +68,8 @@ pub struct Flags {
     #[arg(long)]
     pub connected: bool,
     /// Segmentation-colour tolerance (an RGB distance, 0 to 1, in the segmentation the masks read:
-    /// the network's, smoothed along the photo); default automatic. A given
+    /// the network's, smoothed along the photo; with an MSN that has a material embedding, as the
+    /// embedded one does, a distance in the embedding scaled by 0.25); default automatic. A given
     /// tolerance is applied as it is: without the automatic mode's leak guard, which stops the
     /// mask at the segmentation's edge with clearly other colours (give one when the automatic
     /// mask stops short on a strongly shaded or vignetted surface).
@@ -217,7 +218,8 @@ pub struct Args {
     pub all: bool,
     /// Render elements instead of the networks: a folder with diffuse_albedo.exr,
     /// specular_albedo.exr, glossiness.exr, normals.exr, view_vector.exr, uv.exr,
-    /// segmentation.exr and optionally envmap.exr (as `picker synth` or `picker infer` write).
+    /// segmentation.exr and optionally embedding.exr and envmap.exr (as `picker synth` or
+    /// `picker infer` write).
     #[arg(long, value_name = "DIR", conflicts_with = "weights")]
     pub elements: Option<PathBuf>,
     /// Output directory (default: `<photo stem>.material/` next to the photo).
@@ -322,7 +324,7 @@ impl Models {
         photo_rgb: &image::Rgb32FImage,
         work_size: u32,
         timings: &mut serde_json::Map<String, Value>,
-    ) -> Result<(ElementImages, Image, Option<EnvMap>, Value)> {
+    ) -> Result<(ElementImages, MsnImages, Option<EnvMap>, Value)> {
         let (pw, ph) = photo_rgb.dimensions();
         let (ww, wh) = photo::working_size(pw, ph, work_size);
         self.infer_work(&photo::resize(photo_rgb, ww, wh), timings)
@@ -333,7 +335,7 @@ impl Models {
         &self,
         work: &image::Rgb32FImage,
         timings: &mut serde_json::Map<String, Value>,
-    ) -> Result<(ElementImages, Image, Option<EnvMap>, Value)> {
+    ) -> Result<(ElementImages, MsnImages, Option<EnvMap>, Value)> {
         let (ww, wh) = work.dimensions();
         let mut x = Tensor::new([1, 3, wh as usize, ww as usize], photo::to_planar(work))
             .map_err(|e| anyhow!("making the input tensor: {e}"))?;
@@ -363,9 +365,12 @@ impl Models {
                 }
                 Net::Msn(msn) => {
                     let out = msn.forward(&x).with_context(what)?;
-                    seg = Some(tensor_image(&conv::decode_segmentation_tensor(
-                        &out.segmentation,
-                    )));
+                    seg = Some(MsnImages {
+                        segmentation: tensor_image(&conv::decode_segmentation_tensor(
+                            &out.segmentation,
+                        )),
+                        embedding: out.embedding.as_ref().map(tensor_image),
+                    });
                 }
                 Net::EnvMap(e) => {
                     let out = e.forward(&x).with_context(what)?;
@@ -471,13 +476,13 @@ pub fn load_inputs_from(
         Source::Nets(models) => {
             drop(p);
             let work = work.expect("resized for the networks");
-            let (elements, segmentation, envmap, source) =
-                models.infer_work(&work, &mut timings)?;
+            let (elements, msn, envmap, source) = models.infer_work(&work, &mut timings)?;
             (
                 Inputs {
                     photo: photo_img,
                     elements,
-                    segmentation,
+                    segmentation: msn.segmentation,
+                    embedding: msn.embedding,
                     segmentation_estimated: true,
                     envmap,
                 },
@@ -501,6 +506,14 @@ pub fn load_inputs_from(
     })
 }
 
+/// The MSN's outputs as images at the working resolution.
+struct MsnImages {
+    /// Segmentation colours in `[0, 1]`.
+    segmentation: Image,
+    /// The material embedding (raw tanh values), from an MSN that has one.
+    embedding: Option<Image>,
+}
+
 /// Reads render elements from a folder.
 fn read_elements(dir: &Path, photo: Image) -> Result<(Inputs, Value)> {
     let elements = ElementImages::load(dir)
@@ -508,6 +521,12 @@ fn read_elements(dir: &Path, photo: Image) -> Result<(Inputs, Value)> {
     let seg_path = dir.join(format!("{}.exr", conv::SEGMENTATION));
     let segmentation =
         rio::read_exr(&seg_path).with_context(|| format!("reading {}", seg_path.display()))?;
+    let emb_path = dir.join(format!("{}.exr", conv::EMBEDDING));
+    let embedding = if emb_path.exists() {
+        Some(rio::read_exr(&emb_path).with_context(|| format!("reading {}", emb_path.display()))?)
+    } else {
+        None
+    };
     let env_path = dir.join(format!("{}.exr", conv::ENVMAP));
     let envmap = if env_path.exists() {
         let img =
@@ -522,6 +541,7 @@ fn read_elements(dir: &Path, photo: Image) -> Result<(Inputs, Value)> {
             photo,
             elements,
             segmentation,
+            embedding,
             segmentation_estimated,
             envmap,
         },
@@ -975,12 +995,13 @@ pub fn infer_inputs(models: &Models, photo_path: &Path, work_size: u32) -> Resul
     let (w, h) = p.rgb.dimensions();
     let photo_img = Image::new(3, h as usize, w as usize, photo::to_planar(&p.rgb))
         .map_err(|e| anyhow!("{}: {e}", photo_path.display()))?;
-    let (elements, segmentation, envmap, _) =
+    let (elements, msn, envmap, _) =
         models.infer(&p.rgb, work_size, &mut serde_json::Map::new())?;
     Ok(Inputs {
         photo: photo_img,
         elements,
-        segmentation,
+        segmentation: msn.segmentation,
+        embedding: msn.embedding,
         segmentation_estimated: true,
         envmap,
     })

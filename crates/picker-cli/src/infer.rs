@@ -51,7 +51,7 @@ pub const WEIGHTS_FILES: [(NetKind, &str); 3] = [
 ];
 
 /// How each output is stored: `(output name, EXR contents, PNG contents)`.
-pub const ENCODINGS: [(&str, &str, &str); 9] = [
+pub const ENCODINGS: [(&str, &str, &str); 10] = [
     (
         conv::DIFFUSE_ALBEDO,
         "diffuse albedo, linear RGB in [0,1]: (y+1)/2",
@@ -86,6 +86,12 @@ pub const ENCODINGS: [(&str, &str, &str); 9] = [
         conv::SEGMENTATION,
         "segmentation colour RGB in [0,1]: (y+1)/2",
         "segmentation colour as is",
+    ),
+    (
+        conv::EMBEDDING,
+        "material embedding, the network's raw tanh values in [-1,1] (3 channels): pixels of one material \
+         near each other, different materials far apart; only distances mean anything",
+        "(e+1)/2",
     ),
     (
         conv::ENVMAP,
@@ -313,6 +319,8 @@ fn run_net(net: &Net, x: &Tensor) -> Result<Vec<Decoded>> {
                         Decoded::new(name, out.kind, &conv::decode_segmentation_tensor(raw))
                             .png_map(|v| v)
                     }
+                    conv::EMBEDDING => Decoded::new(name, out.kind, raw)
+                        .png_map(|v| conv::unit_from_tanh(v).clamp(0.0, 1.0)),
                     conv::ENVMAP => {
                         let mut d = Decoded::new(name, out.kind, &conv::decode_envmap(raw));
                         if d.c == 3 {

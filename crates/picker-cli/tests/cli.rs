@@ -427,6 +427,74 @@ fn infer_single_weights_file_runs_that_net_only() {
     assert_eq!(png_size(&out.join("segmentation.png")), (64, 43));
 }
 
+/// An MSN with a material embedding: `picker infer` writes `embedding.exr`
+/// (the raw values), and `extract --elements` of that folder reads it.
+#[test]
+fn infer_writes_the_material_embedding_and_extract_reads_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("elements");
+    let embed = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../fixtures/parity/msn_tiny_embed.safetensors");
+    let o = picker([
+        "infer".as_ref(),
+        example_photo().as_os_str(),
+        "--weights".as_ref(),
+        tiny_weights().join("irn.safetensors").as_os_str(),
+        "--weights".as_ref(),
+        embed.as_os_str(),
+        "--out".as_ref(),
+        out.as_os_str(),
+        "--work-size".as_ref(),
+        "64".as_ref(),
+    ]);
+    assert_ok(&o);
+    let emb = picker_render::io::read_exr(&out.join("embedding.exr")).unwrap();
+    assert_eq!((emb.channels, emb.width, emb.height), (3, 64, 43));
+    assert!(emb.data.iter().all(|v| (-1.0..=1.0).contains(v)));
+    assert!(
+        emb.data.iter().any(|&v| v < 0.0),
+        "raw tanh values, not (e+1)/2"
+    );
+    assert_eq!(png_size(&out.join("embedding.png")), (64, 43));
+    let manifest: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("manifest.json")).unwrap()).unwrap();
+    assert!(manifest["files"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .any(|f| f.to_string().contains("embedding.exr")));
+    let o = picker([
+        "extract".as_ref(),
+        example_photo().as_os_str(),
+        "--elements".as_ref(),
+        out.as_os_str(),
+        "--pick".as_ref(),
+        "10,10".as_ref(),
+        "--out".as_ref(),
+        dir.path().join("m").as_os_str(),
+        "--json".as_ref(),
+    ]);
+    assert_ok(&o);
+    // A misshaped embedding names the problem.
+    let small = picker_render::io::Image::new(3, 4, 4, vec![0.0; 48]).unwrap();
+    picker_render::io::write_exr(&out.join("embedding.exr"), &small).unwrap();
+    let o = picker([
+        "extract".as_ref(),
+        example_photo().as_os_str(),
+        "--elements".as_ref(),
+        out.as_os_str(),
+        "--pick".as_ref(),
+        "10,10".as_ref(),
+        "--out".as_ref(),
+        dir.path().join("m2").as_os_str(),
+    ]);
+    assert!(!o.status.success());
+    assert!(
+        String::from_utf8_lossy(&o.stderr).contains("material embedding"),
+        "{o:?}"
+    );
+}
+
 #[test]
 fn weights_random_and_inspect_tiny() {
     let dir = tempfile::tempdir().unwrap();

@@ -590,6 +590,31 @@ pub fn leak_guard_relief(seg: &Image) -> Vec<f32> {
     gradient_magnitude(seg, LEAK_GUARD_SIGMA)
 }
 
+/// Scale from the MSN's material embedding (tanh units) to the mask's
+/// colour-like units: the training pulls a material's pixels within 0.1 of
+/// its mean and pushes different materials' means at least 0.8 apart
+/// (`training/embedding.py`), which this maps to 0.025 and 0.2 — the spread
+/// and the gaps the mask's tolerances ([`auto_tolerance`], [`valley_tolerance`],
+/// [`LEAK_GUARD_OTHER`]) were made for on segmentation colours. Chosen by
+/// `picker eval` (0.125 gave a lower mean mask IoU on four of the six sets
+/// measured, docs/model-card.md).
+pub const EMBEDDING_SCALE: f32 = 0.25;
+
+/// The material embedding (3 channels, tanh units) as a mask image:
+/// `0.5 + EMBEDDING_SCALE · e` per channel ([`EMBEDDING_SCALE`]).
+pub fn embedding_mask_space(embedding: &Image) -> Image {
+    Image {
+        channels: embedding.channels,
+        height: embedding.height,
+        width: embedding.width,
+        data: embedding
+            .data
+            .iter()
+            .map(|&e| 0.5 + EMBEDDING_SCALE * e)
+            .collect(),
+    }
+}
+
 /// The mask of the material at pixel `(x, y)` of the segmentation image.
 pub fn pick_mask(
     seg: &Image,

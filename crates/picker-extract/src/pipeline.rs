@@ -106,6 +106,11 @@ pub struct Inputs {
     pub elements: ElementImages,
     /// The segmentation at the working resolution (3 channels).
     pub segmentation: Image,
+    /// The MSN's material embedding at the working resolution (3 channels of
+    /// raw tanh values, [`picker_nets::MsnOutput::embedding`]), when the
+    /// network has one: masks are then cut from it instead of the
+    /// segmentation colours ([`mask::embedding_mask_space`]).
+    pub embedding: Option<Image>,
     /// The segmentation is a network's estimate (`true`), not ground truth:
     /// masks then read it smoothed along the photo
     /// ([`crate::smooth::smooth_segmentation`]); ground truth is taken as exact.
@@ -164,6 +169,9 @@ pub struct Prepared {
     /// The focal length from the photo's lines, found once at the first
     /// pick that needs it ([`Prepared::line_focal`]).
     line_focal: std::sync::OnceLock<(crate::lines::SmallLuma, Option<crate::lines::LineFocal>)>,
+    /// What masks are cut from before any smoothing: the segmentation, or the
+    /// embedding in mask units when there is one ([`Prepared::mask_source`]).
+    embedding_mask: Option<Image>,
     /// The segmentation the masks read ([`Prepared::mask_segmentation`]),
     /// made at the first pick when it is an estimate.
     smoothed: std::sync::OnceLock<Image>,
@@ -194,6 +202,10 @@ impl Prepared {
         }
         check_size("photo", &inputs.photo, 3, fw, fh)?;
         check_size("segmentation", &inputs.segmentation, 3, w, h)?;
+        if let Some(e) = &inputs.embedding {
+            check_size("material embedding", e, 3, w, h)?;
+        }
+        let embedding_mask = inputs.embedding.as_ref().map(mask::embedding_mask_space);
         let (photo_linear, luma) = linear_and_luma(&inputs.photo);
         let photo_work = resample::area(&photo_linear, w, h);
         let valid = (0..w * h).map(|i| inputs.elements.is_valid(i)).collect();
@@ -205,6 +217,7 @@ impl Prepared {
             valid,
             prepare_ms: t.elapsed().as_secs_f64() * 1e3,
             line_focal: std::sync::OnceLock::new(),
+            embedding_mask,
             smoothed: std::sync::OnceLock::new(),
             relief: std::sync::OnceLock::new(),
         })
@@ -275,7 +288,7 @@ impl Prepared {
         y: usize,
     ) -> Result<PickMask> {
         if self.inputs.segmentation_estimated {
-            let raw = mask::sure_in(&self.inputs.segmentation, valid, x, y, &pm.mask)?;
+            let raw = mask::sure_in(self.mask_source(), valid, x, y, &pm.mask)?;
             for (s, r) in pm.sure.iter_mut().zip(raw) {
                 *s |= r;
             }
@@ -288,16 +301,39 @@ impl Prepared {
     /// once), ground truth as it is.
     pub fn mask_segmentation(&self) -> &Image {
         if !self.inputs.segmentation_estimated {
-            return &self.inputs.segmentation;
+            return self.mask_source();
         }
         self.smoothed.get_or_init(|| {
-            crate::smooth::smooth_segmentation(
-                &self.inputs.segmentation,
-                &self.photo_work,
-                &self.valid,
-            )
-            .expect("sizes checked in Prepared::new")
+            crate::smooth::smooth_segmentation(self.mask_source(), &self.photo_work, &self.valid)
+                .expect("sizes checked in Prepared::new")
         })
+    }
+
+    /// What masks are cut from, before the smoothing of an estimate: the
+    /// material embedding in mask units ([`mask::embedding_mask_space`]) when
+    /// the inputs have one, else the segmentation colours.
+    pub fn mask_source(&self) -> &Image {
+        self.embedding_mask
+            .as_ref()
+            .unwrap_or(&self.inputs.segmentation)
+    }
+
+    /// The segmentation colour of a pick's material: the mask's colour in the
+    /// segmentation, or, when masks read the embedding, the mean
+    /// segmentation colour over the mask's surest pixels.
+    pub fn segmentation_colour(&self, pm: &PickMask) -> [f32; 3] {
+        if self.embedding_mask.is_none() {
+            return pm.colour;
+        }
+        let seg = &self.inputs.segmentation;
+        let (mut sum, mut n) = ([0f64; 3], 0usize);
+        for (i, _) in pm.sure.iter().enumerate().filter(|(_, &s)| s) {
+            for (c, v) in sum.iter_mut().enumerate() {
+                *v += seg.at(c, i) as f64;
+            }
+            n += 1;
+        }
+        sum.map(|v| (v / n.max(1) as f64) as f32)
     }
 
     /// The mask segmentation's leak-guard relief, computed once.
@@ -690,7 +726,7 @@ fn extract_as(
     let textured_by_flag = t_flag >= conv::TEXTURED_THRESHOLD && el.uv.is_some();
     let textured = !plain && (textured_by_flag || opts.uv == UvChoice::Plane);
     let mut diag = Diagnostics {
-        segmentation_colour: pm.colour,
+        segmentation_colour: p.segmentation_colour(pm),
         tolerance: pm.tolerance,
         textured_flag: t_flag,
         uv: None,
@@ -1482,10 +1518,95 @@ mod tests {
             photo,
             elements,
             segmentation: fill(3, &[0.2, 0.5, 0.7]),
+            embedding: None,
             segmentation_estimated: false,
             envmap: None,
         })
         .unwrap()
+    }
+
+    /// Two materials side by side (left and right halves of a 24×32 image)
+    /// with the same segmentation colour, a photo that looks alike on both
+    /// and, when `embedded`, a material embedding that tells them apart.
+    fn twins(embedded: bool, estimated: bool) -> Prepared {
+        let (h, w) = (24, 32);
+        let mut rng = picker_tensor::Rng::new(5);
+        let fill = |c: usize, v: &[f32]| {
+            Image::new(c, h, w, (0..c).flat_map(|k| vec![v[k]; h * w]).collect()).unwrap()
+        };
+        let photo = Image::new(3, h, w, rng.uniform_vec(3 * h * w, 0.45, 0.55)).unwrap();
+        let elements = ElementImages::new(
+            fill(3, &[0.5, 0.4, 0.3]),
+            fill(3, &[0.04; 3]),
+            fill(1, &[0.5]),
+            fill(3, &[0.0, 0.0, 1.0]),
+            fill(3, &[0.0, 0.0, 1.0]),
+            None,
+        )
+        .unwrap();
+        let noise = rng.uniform_vec(3 * h * w, -0.05, 0.05);
+        let embedding = (0..3 * h * w)
+            .map(|i| {
+                let (c, x) = (i / (h * w), i % w);
+                let centre = match (c, x < w / 2) {
+                    (0, true) => -0.4,
+                    (0, false) => 0.4,
+                    _ => 0.1,
+                };
+                centre + noise[i]
+            })
+            .collect();
+        Prepared::new(Inputs {
+            photo,
+            elements,
+            segmentation: fill(3, &[0.3, 0.3, 0.3]),
+            embedding: embedded.then(|| Image::new(3, h, w, embedding).unwrap()),
+            segmentation_estimated: estimated,
+            envmap: None,
+        })
+        .unwrap()
+    }
+
+    #[test]
+    fn masks_follow_the_material_embedding_when_there_is_one() {
+        for estimated in [false, true] {
+            // Without an embedding the two materials' equal colours are one mask.
+            let p = twins(false, estimated);
+            let pm = p.pick_mask([5, 12], &MaskOptions::default()).unwrap();
+            assert_eq!(pm.mask.count(), 24 * 32, "estimated {estimated}");
+            // With one, the pick's half only, on either side.
+            let p = twins(true, estimated);
+            for (pick, left) in [([5, 12], true), ([27, 3], false)] {
+                let pm = p.pick_mask(pick, &MaskOptions::default()).unwrap();
+                // A smoothed estimate mixes the two across their border where the
+                // photo does not tell them apart: a band of 3 pixels either side
+                // may go either way there.
+                let band = if estimated { 3 } else { 0 };
+                for y in 0..24 {
+                    for x in (0..32).filter(|&x| (x as i32 * 2 - 31).abs() > 2 * band) {
+                        assert_eq!(
+                            pm.mask.data[y * 32 + x],
+                            (x < 16) == left,
+                            "estimated {estimated}, pick {pick:?}: pixel ({x}, {y})"
+                        );
+                    }
+                }
+                // The reported colour is the segmentation's, not the embedding's.
+                let c = p.segmentation_colour(&pm);
+                assert!(c.iter().all(|&v| (v - 0.3).abs() < 1e-6), "{c:?}");
+                assert!(
+                    (pm.colour[0] - (0.5 + mask::EMBEDDING_SCALE * if left { -0.4 } else { 0.4 }))
+                        .abs()
+                        < 0.03
+                );
+            }
+        }
+        // A misshaped embedding is refused.
+        let p = twins(true, true);
+        let mut inputs = p.inputs.clone();
+        inputs.embedding = Some(Image::new(3, 12, 16, vec![0.0; 3 * 12 * 16]).unwrap());
+        let e = Prepared::new(inputs).err().expect("refused").to_string();
+        assert!(e.contains("material embedding"), "{e}");
     }
 
     #[test]

@@ -247,12 +247,14 @@ impl MsnConfig {
             bn_eps: 1e-5,
         }
     }
-    /// The embedded default (issue 5); see [`IrnConfig::lite`].
+    /// The embedded default (issue 5); see [`IrnConfig::lite`]. Its 6 output
+    /// channels are the segmentation colours and a material embedding
+    /// ([`crate::MsnOutput::embedding`]).
     pub fn lite() -> Self {
         Self {
             widths: [24, 48, 96],
             blocks: 4,
-            out_channels: 3,
+            out_channels: 6,
             conv_bias: false,
             bn_eps: 1e-5,
         }
@@ -568,7 +570,17 @@ impl NetConfig {
                     }
                 }
             }
-            NetConfig::Msn(c) => check_channels("out_channels", c.out_channels)?,
+            NetConfig::Msn(c) => {
+                let with_embedding = 3 + crate::nets::MSN_EMBEDDING_CHANNELS;
+                if c.out_channels != 3 && c.out_channels != with_embedding {
+                    return Err(invalid(format!(
+                        "out_channels is {}; an MSN has 3 (segmentation colours) or {with_embedding} \
+                         (colours, then a {}-channel material embedding)",
+                        c.out_channels,
+                        crate::nets::MSN_EMBEDDING_CHANNELS
+                    )));
+                }
+            }
             NetConfig::EnvMap(c) => {
                 check_widths("tail_widths", &c.tail_widths)?;
                 check_channels("out_channels", c.out_channels)?;
@@ -872,6 +884,24 @@ mod tests {
         c.widths[1] = 0;
         let e = NetConfig::Msn(c).validate().unwrap_err().to_string();
         assert!(e.contains("widths[1]"), "{e}");
+        // An MSN outputs 3 colours, or 3 colours and a 3-channel embedding.
+        for (out, ok) in [
+            (1, false),
+            (3, true),
+            (4, false),
+            (5, false),
+            (6, true),
+            (7, false),
+        ] {
+            let mut c = MsnConfig::tiny();
+            c.out_channels = out;
+            let r = NetConfig::Msn(c).validate();
+            assert_eq!(r.is_ok(), ok, "out_channels {out}: {r:?}");
+            if let Err(e) = r {
+                assert!(e.to_string().contains("out_channels is"), "{e}");
+            }
+        }
+        assert_eq!(MsnConfig::lite().out_channels, 6);
         let mut c = EnvMapConfig::tiny();
         c.bn_eps = 0.0;
         assert!(NetConfig::EnvMap(c).validate().is_err());

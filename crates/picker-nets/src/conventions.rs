@@ -36,6 +36,8 @@ pub const VIEW_VECTOR: &str = "view_vector";
 pub const UV: &str = "uv";
 /// Name of the MSN output.
 pub const SEGMENTATION: &str = "segmentation";
+/// Name of the MSN's material embedding output (an MSN with 6 output channels).
+pub const EMBEDDING: &str = "embedding";
 /// Name of the EnvMap output.
 pub const ENVMAP: &str = "envmap";
 /// Name of the learned inpainter's output.

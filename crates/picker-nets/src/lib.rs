@@ -81,7 +81,7 @@ pub use keys::{random_weights, state_dict_spec, ParamRole, ParamSpec};
 pub use layers::{LayerOptions, Timings, Trace};
 pub use nets::{
     EnvMap, EnvMapOutput, Inpaint, InpaintOutput, Irn, IrnOutput, Msn, MsnOutput, Net, NetOutput,
-    Tower,
+    Tower, MSN_EMBEDDING_CHANNELS,
 };
 pub use safetensors::Dtype;
 pub use save::{

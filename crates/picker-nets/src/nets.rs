@@ -218,12 +218,22 @@ impl Irn {
     }
 }
 
-/// The MSN's output: segmentation colours as raw tanh values `[N, out_channels, H, W]`.
+/// The MSN's output as raw tanh values: the segmentation colours `[N, 3, H, W]`
+/// and, from an MSN with 6 output channels, the material embedding
+/// `[N, 3, H, W]` (the last three channels; [`MSN_EMBEDDING_CHANNELS`]).
 #[derive(Clone, Debug)]
 pub struct MsnOutput {
-    /// Raw tanh values.
+    /// Raw tanh values of the segmentation colours.
     pub segmentation: Tensor,
+    /// Raw tanh values of the material embedding: points that the training
+    /// put close for pixels of one material and far apart for different
+    /// materials; only distances between them mean anything.
+    pub embedding: Option<Tensor>,
 }
+
+/// Channels of the MSN's material embedding (after its 3 colour channels),
+/// when it has one.
+pub const MSN_EMBEDDING_CHANNELS: usize = 3;
 
 /// Material Segmentation Network: encoder, residual blocks, decoder.
 #[derive(Clone, Debug)]
@@ -281,9 +291,16 @@ impl Msn {
         let (xp, pads) = pad_input(NetKind::Msn, x, 3)?;
         let e = self.enc.forward_traced(&xp, tr, "enc")?;
         let b = self.blocks.forward_traced(&e, tr, "blocks")?;
-        let y = self.dec.forward_traced(&b, tr, "dec")?;
+        let y = crop_back(self.dec.forward_traced(&b, tr, "dec")?, pads, x.h(), x.w())?;
+        if y.c() == 3 {
+            return Ok(MsnOutput {
+                segmentation: y,
+                embedding: None,
+            });
+        }
         Ok(MsnOutput {
-            segmentation: crop_back(y, pads, x.h(), x.w())?,
+            segmentation: y.channels(0, 3)?,
+            embedding: Some(y.channels(3, MSN_EMBEDDING_CHANNELS)?),
         })
     }
 }
@@ -468,7 +485,8 @@ impl Inpaint {
     }
 }
 
-/// Named outputs of any network: IRN heads by name, MSN `segmentation`, EnvMap `envmap`,
+/// Named outputs of any network: IRN heads by name, MSN `segmentation` (and
+/// `embedding` when it has one), EnvMap `envmap`,
 /// inpainter `inpainted`.
 #[derive(Clone, Debug)]
 pub struct NetOutput {
@@ -501,7 +519,9 @@ impl From<MsnOutput> for NetOutput {
     fn from(o: MsnOutput) -> Self {
         Self {
             kind: NetKind::Msn,
-            tensors: vec![("segmentation".to_string(), o.segmentation)],
+            tensors: std::iter::once(("segmentation".to_string(), o.segmentation))
+                .chain(o.embedding.map(|e| ("embedding".to_string(), e)))
+                .collect(),
         }
     }
 }

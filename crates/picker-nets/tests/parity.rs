@@ -47,7 +47,15 @@ fn check(what: &str, found: &Tensor, expected: &Tensor, tol: Tolerance) -> f32 {
 fn parity(weights: &str, io: &str, kind: NetKind, dtype: &str) {
     let w = Weights::open(fixture(weights)).unwrap();
     assert_eq!(w.kind(), kind);
-    w.expect_preset("tiny").unwrap();
+    // The tiny preset, or (the embedding fixture) the tiny MSN with 6 output channels.
+    if weights.starts_with("msn_tiny_embed") {
+        let picker_nets::NetConfig::Msn(c) = *w.config() else {
+            panic!("{weights}: not an MSN")
+        };
+        assert_eq!(c.out_channels, 6, "{weights}: out_channels");
+    } else {
+        w.expect_preset("tiny").unwrap();
+    }
     assert!(
         w.dtypes().iter().any(|d| d.dtype == dtype),
         "{weights}: expected {dtype} storage, found {:?}",
@@ -149,6 +157,18 @@ fn msn_tiny_f32() {
     parity(
         "msn_tiny.safetensors",
         "msn_tiny_io.safetensors",
+        NetKind::Msn,
+        "F32",
+    );
+}
+
+/// An MSN with a material embedding (6 output channels): `segmentation` and
+/// `embedding` against PyTorch's split of the output.
+#[test]
+fn msn_tiny_embedding_f32() {
+    parity(
+        "msn_tiny_embed.safetensors",
+        "msn_tiny_embed_io.safetensors",
         NetKind::Msn,
         "F32",
     );

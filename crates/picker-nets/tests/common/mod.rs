@@ -238,8 +238,16 @@ pub fn reference_forward(sd: &StateDict, x: &Tensor) -> (Named, Named) {
         NetConfig::Msn(c) => {
             let e = rf.encoder(&xp, 1);
             let b = rf.blocks("blocks", c.blocks, e);
-            let y = rf.decoder("dec", &b);
-            vec![("segmentation".to_string(), crop(y))]
+            let y = crop(rf.decoder("dec", &b));
+            if y.c() == 3 {
+                vec![("segmentation".to_string(), y)]
+            } else {
+                // Colours, then the material embedding.
+                vec![
+                    ("segmentation".to_string(), y.channels(0, 3).unwrap()),
+                    ("embedding".to_string(), y.channels(3, y.c() - 3).unwrap()),
+                ]
+            }
         }
         NetConfig::Inpaint(c) => {
             let e = rf.encoder(&xp, 1);
