@@ -463,31 +463,23 @@ fn infer_writes_the_material_embedding_and_extract_reads_it() {
         .unwrap()
         .iter()
         .any(|f| f.to_string().contains("embedding.exr")));
-    let o = picker([
-        "extract".as_ref(),
-        example_photo().as_os_str(),
-        "--elements".as_ref(),
-        out.as_os_str(),
-        "--pick".as_ref(),
-        "10,10".as_ref(),
-        "--out".as_ref(),
-        dir.path().join("m").as_os_str(),
-        "--json".as_ref(),
-    ]);
-    assert_ok(&o);
+    let extract = |name: &str| {
+        picker([
+            "extract".as_ref(),
+            example_photo().as_os_str(),
+            "--elements".as_ref(),
+            out.as_os_str(),
+            "--pick".as_ref(),
+            "10,10".as_ref(),
+            "--out".as_ref(),
+            dir.path().join(name).as_os_str(),
+        ])
+    };
+    assert_ok(&extract("m"));
     // A misshaped embedding names the problem.
     let small = picker_render::io::Image::new(3, 4, 4, vec![0.0; 48]).unwrap();
     picker_render::io::write_exr(&out.join("embedding.exr"), &small).unwrap();
-    let o = picker([
-        "extract".as_ref(),
-        example_photo().as_os_str(),
-        "--elements".as_ref(),
-        out.as_os_str(),
-        "--pick".as_ref(),
-        "10,10".as_ref(),
-        "--out".as_ref(),
-        dir.path().join("m2").as_os_str(),
-    ]);
+    let o = extract("m2");
     assert!(!o.status.success());
     assert!(
         String::from_utf8_lossy(&o.stderr).contains("material embedding"),
