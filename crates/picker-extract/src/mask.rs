@@ -120,7 +120,10 @@ pub struct MaskOptions {
 pub struct PickMask {
     /// The mask.
     pub mask: Mask,
-    /// The material's segmentation colour.
+    /// The material's colour in the image the mask was cut from: its
+    /// segmentation colour, or its embedding in mask units
+    /// ([`embedding_mask_space`]; the pipeline reports the segmentation
+    /// colour then, [`crate::Prepared::segmentation_colour`]).
     pub colour: [f32; 3],
     /// The tolerance used.
     pub tolerance: f32,

@@ -536,7 +536,8 @@ pub struct UvDecision {
 pub struct Diagnostics {
     /// Segmentation colour of the material.
     pub segmentation_colour: [f32; 3],
-    /// Segmentation-colour tolerance used.
+    /// Tolerance used, in the mask image's units (segmentation colours, or
+    /// the material embedding mapped by [`mask::embedding_mask_space`]).
     pub tolerance: f32,
     /// Median `t` (textured flag) over the mask.
     pub textured_flag: f32,
@@ -1496,28 +1497,37 @@ mod tests {
         }
     }
 
+    /// A constant 24×32 image of `c` channels with the values `v`.
+    fn flat(c: usize, v: &[f32]) -> Image {
+        let (h, w) = (24, 32);
+        Image::new(c, h, w, (0..c).flat_map(|k| vec![v[k]; h * w]).collect()).unwrap()
+    }
+
+    /// Constant 24×32 render elements of one material (albedo (0.5, 0.4, 0.3),
+    /// specular 0.04, glossiness 0.5, the view vector +z) with `normal` and `uv`.
+    fn flat_elements(normal: [f32; 3], uv: Option<[f32; 3]>) -> ElementImages {
+        ElementImages::new(
+            flat(3, &[0.5, 0.4, 0.3]),
+            flat(3, &[0.04; 3]),
+            flat(1, &[0.5]),
+            flat(3, &normal),
+            flat(3, &[0.0, 0.0, 1.0]),
+            uv.map(|uv| flat(3, &uv)),
+        )
+        .unwrap()
+    }
+
     /// A 24×32 material with a textured flag but UVs that are all NaN and
     /// normals facing away from the camera (no plane can be rectified).
     fn unreprojectable() -> Prepared {
         let (h, w) = (24, 32);
         let mut rng = picker_tensor::Rng::new(21);
-        let fill = |c: usize, v: &[f32]| {
-            Image::new(c, h, w, (0..c).flat_map(|k| vec![v[k]; h * w]).collect()).unwrap()
-        };
         let photo = Image::new(3, h, w, rng.uniform_vec(3 * h * w, 0.3, 0.7)).unwrap();
-        let elements = ElementImages::new(
-            fill(3, &[0.5, 0.4, 0.3]),
-            fill(3, &[0.04; 3]),
-            fill(1, &[0.5]),
-            fill(3, &[0.0, 0.0, -1.0]),
-            fill(3, &[0.0, 0.0, 1.0]),
-            Some(fill(3, &[f32::NAN, f32::NAN, 1.0])),
-        )
-        .unwrap();
+        let elements = flat_elements([0.0, 0.0, -1.0], Some([f32::NAN, f32::NAN, 1.0]));
         Prepared::new(Inputs {
             photo,
             elements,
-            segmentation: fill(3, &[0.2, 0.5, 0.7]),
+            segmentation: flat(3, &[0.2, 0.5, 0.7]),
             embedding: None,
             segmentation_estimated: false,
             envmap: None,
@@ -1531,19 +1541,8 @@ mod tests {
     fn twins(embedded: bool, estimated: bool) -> Prepared {
         let (h, w) = (24, 32);
         let mut rng = picker_tensor::Rng::new(5);
-        let fill = |c: usize, v: &[f32]| {
-            Image::new(c, h, w, (0..c).flat_map(|k| vec![v[k]; h * w]).collect()).unwrap()
-        };
         let photo = Image::new(3, h, w, rng.uniform_vec(3 * h * w, 0.45, 0.55)).unwrap();
-        let elements = ElementImages::new(
-            fill(3, &[0.5, 0.4, 0.3]),
-            fill(3, &[0.04; 3]),
-            fill(1, &[0.5]),
-            fill(3, &[0.0, 0.0, 1.0]),
-            fill(3, &[0.0, 0.0, 1.0]),
-            None,
-        )
-        .unwrap();
+        let elements = flat_elements([0.0, 0.0, 1.0], None);
         let noise = rng.uniform_vec(3 * h * w, -0.05, 0.05);
         let embedding = (0..3 * h * w)
             .map(|i| {
@@ -1559,7 +1558,7 @@ mod tests {
         Prepared::new(Inputs {
             photo,
             elements,
-            segmentation: fill(3, &[0.3, 0.3, 0.3]),
+            segmentation: flat(3, &[0.3, 0.3, 0.3]),
             embedding: embedded.then(|| Image::new(3, h, w, embedding).unwrap()),
             segmentation_estimated: estimated,
             envmap: None,
