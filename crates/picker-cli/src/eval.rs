@@ -93,6 +93,11 @@ pub struct Args {
     /// plane mode alone (true normals, masks and albedo, rectified instead of the true UVs).
     #[arg(long, value_enum, default_value_t = crate::extract::UvArg::Auto)]
     pub uv: crate::extract::UvArg,
+    /// Score the pick masks only (IoU, precision, recall, baselines, albedo and normals at the
+    /// picks): no texture is extracted, so a run takes a fraction of the time; the texture
+    /// figures and `textured_extracted` are null.
+    #[arg(long)]
+    pub masks_only: bool,
 }
 
 /// One evaluated material.
@@ -105,7 +110,8 @@ pub struct Row {
     area: f64,
     pick: [u32; 2],
     textured_truth: bool,
-    textured_extracted: bool,
+    /// Whether the extraction made a texture (null with `--masks-only`).
+    textured_extracted: Option<bool>,
     iou: f64,
     /// Share of the extracted mask inside the true mask (1: no leak).
     mask_precision: f64,
@@ -405,13 +411,21 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
         let pick = [(best % w) as u32, (best / w) as u32];
         let pm = prepared.pick_mask(pick, &opts.mask)?;
         let oracle = oracle_tolerance_iou(&seg_here.data, &valid_here, pm.colour, &true_mask);
-        let (mat, diag) = pipeline::extract(&prepared, &format!("m{id}"), Some(pick), &pm, &opts)
-            .with_context(|| format!("{}: material {id}", dir.display()))?;
-        let got: Vec<bool> = mat.mask.data.iter().map(|&v| v > 0.5).collect();
-        let got = Mask {
-            width: w,
-            height: h,
-            data: got,
+        let extracted = if a.masks_only {
+            None
+        } else {
+            Some(
+                pipeline::extract(&prepared, &format!("m{id}"), Some(pick), &pm, &opts)
+                    .with_context(|| format!("{}: material {id}", dir.display()))?,
+            )
+        };
+        let got = match &extracted {
+            Some((mat, _)) => Mask {
+                width: w,
+                height: h,
+                data: mat.mask.data.iter().map(|&v| v > 0.5).collect(),
+            },
+            None => pipeline::photo_mask(&prepared, &pm),
         };
         let textured_truth = m["textured"].as_bool().unwrap_or(false);
         let mut row = Row {
@@ -425,7 +439,7 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
             area,
             pick,
             textured_truth,
-            textured_extracted: mat.textured,
+            textured_extracted: None,
             iou: metrics::mask_iou(&got.data, &true_mask),
             mask_precision: share_inside(&got.data, &true_mask),
             mask_recall: share_inside(&true_mask, &got.data),
@@ -438,27 +452,37 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
             normal_error_deg: metrics::normal_error_deg(&el_normals, &truth.normals, &true_mask),
             texture_psnr_db: None,
             texture_colour_distance: None,
-            texture_size: diag.texture_size,
+            texture_size: None,
             texture_scale: None,
             seam_ratio: None,
             truth_seam_ratio: None,
             coverage: None,
-            uv_mode: diag
-                .uv
-                .as_ref()
-                .map(|u| format!("{:?}", u.mode).to_lowercase()),
+            uv_mode: None,
             colour_rmse: None,
             plane_predicted_error_deg: None,
             plane_error_deg: None,
             focal_rel_error: None,
-            folded: diag
-                .uv
-                .as_ref()
-                .and_then(|u| u.period)
-                .map(|f| f.periods_per_tile),
-            uv_repeats: diag.uv.as_ref().and_then(|u| u.repeats).map(|r| r.repeats),
-            repeat_filled: diag.uv.as_ref().and_then(|u| u.repeats).map(|r| r.filled),
+            folded: None,
+            uv_repeats: None,
+            repeat_filled: None,
         };
+        let Some((mat, diag)) = extracted else {
+            rows.push(row);
+            continue;
+        };
+        row.textured_extracted = Some(mat.textured);
+        row.texture_size = diag.texture_size;
+        row.uv_mode = diag
+            .uv
+            .as_ref()
+            .map(|u| format!("{:?}", u.mode).to_lowercase());
+        row.folded = diag
+            .uv
+            .as_ref()
+            .and_then(|u| u.period)
+            .map(|f| f.periods_per_tile);
+        row.uv_repeats = diag.uv.as_ref().and_then(|u| u.repeats).map(|r| r.repeats);
+        row.repeat_filled = diag.uv.as_ref().and_then(|u| u.repeats).map(|r| r.filled);
         if let Some(uv) = diag.uv.as_ref().filter(|u| u.mode == UvMode::Plane) {
             // The true plane at the pick (the same rule as the extraction's:
             // a material of several planes is rectified from the one picked),
@@ -654,7 +678,7 @@ pub fn run(a: Args) -> Result<()> {
         "median_plane_error_deg": median(rows.iter().filter_map(|r| r.plane_error_deg).collect()),
         "median_plane_predicted_error_deg": median(rows.iter().filter_map(|r| r.plane_predicted_error_deg).collect()),
         "mean_focal_rel_error": mean(rows.iter().filter_map(|r| r.focal_rel_error)),
-        "textured_detected": tex.iter().filter(|r| r.textured_extracted).count(),
+        "textured_detected": tex.iter().filter(|r| r.textured_extracted == Some(true)).count(),
     });
     println!("{}", serde_json::to_string_pretty(&agg)?);
     if let Some(p) = &a.json_out {

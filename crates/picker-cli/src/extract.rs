@@ -671,8 +671,22 @@ fn report_sheet(p: &Prepared, m: &Material, preview: &Image) -> Image {
         shown("glossiness", el.glossiness.clone()),
         shown("normals", direction_colours(&el.normals)),
         shown("segmentation", p.inputs.segmentation.clone()),
-        report::dimmed_tile("mask".into(), photo, &m.mask.data, 0.25),
     ];
+    if let Some(e) = &p.inputs.embedding {
+        // What the masks read when the MSN has one, shown as `embedding.png`
+        // is: (e + 1)/2 per channel, one colour per material.
+        let mut shown_embedding = e.clone();
+        for v in &mut shown_embedding.data {
+            *v = ((*v + 1.0) / 2.0).clamp(0.0, 1.0);
+        }
+        tiles.push(shown("material embedding", shown_embedding));
+    }
+    tiles.push(report::dimmed_tile(
+        "mask".into(),
+        photo,
+        &m.mask.data,
+        0.25,
+    ));
     if let Some(e) = &p.inputs.envmap {
         tiles.push(shown("lighting (envmap)", tone_mapped(&e.to_image())));
     }

@@ -217,6 +217,66 @@ fn eval_with_networks_scores_every_material_at_the_scenes_size() {
     assert!(scored.is_finite(), "{}", r["aggregate"]);
 }
 
+/// `eval --masks-only` scores the same masks as the full evaluation (same
+/// rows, IoU, precision, recall, oracle and baselines, bit for bit) and
+/// leaves every texture figure null, with the networks and with the
+/// ground-truth elements.
+#[test]
+fn eval_masks_only_scores_the_same_masks_without_textures() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scenes = repo().join("fixtures/blender");
+    let weights = repo().join("fixtures/weights/tiny");
+    let same = [
+        "scene",
+        "material_id",
+        "pick",
+        "area",
+        "iou",
+        "mask_precision",
+        "mask_recall",
+        "oracle_tolerance_iou",
+        "flood_iou",
+        "albedo_rmse",
+        "normal_error_deg",
+    ];
+    let nets = ["--weights", weights.to_str().unwrap()];
+    for (k, extra) in [&nets[..], &[]].into_iter().enumerate() {
+        let (_, full) = eval_report(&scenes, extra, &tmp.path().join(format!("full{k}.json")));
+        let mut masks_args = extra.to_vec();
+        masks_args.push("--masks-only");
+        let (_, masks) = eval_report(
+            &scenes,
+            &masks_args,
+            &tmp.path().join(format!("masks{k}.json")),
+        );
+        let (a, b) = (
+            full["rows"].as_array().unwrap(),
+            masks["rows"].as_array().unwrap(),
+        );
+        assert!(!a.is_empty() && a.len() == b.len(), "{a:?} {b:?}");
+        for (ra, rb) in a.iter().zip(b) {
+            for key in same {
+                assert_eq!(ra[key], rb[key], "{key}: {ra} {rb}");
+            }
+            assert!(ra["textured_extracted"].is_boolean(), "{ra}");
+            for key in [
+                "textured_extracted",
+                "texture_psnr_db",
+                "texture_size",
+                "uv_mode",
+            ] {
+                assert!(rb[key].is_null(), "{key}: {rb}");
+            }
+        }
+        assert_eq!(
+            full["aggregate"]["mean_iou"],
+            masks["aggregate"]["mean_iou"]
+        );
+        assert!(masks["aggregate"]["mean_texture_psnr_db"].is_null());
+        assert_eq!(masks["aggregate"]["textured_detected"], 0);
+    }
+}
+
 /// Compares two images value by value (8-bit PNGs: ±1 code value).
 fn same_png(got: &Path, want: &Path) -> Result<(), String> {
     let (a, b) = (

@@ -602,6 +602,36 @@ pub fn extract(
     }
 }
 
+/// A pick mask ([`Prepared::pick_mask`], working resolution) at the photo's
+/// resolution, as [`extract`] makes it: guided-upsampled to the photo's
+/// edges ([`mask::refine`]); a material thinner than a photo-resolution edge
+/// keeps its coarse mask, each masked working pixel also marking the photo
+/// pixel under its centre, so a non-empty mask never becomes empty.
+pub fn photo_mask(p: &Prepared, pm: &PickMask) -> Mask {
+    let (w, h) = p.work_size();
+    let (fw, fh) = p.photo_size();
+    let full = mask::refine(&pm.mask, &p.luma, fw, fh);
+    if full.count() == 0 {
+        // A material thinner than a photo-resolution edge: keep the coarse mask.
+        // Each masked working pixel also marks the photo pixel under its centre,
+        // so a non-empty coarse mask never becomes empty (tiny or downscaled photos).
+        let up = resample::bilinear_plane(&pm.mask.to_image().data, w, h, fw, fh);
+        let mut data: Vec<bool> = up.iter().map(|&v| v >= 0.5).collect();
+        for (i, _) in pm.mask.data.iter().enumerate().filter(|(_, &m)| m) {
+            let (x, y) = (i % w, i / w);
+            let (fx, fy) = (cell_under(x, w, fw), cell_under(y, h, fh));
+            data[fy * fw + fx] = true;
+        }
+        Mask {
+            width: fw,
+            height: fh,
+            data,
+        }
+    } else {
+        full
+    }
+}
+
 /// [`extract`], as a single colour whatever the textured flag when `plain`.
 fn extract_as(
     p: &Prepared,
@@ -629,26 +659,7 @@ fn extract_as(
     if pm.mask.count() == 0 {
         return Err(Error::Invalid("the picked material has no pixels".into()));
     }
-    let full = mask::refine(&pm.mask, &p.luma, fw, fh);
-    let full = if full.count() == 0 {
-        // A material thinner than a photo-resolution edge: keep the coarse mask.
-        // Each masked working pixel also marks the photo pixel under its centre,
-        // so a non-empty coarse mask never becomes empty (tiny or downscaled photos).
-        let up = resample::bilinear_plane(&pm.mask.to_image().data, w, h, fw, fh);
-        let mut data: Vec<bool> = up.iter().map(|&v| v >= 0.5).collect();
-        for (i, _) in pm.mask.data.iter().enumerate().filter(|(_, &m)| m) {
-            let (x, y) = (i % w, i / w);
-            let (fx, fy) = (cell_under(x, w, fw), cell_under(y, h, fh));
-            data[fy * fw + fx] = true;
-        }
-        Mask {
-            width: fw,
-            height: fh,
-            data,
-        }
-    } else {
-        full
-    };
+    let full = photo_mask(p, pm);
     lap("mask", &mut timings);
 
     // Parameters over the working-resolution mask.
