@@ -673,11 +673,11 @@ fn report_sheet(p: &Prepared, m: &Material, preview: &Image) -> Image {
         shown("segmentation", p.inputs.segmentation.clone()),
     ];
     if let Some(e) = &p.inputs.embedding {
-        // What the masks read when the MSN has one, shown as `embedding.png`
-        // is: (e + 1)/2 per channel, one colour per material.
+        // What the masks read when the MSN has one, shown as `picker infer`
+        // shows it in `embedding.png`: (e + 1)/2 per channel.
         let mut shown_embedding = e.clone();
         for v in &mut shown_embedding.data {
-            *v = ((*v + 1.0) / 2.0).clamp(0.0, 1.0);
+            *v = conv::unit_from_tanh(*v).clamp(0.0, 1.0);
         }
         tiles.push(shown("material embedding", shown_embedding));
     }
