@@ -89,6 +89,10 @@ pub struct Args {
     /// (`extract --no-fold`).
     #[arg(long)]
     pub no_fold: bool,
+    /// Inpaint every texel the mask's surest part did not show, instead of first filling them
+    /// from the rest of the mask (its less sure pixels) where it showed them.
+    #[arg(long)]
+    pub no_mask_fill: bool,
     /// Texture coordinates, as `extract --uv`: `plane` with the ground-truth elements measures the
     /// plane mode alone (true normals, masks and albedo, rectified instead of the true UVs).
     #[arg(long, value_enum, default_value_t = crate::extract::UvArg::Auto)]
@@ -380,6 +384,7 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
         fov_deg: None,
         line_refine: !a.no_lines,
         fold_period: !a.no_fold,
+        fill_from_mask: !a.no_mask_fill,
         tileable: true,
         seamless: false,
         seed: 0,

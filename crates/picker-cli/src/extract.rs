@@ -91,6 +91,10 @@ pub struct Flags {
     /// repeats (the inpainter fills them all).
     #[arg(long)]
     pub no_fold: bool,
+    /// Inpaint every texel the mask's surest part did not show, instead of first filling them
+    /// from the rest of the mask (its less sure pixels) where it showed them.
+    #[arg(long)]
+    pub no_mask_fill: bool,
     /// Texture side in texels (default: the observed texel density, capped by --max-size).
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=8192))]
     pub size: Option<u32>,
@@ -154,6 +158,7 @@ impl Flags {
             fov_deg: self.fov,
             line_refine: !self.no_lines,
             fold_period: !self.no_fold,
+            fill_from_mask: !self.no_mask_fill,
             tileable: !self.no_tile,
             seamless: self.seamless,
             seed: self.seed,

@@ -139,6 +139,18 @@ pub struct Options<'a> {
     /// whole repeats inside the texture square into one tile and lay it over
     /// the square ([`crate::period`]).
     pub fold_period: bool,
+    /// When the texture comes from the mask's surest part and repeats (the
+    /// plane mode's fold, the networks' UV repeats: see `fold_period`), fill
+    /// the texels that no repeat of that part showed from the rest of the
+    /// mask (reprojected through the same coordinates) before inpainting.
+    /// The surest part is the pixels near the pick's own colour, so a
+    /// pattern of two colours (a chessboard) gives it one of them and leaves
+    /// the other's texels as holes that the inpainter would fill with the
+    /// first colour. Only for repeating textures: on any texture, the rest's
+    /// pixels (a neighbour the mask took in, the mask's edge) lowered the
+    /// mean aligned texture PSNR on all seven evaluation sets (−0.06 to
+    /// −0.17 dB with the embedded networks).
+    pub fill_from_mask: bool,
     /// Make the texture tileable (toroidal inpainting).
     pub tileable: bool,
     /// Also remove colour jumps across the wrap edges when they show (see
@@ -164,6 +176,13 @@ pub struct Prepared {
     pub luma: Vec<f32>,
     /// Pixels with a surface at the working resolution.
     pub valid: Vec<bool>,
+    /// The photo has no colour: every pixel's three channels are equal (a
+    /// greyscale file, or a colour file holding a greyscale picture). The
+    /// networks' albedo then has a colour the photo cannot tell, so the
+    /// extracted colours are grey: the de-lighting divides by the albedo's
+    /// luminance ([`luminance`]) instead of per channel, and the estimated
+    /// lighting is made grey the same way.
+    pub greyscale: bool,
     /// Time spent preparing, ms.
     pub prepare_ms: f64,
     /// The focal length from the photo's lines, found once at the first
@@ -192,8 +211,10 @@ fn check_size(what: &str, img: &Image, c: usize, w: usize, h: usize) -> Result<(
 }
 
 impl Prepared {
-    /// Checks and prepares `inputs`.
-    pub fn new(inputs: Inputs) -> Result<Self> {
+    /// Checks and prepares `inputs`. A greyscale photo ([`Prepared::greyscale`])
+    /// also makes the estimated lighting grey (each texel its luminance): the
+    /// photo cannot tell the light's colour either.
+    pub fn new(mut inputs: Inputs) -> Result<Self> {
         let t = Instant::now();
         let (w, h) = (inputs.elements.width(), inputs.elements.height());
         let (fw, fh) = (inputs.photo.width, inputs.photo.height);
@@ -209,12 +230,33 @@ impl Prepared {
         let (photo_linear, luma) = linear_and_luma(&inputs.photo);
         let photo_work = resample::area(&photo_linear, w, h);
         let valid = (0..w * h).map(|i| inputs.elements.is_valid(i)).collect();
+        let n = fw * fh;
+        let (r, rest) = inputs.photo.data.split_at(n);
+        let (g, b) = rest.split_at(n);
+        let greyscale = r
+            .par_chunks(4096)
+            .zip(g.par_chunks(4096))
+            .zip(b.par_chunks(4096))
+            .all(|((r, g), b)| {
+                r.iter()
+                    .zip(g)
+                    .zip(b)
+                    .all(|((r, g), b)| r.to_bits() == g.to_bits() && g.to_bits() == b.to_bits())
+            });
+        if greyscale {
+            if let Some(env) = inputs.envmap.as_mut() {
+                for c in env.data_mut() {
+                    *c = Vec3::splat(luminance(*c));
+                }
+            }
+        }
         Ok(Self {
             inputs,
             photo_linear,
             photo_work,
             luma,
             valid,
+            greyscale,
             prepare_ms: t.elapsed().as_secs_f64() * 1e3,
             line_focal: std::sync::OnceLock::new(),
             embedding_mask,
@@ -550,8 +592,21 @@ pub struct Diagnostics {
     /// ([`Error::NoTexture`]); absent otherwise.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub texture_fallback: Option<String>,
+    /// Share of the texture's texels that the mask's surest part did not
+    /// show and the rest of the mask did ([`Options::fill_from_mask`]);
+    /// absent when the texture came from the whole mask.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub filled_from_mask: Option<f64>,
+    /// The photo has no colour ([`Prepared::greyscale`]): the extracted
+    /// colours are grey.
+    pub greyscale_photo: bool,
     /// Timings, ms.
     pub timings_ms: std::collections::BTreeMap<String, f64>,
+}
+
+/// The relative luminance of a linear Rec. 709 / sRGB colour.
+pub fn luminance(c: Vec3) -> f32 {
+    0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
 }
 
 fn median(mut v: Vec<f32>) -> f32 {
@@ -679,7 +734,10 @@ fn extract_as(
     let mut rw = vec![0.0f32; w * h];
     for &i in &idx {
         let ph = p.photo_work.rgb(i);
-        let alb = el.diffuse.rgb(i);
+        let mut alb = el.diffuse.rgb(i);
+        if p.greyscale {
+            alb = Vec3::splat(luminance(alb));
+        }
         if ph.min_element() > 0.004 {
             ratio.set_rgb(i, (alb / ph).min(Vec3::splat(100.0)));
             rw[i] = 1.0;
@@ -744,6 +802,8 @@ fn extract_as(
         uv: None,
         texture_size: None,
         texture_fallback: None,
+        filled_from_mask: None,
+        greyscale_photo: p.greyscale,
         timings_ms: Default::default(),
     };
     let mut texture = None;
@@ -753,6 +813,7 @@ fn extract_as(
         // The texture comes from the mask's surest part (`PickMask::sure`:
         // the pixels within the pick's own colour spread, where the mask
         // grew beyond it); the mask and the parameters stay whole.
+        let (whole_mw, whole_full) = (mw, &full);
         let sure_full;
         let (mw, full) = if pm.sure != *mw {
             sure_full = restrict_to_work(&full, &pm.sure, w, h);
@@ -760,6 +821,20 @@ fn extract_as(
         } else {
             (mw, &full)
         };
+        // The rest of the mask, when the texture's pixels are fewer
+        // (`Options::fill_from_mask`).
+        let rest_full = (opts.fill_from_mask && !std::ptr::eq(full, whole_full))
+            .then(|| Mask {
+                width: fw,
+                height: fh,
+                data: whole_full
+                    .data
+                    .iter()
+                    .zip(&full.data)
+                    .map(|(&a, &b)| a && !b)
+                    .collect(),
+            })
+            .filter(|m| m.count() > 0);
         // Coordinates.
         let mwf: Vec<f32> = mw.iter().map(|&b| b as u8 as f32).collect();
         // Upsampled only inside the mask (the only pixels any use reads), and
@@ -818,11 +893,11 @@ fn extract_as(
             UvChoice::Plane => true,
             UvChoice::Auto => !net_ok || net_coords.is_none(),
         };
+        let anchor = match pick {
+            Some(k) => p.to_work(k[0] as usize, k[1] as usize),
+            None => central_pixel(mw, w),
+        };
         let part = if wants_plane {
-            let anchor = match pick {
-                Some(k) => p.to_work(k[0] as usize, k[1] as usize),
-                None => central_pixel(mw, w),
-            };
             plane::coplanar_part(&el.normals, mw, w, h, anchor, AUTO_MAX_PLANE_SPREAD_DEG)
                 .filter(|pp| plane::faces_camera(pp.normal, anchor, w, h))
                 // A material that is one plane by its median normal keeps
@@ -847,8 +922,25 @@ fn extract_as(
             None => (mw, full, normal, spread, planar),
         };
         let observed_cap = observed_cap(opts.max_size, full.count());
+        // The plane mode's rest of the mask: the part of the whole mask on
+        // the plane at the pick ([`plane::coplanar_part`] of the whole mask),
+        // outside the texture's pixels.
+        let rest_plane = || {
+            let rest = rest_full.as_ref()?;
+            let pp = plane::coplanar_part(
+                &el.normals,
+                whole_mw,
+                w,
+                h,
+                anchor,
+                AUTO_MAX_PLANE_SPREAD_DEG,
+            )?;
+            let m = restrict_to_work(rest, &pp.mask, w, h);
+            (m.count() > 0).then_some(m)
+        };
         let plane_coords = |diag_focal: &mut Option<f32>,
-                            diag_lines: &mut Option<crate::lines::LineRefinement>|
+                            diag_lines: &mut Option<crate::lines::LineRefinement>,
+                            rest_src: &mut Option<Mask>|
          -> Option<Coords> {
             let n = normal?;
             // --fov, else the photo's lines (when refining with them), else
@@ -889,8 +981,19 @@ fn extract_as(
             };
             // A plane seen edge-on or from behind at every picked pixel
             // gives no coordinates: no plane.
-            let c = plane::plane_coords(fw, fh, &full.data, n, f, along);
-            c.u.iter().any(|u| u.is_finite()).then_some(c)
+            let rest = rest_plane();
+            let c = plane::plane_coords_with(
+                fw,
+                fh,
+                &full.data,
+                rest.as_ref().map(|m| &m.data[..]),
+                n,
+                f,
+                along,
+            );
+            let usable = c.u.iter().zip(&full.data).any(|(u, &m)| m && u.is_finite());
+            *rest_src = rest;
+            usable.then_some(c)
         };
         // Why auto finds no coordinates, if it finds none.
         let neither = || {
@@ -902,6 +1005,7 @@ fn extract_as(
         };
         let mut focal = None;
         let mut lines = None;
+        let mut plane_rest = None;
         let (mode, coords) =
             match opts.uv {
                 UvChoice::Net => match net_coords {
@@ -911,7 +1015,7 @@ fn extract_as(
                             .into(),
                     )),
                 },
-                UvChoice::Plane => match plane_coords(&mut focal, &mut lines) {
+                UvChoice::Plane => match plane_coords(&mut focal, &mut lines, &mut plane_rest) {
                     Some(c) => (UvMode::Plane, c),
                     None => {
                         return Err(Error::Invalid(
@@ -927,11 +1031,11 @@ fn extract_as(
                             Some(c) => (UvMode::Net, c),
                             None => (
                                 UvMode::Plane,
-                                plane_coords(&mut focal, &mut lines).ok_or_else(neither)?,
+                                plane_coords(&mut focal, &mut lines, &mut plane_rest).ok_or_else(neither)?,
                             ),
                         }
                     } else {
-                        match plane_coords(&mut focal, &mut lines) {
+                        match plane_coords(&mut focal, &mut lines, &mut plane_rest) {
                             Some(c) => (UvMode::Plane, c),
                             None => (
                                 UvMode::Net,
@@ -959,7 +1063,31 @@ fn extract_as(
                         &confidence,
                         probe,
                     );
-                    (c, f, None)
+                    // No period in the texture's pixels: looked for again
+                    // with the rest of the mask on the plane. A pattern of
+                    // two colours repeats only with both, and the surest
+                    // part may hold one of them, whose texels are then all
+                    // alike. Only then: over the whole mask, a far, blurred
+                    // part of a floor can hide the period the near part shows.
+                    match (&f, &plane_rest) {
+                        (None, Some(rest)) => {
+                            let seen: Vec<bool> = full
+                                .data
+                                .iter()
+                                .zip(&rest.data)
+                                .map(|(&a, &b)| a || b)
+                                .collect();
+                            let (c, f) = crate::period::fold_if_periodic(
+                                c,
+                                &seen,
+                                &delit,
+                                &confidence,
+                                probe,
+                            );
+                            (c, f, None)
+                        }
+                        _ => (c, f, None),
+                    }
                 }
                 UvMode::Net => {
                     let r = crate::period::fold_uv_if_periodic(
@@ -1009,7 +1137,34 @@ fn extract_as(
             reproject::texture_size(area, cap)
         });
         diag.texture_size = Some(size);
-        let r = reproject::reproject(&coords, &full.data, &delit, &confidence, size);
+        let mut r = reproject::reproject(&coords, &full.data, &delit, &confidence, size);
+        // A texture that repeats: the texels no repeat of the surest part
+        // showed, from the rest of the mask where it showed them
+        // (`Options::fill_from_mask`).
+        let rest = match (mode, &rest_full) {
+            (UvMode::Plane, _) if fold.is_some() => plane_rest.as_ref().map(|m| (m, None)),
+            (UvMode::Net, Some(rest)) if uv_fold.is_some() => el.uv.as_ref().map(|uv| {
+                // The UVs upsampled within the whole mask: its rest lies
+                // outside the surest part the texture's UVs were upsampled in.
+                let wf: Vec<f32> = whole_mw.iter().map(|&b| b as u8 as f32).collect();
+                let up = resample::upsample_uv_where(uv, &wf, fw, fh, &rest.data);
+                let c = Coords {
+                    width: fw,
+                    height: fh,
+                    u: up.plane(0).to_vec(),
+                    v: up.plane(1).to_vec(),
+                    wrap: true,
+                };
+                (rest, Some(c))
+            }),
+            _ => None,
+        };
+        if let Some((rest, rest_coords)) = rest {
+            let c = rest_coords.as_ref().unwrap_or(&coords);
+            let o = reproject::reproject(c, &rest.data, &delit, &confidence, size);
+            let n = reproject::fill_unknown_from(&mut r, &o);
+            diag.filled_from_mask = Some(n as f64 / r.known.len().max(1) as f64);
+        }
         lap("reproject", &mut timings);
         let known_fraction = r.known_fraction();
         if known_fraction == 0.0 {
@@ -1632,6 +1787,7 @@ mod tests {
             fov_deg: None,
             line_refine: false,
             fold_period: true,
+            fill_from_mask: true,
             tileable: true,
             seamless: false,
             seed: 1,
@@ -1659,6 +1815,177 @@ mod tests {
             e.to_string().contains("landed in the texture square"),
             "{e}"
         );
+    }
+
+    /// A frontal chessboard (squares of 8 pixels, sRGB 0.9 and 0.15) whose
+    /// mask is the whole board but whose surest part is the white squares
+    /// only, as an embedding that follows the squares makes it: with the
+    /// fold and the fill from the rest of the mask the texture holds both
+    /// colours; without the fill the black squares are
+    /// holes that the inpainter fills from the white ones.
+    #[test]
+    fn a_folded_chessboard_takes_its_black_squares_from_the_rest_of_the_mask() {
+        let (h, w) = (96, 128);
+        let white = |i: usize| ((i % w) / 8 + (i / w) / 8).is_multiple_of(2);
+        let shown = |i: usize| if white(i) { 0.9 } else { 0.15 };
+        let albedo = |i: usize| picker_render::io::srgb_decode(shown(i));
+        let photo = Image::new(
+            3,
+            h,
+            w,
+            (0..3 * h * w).map(|k| shown(k % (h * w))).collect(),
+        )
+        .unwrap();
+        let plane = |c: usize, f: &dyn Fn(usize) -> f32| {
+            Image::new(c, h, w, (0..c * h * w).map(|k| f(k % (h * w))).collect()).unwrap()
+        };
+        let elements = ElementImages::new(
+            plane(3, &albedo),
+            plane(3, &|_| 0.04),
+            plane(1, &|_| 0.5),
+            Image::new(
+                3,
+                h,
+                w,
+                [0.0, 0.0, 1.0]
+                    .iter()
+                    .flat_map(|&v| vec![v; h * w])
+                    .collect(),
+            )
+            .unwrap(),
+            Image::new(
+                3,
+                h,
+                w,
+                [0.0, 0.0, 1.0]
+                    .iter()
+                    .flat_map(|&v| vec![v; h * w])
+                    .collect(),
+            )
+            .unwrap(),
+            Some(plane(3, &|_| 1.0)),
+        )
+        .unwrap();
+        let p = Prepared::new(Inputs {
+            photo,
+            elements,
+            segmentation: plane(3, &|_| 0.5),
+            embedding: None,
+            segmentation_estimated: false,
+            envmap: None,
+        })
+        .unwrap();
+        let pm = PickMask {
+            mask: Mask {
+                width: w,
+                height: h,
+                data: vec![true; w * h],
+            },
+            colour: [0.5; 3],
+            tolerance: 0.1,
+            sure: (0..w * h).map(white).collect(),
+        };
+        let inpainter = picker_inpaint::DiffusionInpainter::default();
+        let run = |fold_period: bool, fill_from_mask: bool| {
+            let opts = Options {
+                mask: MaskOptions::default(),
+                uv: UvChoice::Plane,
+                size: None,
+                max_size: 256,
+                fov_deg: Some(60.0),
+                line_refine: false,
+                fold_period,
+                fill_from_mask,
+                tileable: true,
+                seamless: false,
+                seed: 1,
+                inpainter: &inpainter,
+            };
+            let (m, diag) = extract(&p, "board", Some([4, 4]), &pm, &opts).unwrap();
+            let t = m.texture.expect("textured").texture;
+            let n = t.width * t.height;
+            let dark = (0..n).filter(|&i| t.rgb(i).x < 0.4).count() as f64 / n as f64;
+            (dark, diag)
+        };
+        let (dark, diag) = run(true, true);
+        assert!(
+            diag.uv.as_ref().unwrap().period.is_some(),
+            "the board folds"
+        );
+        let filled = diag.filled_from_mask.expect("filled from the mask");
+        assert!((0.25..0.6).contains(&filled), "filled {filled}");
+        // The white squares' pixels spread a texel into the black squares
+        // (the splat's tent), so those are a little smaller than half.
+        assert!((0.25..0.6).contains(&dark), "dark share {dark}");
+        let (dark, diag) = run(true, false);
+        assert!(diag.filled_from_mask.is_none());
+        assert!(dark < 0.1, "dark share without the fill {dark}");
+        // No fold: no fill (the rest of a mask is only trusted in repeats).
+        let (_, diag) = run(false, true);
+        assert!(diag.uv.as_ref().unwrap().period.is_none());
+        assert!(diag.filled_from_mask.is_none());
+    }
+
+    /// A greyscale photo gives a grey material and grey lighting whatever
+    /// colour the networks' albedo and environment map have; one coloured
+    /// pixel makes it a colour photo again.
+    #[test]
+    fn a_greyscale_photo_gives_grey_colours() {
+        let (h, w) = (24, 32);
+        let mut rng = picker_tensor::Rng::new(8);
+        let grey = rng.uniform_vec(h * w, 0.3, 0.7);
+        let photo = Image::new(3, h, w, [grey.clone(), grey.clone(), grey].concat()).unwrap();
+        let env = EnvMap::uniform(8, 4, Vec3::new(1.0, 0.5, 0.25));
+        let inputs = Inputs {
+            photo,
+            elements: flat_elements([0.0, 0.0, 1.0], None),
+            segmentation: flat(3, &[0.2, 0.5, 0.7]),
+            embedding: None,
+            segmentation_estimated: false,
+            envmap: Some(env),
+        };
+        let inpainter = picker_inpaint::DiffusionInpainter::default();
+        let opts = Options {
+            mask: MaskOptions::default(),
+            uv: UvChoice::Auto,
+            size: None,
+            max_size: 64,
+            fov_deg: None,
+            line_refine: false,
+            fold_period: true,
+            fill_from_mask: true,
+            tileable: true,
+            seamless: false,
+            seed: 1,
+            inpainter: &inpainter,
+        };
+        let p = Prepared::new(inputs.clone()).unwrap();
+        assert!(p.greyscale);
+        let y = luminance(Vec3::new(0.5, 0.4, 0.3));
+        let e = p.inputs.envmap.as_ref().unwrap().get(1, 1);
+        assert!(
+            (e - Vec3::splat(luminance(Vec3::new(1.0, 0.5, 0.25))))
+                .abs()
+                .max_element()
+                < 1e-6
+        );
+        let pm = p.pick_mask([16, 12], &MaskOptions::default()).unwrap();
+        let (m, diag) = extract(&p, "m", Some([16, 12]), &pm, &opts).unwrap();
+        assert!(diag.greyscale_photo && !m.textured);
+        for c in m.params.diffuse {
+            assert!((c - y).abs() < 1e-3, "{:?} against {y}", m.params.diffuse);
+        }
+        // One pixel with colour: the networks' albedo colour is kept.
+        let mut coloured = inputs;
+        coloured.photo.data[5] += 0.01;
+        let p = Prepared::new(coloured).unwrap();
+        assert!(!p.greyscale);
+        let pm = p.pick_mask([16, 12], &MaskOptions::default()).unwrap();
+        let (m, diag) = extract(&p, "m", Some([16, 12]), &pm, &opts).unwrap();
+        assert!(!diag.greyscale_photo);
+        for (c, want) in m.params.diffuse.iter().zip([0.5, 0.4, 0.3]) {
+            assert!((c - want).abs() < 1e-3, "{:?}", m.params.diffuse);
+        }
     }
 
     #[test]

@@ -295,6 +295,29 @@ pub fn plane_coords(
     focal: f32,
     along: Option<Vec3>,
 ) -> Coords {
+    plane_coords_with(w, h, mask, None, n, focal, along)
+}
+
+/// [`plane_coords`] that also gives coordinates to the pixels of `extra`
+/// (when given) in the same square: the square is framed by `mask`'s pixels
+/// alone, so `mask`'s coordinates are [`plane_coords`]' whatever `extra`
+/// holds. The pipeline reprojects the rest of a material's mask through
+/// them to fill the texels its surest part did not show.
+///
+/// # Panics
+/// If `mask` or `extra` does not hold `w·h` values.
+pub fn plane_coords_with(
+    w: usize,
+    h: usize,
+    mask: &[bool],
+    extra: Option<&[bool]>,
+    n: Vec3,
+    focal: f32,
+    along: Option<Vec3>,
+) -> Coords {
+    assert_eq!(mask.len(), w * h, "mask size");
+    assert!(extra.is_none_or(|e| e.len() == w * h), "extra size");
+    let wanted = |i: usize| mask[i] || extra.is_some_and(|e| e[i]);
     let (e1, e2) = plane_basis(n, along);
     let (cx, cy) = (w as f32 / 2.0, h as f32 / 2.0);
     let mut s = vec![f32::NAN; w * h];
@@ -307,7 +330,7 @@ pub fn plane_coords(
         .for_each(|(row, (rs, rt))| {
             for col in 0..rs.len() {
                 let i = row * w + col;
-                if !mask[i] {
+                if !wanted(i) {
                     continue;
                 }
                 let (x, y) = (col as f32 + 0.5, row as f32 + 0.5);
@@ -327,7 +350,7 @@ pub fn plane_coords(
     let pct2 = |v: &[f32], q0: f32, q1: f32| -> Option<(f32, f32)> {
         let at = crate::select::kth_smallest(
             v.len(),
-            |i| v[i].is_finite().then(|| v[i]),
+            |i| (mask[i] && v[i].is_finite()).then(|| v[i]),
             |len| {
                 let k = |q: f32| ((len - 1) as f32 * q) as usize;
                 Some(vec![k(q0), k(q1)])
@@ -354,10 +377,12 @@ pub fn plane_coords(
     let framed: usize = s
         .par_chunks(step)
         .zip(t.par_chunks(step))
-        .map(|(rs, rt)| {
+        .zip(mask.par_chunks(step))
+        .map(|((rs, rt), rm)| {
             rs.iter()
                 .zip(rt)
-                .filter(|&(&a, &b)| a.is_finite() && inside(a, sc) && inside(b, tc))
+                .zip(rm)
+                .filter(|&((&a, &b), &m)| m && a.is_finite() && inside(a, sc) && inside(b, tc))
                 .count()
         })
         .sum();
@@ -399,6 +424,7 @@ pub fn plane_coords_reference(
     w: usize,
     h: usize,
     mask: &[bool],
+    extra: Option<&[bool]>,
     n: Vec3,
     focal: f32,
     along: Option<Vec3>,
@@ -408,7 +434,7 @@ pub fn plane_coords_reference(
     let mut s = vec![f32::NAN; w * h];
     let mut t = vec![f32::NAN; w * h];
     for i in 0..w * h {
-        if !mask[i] {
+        if !mask[i] && !extra.is_some_and(|e| e[i]) {
             continue;
         }
         let (x, y) = ((i % w) as f32 + 0.5, (i / w) as f32 + 0.5);
@@ -422,7 +448,10 @@ pub fn plane_coords_reference(
         t[i] = -p.dot(e2);
     }
     let pct = |v: &[f32], q: f32| -> Option<f32> {
-        let mut f: Vec<f32> = v.iter().copied().filter(|x| x.is_finite()).collect();
+        let mut f: Vec<f32> = (0..w * h)
+            .filter(|&i| mask[i] && v[i].is_finite())
+            .map(|i| v[i])
+            .collect();
         if f.is_empty() {
             return None;
         }
@@ -446,7 +475,7 @@ pub fn plane_coords_reference(
     let (mut sc, mut tc) = ((s0 + s1) / 2.0 - side / 2.0, (t0 + t1) / 2.0 - side / 2.0);
     let inside = |v: f32, c: f32| (0.0..1.0).contains(&((v - c) / side));
     let framed = (0..w * h)
-        .filter(|&i| s[i].is_finite() && inside(s[i], sc) && inside(t[i], tc))
+        .filter(|&i| mask[i] && s[i].is_finite() && inside(s[i], sc) && inside(t[i], tc))
         .count();
     if framed == 0 {
         if let (Some(sm), Some(tm)) = (pct(&s, 0.5), pct(&t, 0.5)) {
@@ -488,12 +517,51 @@ mod tests {
                     d - d.dot(n) * n
                 });
                 let a = plane_coords(w, h, &mask, n, focal, along);
-                let b = plane_coords_reference(w, h, &mask, n, focal, along);
+                let b = plane_coords_reference(w, h, &mask, None, n, focal, along);
                 let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
                 assert_eq!(bits(&a.u), bits(&b.u), "{w}x{h} k{k}");
                 assert_eq!(bits(&a.v), bits(&b.v), "{w}x{h} k{k}");
+                // Extra pixels (some also in the mask) get coordinates in
+                // the same square; the mask's own are unchanged.
+                let extra: Vec<bool> = (0..w * h).map(|_| rng.f64() < 0.4).collect();
+                let c = plane_coords_with(w, h, &mask, Some(&extra), n, focal, along);
+                let d = plane_coords_reference(w, h, &mask, Some(&extra), n, focal, along);
+                assert_eq!(bits(&c.u), bits(&d.u), "{w}x{h} k{k} extra");
+                assert_eq!(bits(&c.v), bits(&d.v), "{w}x{h} k{k} extra");
+                for i in 0..w * h {
+                    if mask[i] {
+                        assert_eq!(c.u[i].to_bits(), a.u[i].to_bits(), "{w}x{h} k{k} @{i}");
+                        assert_eq!(c.v[i].to_bits(), a.v[i].to_bits(), "{w}x{h} k{k} @{i}");
+                    } else if !extra[i] {
+                        assert!(c.u[i].is_nan() && c.v[i].is_nan(), "{w}x{h} k{k} @{i}");
+                    }
+                }
             }
         }
+    }
+
+    /// Extra pixels on the plane beyond the mask continue its coordinates:
+    /// a frontal plane's `u` grows by the same step per pixel across them
+    /// (those that still fall inside the square).
+    #[test]
+    fn extra_pixels_continue_the_masks_coordinates() {
+        let (w, h) = (40, 20);
+        let mask: Vec<bool> = (0..w * h).map(|i| (i % w) < 20).collect();
+        let extra: Vec<bool> = (0..w * h).map(|i| (i % w) >= 20).collect();
+        let c = plane_coords_with(w, h, &mask, Some(&extra), Vec3::Z, 50.0, None);
+        let row = 10 * w;
+        let du = c.u[row + 1] - c.u[row];
+        assert!(du > 0.0);
+        let mut seen = 0;
+        for x in 20..w {
+            let u = c.u[row + x];
+            if u.is_finite() {
+                assert!((u - c.u[row] - du * x as f32).abs() < 1e-4, "x {x}: {u}");
+                seen += 1;
+            }
+        }
+        // The mask frames a 20×20 square: extra pixels beyond it have none.
+        assert!(seen < 20 && c.u[row + w - 1].is_nan(), "{seen}");
     }
 
     #[test]
@@ -736,7 +804,7 @@ mod tests {
             .collect();
         let n = Vec3::new(0.0, 1.0, 0.05).normalize();
         let a = plane_coords(w, h, &mask, n, 60.0, None);
-        let b = plane_coords_reference(w, h, &mask, n, 60.0, None);
+        let b = plane_coords_reference(w, h, &mask, None, n, 60.0, None);
         let landed = a.u.iter().filter(|u| u.is_finite()).count();
         assert!(landed > 0, "nothing framed");
         let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();

@@ -1113,6 +1113,37 @@ pub fn reproject(
     )
 }
 
+/// The texels `own` did not observe that `other` (a reprojection of other
+/// pixels through the same coordinates at the same size) did, taken from
+/// `other`: colour, weight, coverage and the known flag. Texels `own` knows
+/// keep their values whatever `other` says. Returns how many were filled.
+///
+/// # Panics
+/// When the two squares' sizes or channels differ.
+pub fn fill_unknown_from(own: &mut Reprojected, other: &Reprojected) -> usize {
+    let (t, o) = (&own.texture, &other.texture);
+    assert!(
+        (t.channels, t.height, t.width) == (o.channels, o.height, o.width)
+            && own.known.len() == other.known.len(),
+        "fill_unknown_from: sizes differ"
+    );
+    let (n, channels) = (own.known.len(), t.channels);
+    let mut filled = 0;
+    for i in 0..n {
+        if own.known[i] || !other.known[i] {
+            continue;
+        }
+        for c in 0..channels {
+            own.texture.data[c * n + i] = other.texture.data[c * n + i];
+        }
+        own.weight.data[i] = other.weight.data[i];
+        own.coverage.data[i] = other.coverage.data[i];
+        own.known[i] = true;
+        filled += 1;
+    }
+    filled
+}
+
 /// [`reproject`] without the back-projection rounds: the plain robust
 /// splat, for a quick look at the texture (the plane mode's period search).
 pub fn reproject_unsharpened(
@@ -1323,6 +1354,58 @@ mod tests {
             },
             img,
         )
+    }
+
+    /// Two halves of a picture reprojected apart: filling the first's
+    /// unknown texels from the second's gives exactly the union's known set,
+    /// keeps every texel the first knew bit for bit, and takes the second's
+    /// values elsewhere.
+    #[test]
+    fn unknown_texels_are_filled_from_another_reprojection() {
+        let tex = |u: f32, v: f32| Vec3::new(u, v, (u * 7.0).sin().abs());
+        let (coords, img) = frontal(24, 24, 24.0, tex);
+        let left: Vec<bool> = (0..24 * 24).map(|i| i % 24 < 12).collect();
+        let right: Vec<bool> = left.iter().map(|&l| !l).collect();
+        let conf = vec![1.0; 24 * 24];
+        let a = reproject(&coords, &left, &img, &conf, 24);
+        let b = reproject(&coords, &right, &img, &conf, 24);
+        let mut f = a.clone();
+        let n = fill_unknown_from(&mut f, &b);
+        let expect = (0..24 * 24).filter(|&i| !a.known[i] && b.known[i]).count();
+        assert_eq!(n, expect);
+        assert!(n > 0);
+        for i in 0..24 * 24 {
+            assert_eq!(f.known[i], a.known[i] || b.known[i]);
+            let src = if a.known[i] {
+                &a
+            } else if b.known[i] {
+                &b
+            } else {
+                &a
+            };
+            for c in 0..3 {
+                assert_eq!(
+                    f.texture.data[c * 576 + i].to_bits(),
+                    src.texture.data[c * 576 + i].to_bits()
+                );
+            }
+            assert_eq!(f.weight.data[i].to_bits(), src.weight.data[i].to_bits());
+            assert_eq!(f.coverage.data[i].to_bits(), src.coverage.data[i].to_bits());
+        }
+        // Filling from itself changes nothing.
+        let mut g = a.clone();
+        assert_eq!(fill_unknown_from(&mut g, &a), 0);
+        assert_eq!(g.known, a.known);
+    }
+
+    #[test]
+    #[should_panic(expected = "sizes differ")]
+    fn filling_from_another_size_is_refused() {
+        let (coords, img) = frontal(8, 8, 8.0, |u, v| Vec3::new(u, v, 0.0));
+        let m = vec![true; 64];
+        let mut a = reproject(&coords, &m, &img, &[1.0; 64], 8);
+        let b = reproject(&coords, &m, &img, &[1.0; 64], 16);
+        fill_unknown_from(&mut a, &b);
     }
 
     #[test]
