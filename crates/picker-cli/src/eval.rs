@@ -102,6 +102,11 @@ pub struct Args {
     /// figures and `textured_extracted` are null.
     #[arg(long)]
     pub masks_only: bool,
+    /// With the networks (--embedded or --weights): use the scene's ground truth instead of the
+    /// networks' estimate for these parts (comma-separated), to measure what each network's
+    /// error costs the extraction. Needs the networks' working size to be the scene's.
+    #[arg(long, value_enum, value_delimiter = ',', value_name = "PARTS")]
+    pub truth: Vec<TruthPart>,
 }
 
 /// One evaluated material.
@@ -331,6 +336,79 @@ pub fn flood_fill(rgb: &[f32], w: usize, h: usize, pick: [u32; 2], tol: f32) -> 
     mask
 }
 
+/// A part of the render elements that `picker eval --truth` takes from the
+/// scene's ground truth instead of the networks.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum TruthPart {
+    /// The diffuse albedo (the de-lighting's reference).
+    Albedo,
+    /// The specular albedo and the glossiness.
+    Specular,
+    /// The surface normals (the plane mode's plane).
+    Normals,
+    /// The view vectors (the plane mode's focal length).
+    View,
+    /// The texture coordinates and textured flag.
+    Uv,
+    /// The segmentation (the masks; no material embedding, not smoothed).
+    Segmentation,
+    /// The environment map.
+    Envmap,
+}
+
+/// `inputs` (the networks' estimate, at the working size) with the parts
+/// `parts` replaced by the scene's ground truth (`truth`, the scene folder
+/// `dir`); refused when the working size is not the scene's `w × h`.
+fn with_truth(
+    mut inputs: Inputs,
+    parts: &[TruthPart],
+    truth: &ElementImages,
+    dir: &Path,
+    (w, h): (usize, usize),
+) -> Result<Inputs> {
+    if parts.is_empty() {
+        return Ok(inputs);
+    }
+    let (ww, wh) = (inputs.elements.width(), inputs.elements.height());
+    if (ww, wh) != (w, h) {
+        bail!(
+            "{}: --truth needs the networks' working size ({ww}x{wh}) to be the scene's ({w}x{h})",
+            dir.display()
+        );
+    }
+    let el = &mut inputs.elements;
+    for part in parts {
+        match part {
+            TruthPart::Albedo => el.diffuse = truth.diffuse.clone(),
+            TruthPart::Specular => {
+                el.specular = truth.specular.clone();
+                el.glossiness = truth.glossiness.clone();
+            }
+            TruthPart::Normals => el.normals = truth.normals.clone(),
+            TruthPart::View => el.view = truth.view.clone(),
+            TruthPart::Uv => el.uv = truth.uv.clone(),
+            TruthPart::Segmentation => {
+                let p = dir.join("segmentation.exr");
+                inputs.segmentation =
+                    rio::read_exr(&p).with_context(|| format!("reading {}", p.display()))?;
+                inputs.embedding = None;
+                inputs.segmentation_estimated = false;
+            }
+            TruthPart::Envmap => {
+                let p = dir.join("envmap.exr");
+                inputs.envmap = Some(
+                    EnvMap::from_image(
+                        &rio::read_exr(&p).with_context(|| format!("reading {}", p.display()))?,
+                    )
+                    .map_err(|e| anyhow!("{}: {e}", p.display()))?,
+                );
+            }
+        }
+    }
+    Ok(inputs)
+}
+
 fn f(v: &serde_json::Value) -> Option<f32> {
     v.as_f64().map(|x| x as f32)
 }
@@ -352,7 +430,8 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
     let photo_path = dir.join("image.png");
     let truth = ElementImages::load(dir)?;
     let inputs = if let Some(models) = models {
-        crate::extract::infer_inputs(models, &photo_path, 320)?
+        let est = crate::extract::infer_inputs(models, &photo_path, 320)?;
+        with_truth(est, &a.truth, &truth, dir, (w, h))?
     } else {
         let env_path = dir.join("envmap.exr");
         Inputs {
@@ -601,6 +680,9 @@ fn opt(v: Option<f64>, prec: usize) -> String {
 /// Runs `picker eval`.
 pub fn run(a: Args) -> Result<()> {
     crate::threads::init(a.threads)?;
+    if !a.truth.is_empty() && a.weights.is_empty() && !a.embedded {
+        bail!("--truth replaces parts of the networks' estimate: give --embedded or --weights");
+    }
     let dirs = scene_dirs(&a.dir)?;
     let models = if a.weights.is_empty() && !a.embedded {
         None
@@ -691,6 +773,7 @@ pub fn run(a: Args) -> Result<()> {
             "format": "material-picker-eval", "format_version": 1,
             "dir": a.dir.display().to_string(),
             "elements": if models.is_none() { "ground truth" } else { "networks" },
+            "truth": &a.truth,
             "weights": models.as_ref().map(|m| m.paths().iter().map(|p| p.display().to_string()).collect::<Vec<_>>()),
             "min_area": a.min_area, "aggregate": agg, "rows": rows,
         }))?;

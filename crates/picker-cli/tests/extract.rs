@@ -277,6 +277,64 @@ fn eval_masks_only_scores_the_same_masks_without_textures() {
     }
 }
 
+/// `picker eval --truth` with every part from the ground truth scores each
+/// material exactly as the ground-truth evaluation does; the segmentation
+/// alone gives the ground truth's masks; without networks, or with a
+/// working size that is not the scene's, it is refused.
+#[test]
+fn eval_truth_parts_replace_the_networks_estimate() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scenes = tmp.path().join("scenes");
+    synth_scenes(&scenes, 1, "240x320", 77);
+    let weights = repo().join("fixtures/weights/tiny");
+    let w = ["--weights", weights.to_str().unwrap()];
+    let (_, truth) = eval_report(&scenes, &[], &tmp.path().join("truth.json"));
+    let all = "albedo,specular,normals,view,uv,segmentation,envmap";
+    let (_, swapped) = eval_report(
+        &scenes,
+        &[w[0], w[1], "--truth", all],
+        &tmp.path().join("all.json"),
+    );
+    let (_, seg) = eval_report(
+        &scenes,
+        &[w[0], w[1], "--truth", "segmentation"],
+        &tmp.path().join("seg.json"),
+    );
+    let (_, nets) = eval_report(&scenes, &w, &tmp.path().join("nets.json"));
+    assert_eq!(swapped["truth"].as_array().unwrap().len(), 7);
+    let rows = |v: &Value| v["rows"].as_array().unwrap().clone();
+    let (t, a, s, n) = (rows(&truth), rows(&swapped), rows(&seg), rows(&nets));
+    assert!(!t.is_empty() && t.len() == a.len() && t.len() == s.len());
+    for (rt, ra) in t.iter().zip(&a) {
+        assert_eq!(rt, ra, "every part from the truth: the ground truth's row");
+    }
+    for ((rt, rs), rn) in t.iter().zip(&s).zip(&n) {
+        assert_eq!(rt["iou"], rs["iou"], "{rs}");
+        // The rest is still the networks': their albedo error, not none.
+        assert_eq!(rs["albedo_rmse"], rn["albedo_rmse"]);
+        assert!(rs["albedo_rmse"].as_f64().unwrap() > 0.0);
+    }
+    // Refused: no networks; a working size (320×240) that is not the scene's (160×120).
+    let e = run(&["eval", scenes.to_str().unwrap(), "--truth", "normals"]);
+    assert!(!e.status.success());
+    assert!(String::from_utf8_lossy(&e.stderr).contains("give --embedded or --weights"));
+    let small = repo().join("fixtures/blender");
+    let e = run(&[
+        "eval",
+        small.to_str().unwrap(),
+        w[0],
+        w[1],
+        "--truth",
+        "normals",
+    ]);
+    assert!(!e.status.success());
+    let err = String::from_utf8_lossy(&e.stderr);
+    assert!(
+        err.contains("working size (320x240)") && err.contains("(160x120)"),
+        "{err}"
+    );
+}
+
 /// Compares two images value by value (8-bit PNGs: ±1 code value).
 fn same_png(got: &Path, want: &Path) -> Result<(), String> {
     let (a, b) = (
