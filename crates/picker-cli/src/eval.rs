@@ -93,6 +93,10 @@ pub struct Args {
     /// from the rest of the mask (its less sure pixels) where it showed them.
     #[arg(long)]
     pub no_mask_fill: bool,
+    /// Keep the observed texels along the wrap edges even when the two sides of an edge differ
+    /// (by default a band across each such edge is inpainted so the texture tiles without a seam).
+    #[arg(long)]
+    pub keep_seams: bool,
     /// Texture coordinates, as `extract --uv`: `plane` with the ground-truth elements measures the
     /// plane mode alone (true normals, masks and albedo, rectified instead of the true UVs).
     #[arg(long, value_enum, default_value_t = crate::extract::UvArg::Auto)]
@@ -464,6 +468,7 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
         line_refine: !a.no_lines,
         fold_period: !a.no_fold,
         fill_from_mask: !a.no_mask_fill,
+        heal_seams: !a.keep_seams,
         tileable: true,
         seamless: false,
         seed: 0,

@@ -95,6 +95,10 @@ pub struct Flags {
     /// from the rest of the mask (its less sure pixels) where it showed them.
     #[arg(long)]
     pub no_mask_fill: bool,
+    /// Keep the observed texels along the wrap edges even when the two sides of an edge differ
+    /// (by default a band across each such edge is inpainted so the texture tiles without a seam).
+    #[arg(long)]
+    pub keep_seams: bool,
     /// Texture side in texels (default: the observed texel density, capped by --max-size).
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=8192))]
     pub size: Option<u32>,
@@ -159,6 +163,7 @@ impl Flags {
             line_refine: !self.no_lines,
             fold_period: !self.no_fold,
             fill_from_mask: !self.no_mask_fill,
+            heal_seams: !self.keep_seams,
             tileable: !self.no_tile,
             seamless: self.seamless,
             seed: self.seed,

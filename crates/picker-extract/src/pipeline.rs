@@ -153,6 +153,13 @@ pub struct Options<'a> {
     pub fill_from_mask: bool,
     /// Make the texture tileable (toroidal inpainting).
     pub tileable: bool,
+    /// With `tileable`, for a rectified plane that was not folded (whose
+    /// square is a crop of the photo's region): when the observed texels
+    /// join worse across the wrap edges than inside
+    /// ([`picker_inpaint::seam_band`]), inpaint a band across each wrap edge
+    /// as well, so that the texture tiles without a visible seam. Wrapped
+    /// UVs and folded planes join at the edges by construction.
+    pub heal_seams: bool,
     /// Also remove colour jumps across the wrap edges when they show (see
     /// [`make_seamless`]); only with `tileable`. Off by default: on synthetic
     /// scenes with true elements it lowered the aligned texture PSNR (the
@@ -597,6 +604,11 @@ pub struct Diagnostics {
     /// absent when the texture came from the whole mask.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub filled_from_mask: Option<f64>,
+    /// The observed texels' seam ratio ([`picker_inpaint::known_seam_ratio`])
+    /// when it was high enough for a band across the wrap edges to be
+    /// inpainted ([`Options::heal_seams`]); absent otherwise.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub seam_band: Option<f64>,
     /// The photo has no colour ([`Prepared::greyscale`]): the extracted
     /// colours are grey.
     pub greyscale_photo: bool,
@@ -804,6 +816,7 @@ fn extract_as(
         texture_fallback: None,
         filled_from_mask: None,
         greyscale_photo: p.greyscale,
+        seam_band: None,
         timings_ms: Default::default(),
     };
     let mut texture = None;
@@ -1176,10 +1189,23 @@ fn extract_as(
                 }
             )));
         }
-        let inpaint = |t: &Image, known: &[bool]| {
+        let inpaint = |t: &Image, known: &[bool], band: &mut Option<f64>| {
+            // A band across the wrap edges where the observed sides differ:
+            // only for a rectified plane not folded, the one square whose
+            // edges are a crop of the photo's region. Wrapped UVs and a
+            // folded plane meet themselves at the edges by construction
+            // (a texture whose period ends on a strong edge, a brick's
+            // mortar, has a high seam ratio of its own).
+            let cropped = mode == UvMode::Plane;
+            let healed = (opts.tileable && opts.heal_seams && cropped)
+                .then(|| picker_inpaint::seam_band(t, known))
+                .flatten();
+            if healed.is_some() {
+                *band = picker_inpaint::known_seam_ratio(t, known);
+            }
             opts.inpainter.inpaint(
                 t,
-                known,
+                healed.as_deref().unwrap_or(known),
                 &InpaintOptions {
                     toroidal: opts.tileable,
                     seed: opts.seed,
@@ -1208,14 +1234,14 @@ fn extract_as(
                 let fraction =
                     c.known.iter().filter(|&&k| k).count() as f64 / c.known.len().max(1) as f64;
                 (
-                    inpaint(&c.texture, &c.known)?,
+                    inpaint(&c.texture, &c.known, &mut diag.seam_band)?,
                     c.texture,
                     c.coverage,
                     fraction,
                 )
             }
             None => (
-                inpaint(&r.texture, &r.known)?,
+                inpaint(&r.texture, &r.known, &mut diag.seam_band)?,
                 r.texture,
                 r.coverage,
                 known_fraction,
@@ -1789,6 +1815,7 @@ mod tests {
             fold_period: true,
             fill_from_mask: true,
             tileable: true,
+            heal_seams: true,
             seamless: false,
             seed: 1,
             inpainter: &inpainter,
@@ -1817,6 +1844,83 @@ mod tests {
         );
     }
 
+    /// A `w × h` photo of a frontal plane (normals and view vectors +z,
+    /// every pixel one material flagged textured) whose pixel `i` shows the
+    /// grey sRGB value `shown(i)`; the albedo is that value decoded, so the
+    /// de-lit colours are the albedo.
+    fn frontal_plane(w: usize, h: usize, shown: &dyn Fn(usize) -> f32) -> Prepared {
+        let plane = |c: usize, f: &dyn Fn(usize) -> f32| {
+            Image::new(c, h, w, (0..c * h * w).map(|k| f(k % (h * w))).collect()).unwrap()
+        };
+        let z = || {
+            let data = [0.0, 0.0, 1.0]
+                .iter()
+                .flat_map(|&v| vec![v; h * w])
+                .collect();
+            Image::new(3, h, w, data).unwrap()
+        };
+        let elements = ElementImages::new(
+            plane(3, &|i| picker_render::io::srgb_decode(shown(i))),
+            plane(3, &|_| 0.04),
+            plane(1, &|_| 0.5),
+            z(),
+            z(),
+            Some(plane(3, &|_| 1.0)),
+        )
+        .unwrap();
+        Prepared::new(Inputs {
+            photo: plane(3, shown),
+            elements,
+            segmentation: plane(3, &|_| 0.5),
+            embedding: None,
+            segmentation_estimated: false,
+            envmap: None,
+        })
+        .unwrap()
+    }
+
+    /// A frontal plane whose photo is a ramp with fine bars (a crop: its left
+    /// and right edges are two different places): the plane mode inpaints a
+    /// band across the wrap edges, and the texture tiles with a seam ratio
+    /// far below that of the texture that keeps its observed edges.
+    #[test]
+    fn a_rectified_crop_gets_its_seams_inpainted() {
+        let (h, w) = (64, 96);
+        let p = frontal_plane(w, h, &|i| {
+            let (x, y) = (i % w, i / w);
+            0.1 + 0.75 * x as f32 / w as f32 + if (x + y / 3) % 5 == 0 { 0.03 } else { 0.0 }
+        });
+        let pm = p.pick_mask([40, 30], &MaskOptions::default()).unwrap();
+        assert_eq!(pm.mask.count(), w * h);
+        let inpainter = picker_inpaint::PatchMatchInpainter::default();
+        let run = |heal_seams: bool| {
+            let opts = Options {
+                mask: MaskOptions::default(),
+                uv: UvChoice::Plane,
+                size: None,
+                max_size: 64,
+                fov_deg: Some(60.0),
+                line_refine: false,
+                fold_period: true,
+                fill_from_mask: true,
+                tileable: true,
+                heal_seams,
+                seamless: false,
+                seed: 1,
+                inpainter: &inpainter,
+            };
+            extract(&p, "ramp", Some([40, 30]), &pm, &opts).unwrap()
+        };
+        let (healed, diag) = run(true);
+        let (kept, kept_diag) = run(false);
+        assert!(diag
+            .seam_band
+            .is_some_and(|r| r > picker_inpaint::SEAM_BAND_MIN_RATIO));
+        assert!(kept_diag.seam_band.is_none());
+        let (a, b) = (healed.texture.unwrap().seam, kept.texture.unwrap().seam);
+        assert!(b.ratio > 2.0 && a.ratio < b.ratio / 2.0, "{b:?} -> {a:?}");
+    }
+
     /// A frontal chessboard (squares of 8 pixels, sRGB 0.9 and 0.15) whose
     /// mask is the whole board but whose surest part is the white squares
     /// only, as an embedding that follows the squares makes it: with the
@@ -1827,54 +1931,7 @@ mod tests {
     fn a_folded_chessboard_takes_its_black_squares_from_the_rest_of_the_mask() {
         let (h, w) = (96, 128);
         let white = |i: usize| ((i % w) / 8 + (i / w) / 8).is_multiple_of(2);
-        let shown = |i: usize| if white(i) { 0.9 } else { 0.15 };
-        let albedo = |i: usize| picker_render::io::srgb_decode(shown(i));
-        let photo = Image::new(
-            3,
-            h,
-            w,
-            (0..3 * h * w).map(|k| shown(k % (h * w))).collect(),
-        )
-        .unwrap();
-        let plane = |c: usize, f: &dyn Fn(usize) -> f32| {
-            Image::new(c, h, w, (0..c * h * w).map(|k| f(k % (h * w))).collect()).unwrap()
-        };
-        let elements = ElementImages::new(
-            plane(3, &albedo),
-            plane(3, &|_| 0.04),
-            plane(1, &|_| 0.5),
-            Image::new(
-                3,
-                h,
-                w,
-                [0.0, 0.0, 1.0]
-                    .iter()
-                    .flat_map(|&v| vec![v; h * w])
-                    .collect(),
-            )
-            .unwrap(),
-            Image::new(
-                3,
-                h,
-                w,
-                [0.0, 0.0, 1.0]
-                    .iter()
-                    .flat_map(|&v| vec![v; h * w])
-                    .collect(),
-            )
-            .unwrap(),
-            Some(plane(3, &|_| 1.0)),
-        )
-        .unwrap();
-        let p = Prepared::new(Inputs {
-            photo,
-            elements,
-            segmentation: plane(3, &|_| 0.5),
-            embedding: None,
-            segmentation_estimated: false,
-            envmap: None,
-        })
-        .unwrap();
+        let p = frontal_plane(w, h, &|i| if white(i) { 0.9 } else { 0.15 });
         let pm = PickMask {
             mask: Mask {
                 width: w,
@@ -1897,6 +1954,7 @@ mod tests {
                 fold_period,
                 fill_from_mask,
                 tileable: true,
+                heal_seams: true,
                 seamless: false,
                 seed: 1,
                 inpainter: &inpainter,
@@ -1955,6 +2013,7 @@ mod tests {
             fold_period: true,
             fill_from_mask: true,
             tileable: true,
+            heal_seams: true,
             seamless: false,
             seed: 1,
             inpainter: &inpainter,

@@ -51,7 +51,10 @@ pub use learned::LearnedInpainter;
 pub use metrics::{colour_stats_distance, psnr};
 pub use patchmatch::PatchMatchInpainter;
 pub use picker_render::io::Image;
-pub use seam::{make_seamless, periodic_component, seam_score, SeamScore, SEAMLESS_MIN_RATIO};
+pub use seam::{
+    known_seam_ratio, make_seamless, periodic_component, seam_band, seam_score, SeamScore,
+    SEAMLESS_MIN_RATIO, SEAM_BAND_FRACTION, SEAM_BAND_MIN_RATIO,
+};
 
 /// Options common to every [`Inpainter`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

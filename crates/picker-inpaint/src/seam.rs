@@ -169,6 +169,101 @@ pub fn make_seamless(img: Image) -> (Image, bool) {
     }
 }
 
+/// The seam ratio of the observed texels alone: the mean absolute
+/// difference across the wrap edges over the pairs whose texels are both
+/// `known`, against the mean difference between known neighbours inside
+/// (all channels). `None` when either has no pair. A texture square cut out
+/// of a photo meets itself at the wrap edges where the photo showed two
+/// different places; this tells, before inpainting, whether those places
+/// join as well as neighbouring texels do.
+///
+/// # Panics
+/// If `known` does not hold one flag per texel.
+pub fn known_seam_ratio(img: &Image, known: &[bool]) -> Option<f64> {
+    let (h, w) = (img.height, img.width);
+    assert_eq!(known.len(), h * w, "known_seam_ratio: one flag per texel");
+    let (mut wrap, mut nw) = (0.0f64, 0usize);
+    let (mut inside, mut ni) = (0.0f64, 0usize);
+    let mut pair = |a: usize, b: usize, across: bool| {
+        if !(known[a] && known[b]) {
+            return;
+        }
+        let d: f64 = (0..img.channels)
+            .map(|c| (img.plane(c)[a] - img.plane(c)[b]).abs() as f64)
+            .sum();
+        if across {
+            wrap += d;
+            nw += 1;
+        } else {
+            inside += d;
+            ni += 1;
+        }
+    };
+    for y in 0..h {
+        for x in 0..w {
+            let i = y * w + x;
+            if x + 1 < w {
+                pair(i, i + 1, false);
+            }
+            if y + 1 < h {
+                pair(i, i + w, false);
+            }
+        }
+        if w > 1 {
+            pair(y * w + w - 1, y * w, true);
+        }
+    }
+    if h > 1 {
+        for x in 0..w {
+            pair((h - 1) * w + x, x, true);
+        }
+    }
+    (nw > 0 && ni > 0 && inside > 0.0).then(|| (wrap / nw as f64) / (inside / ni as f64))
+}
+
+/// Observed seam ratio ([`known_seam_ratio`]) above which [`seam_band`]
+/// clears a band along the wrap edges for the inpainter: the same bound as
+/// [`SEAMLESS_MIN_RATIO`].
+pub const SEAM_BAND_MIN_RATIO: f64 = SEAMLESS_MIN_RATIO;
+
+/// Width of each half of [`seam_band`]'s band, as a fraction of the side
+/// (at least one texel).
+pub const SEAM_BAND_FRACTION: f64 = 1.0 / 32.0;
+
+/// The known flags of a texture square to inpaint so that it tiles: when its
+/// observed texels join worse across the wrap edges than inside
+/// ([`known_seam_ratio`] above [`SEAM_BAND_MIN_RATIO`]), `known` with the
+/// texels within [`SEAM_BAND_FRACTION`] of the side of either wrap edge
+/// (on both sides of it) cleared, so that a toroidal inpainter fills a
+/// band across each seam from the texture itself and the two sides join
+/// there; `None` otherwise (the observed edges join, or there is nothing to
+/// measure, or the band holds every known texel). The band's observed colours are lost: a seam an artist would
+/// have to hide by hand is traded for a band of the texture's own patches.
+///
+/// # Panics
+/// If `known` does not hold one flag per texel.
+pub fn seam_band(img: &Image, known: &[bool]) -> Option<Vec<bool>> {
+    let r = known_seam_ratio(img, known)?;
+    if r <= SEAM_BAND_MIN_RATIO {
+        return None;
+    }
+    let (h, w) = (img.height, img.width);
+    let bx = ((w as f64 * SEAM_BAND_FRACTION).round() as usize).max(1);
+    let by = ((h as f64 * SEAM_BAND_FRACTION).round() as usize).max(1);
+    let mut k = known.to_vec();
+    for y in 0..h {
+        for x in 0..w {
+            let near_x = w > 1 && (x < bx || x + bx >= w);
+            let near_y = h > 1 && (y < by || y + by >= h);
+            if near_x || near_y {
+                k[y * w + x] = false;
+            }
+        }
+    }
+    // Nothing left to inpaint from: keep the seam.
+    k.iter().any(|&b| b).then_some(k)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -271,5 +366,145 @@ mod tests {
             "{before:?} -> {after:?}"
         );
         assert!(after.ratio < before.ratio / 2.0, "{before:?} -> {after:?}");
+    }
+
+    /// The plain definition of [`known_seam_ratio`]: every pair listed,
+    /// then averaged.
+    fn known_seam_ratio_reference(img: &Image, known: &[bool]) -> Option<f64> {
+        let (h, w) = (img.height, img.width);
+        let d = |a: usize, b: usize| -> f64 {
+            (0..img.channels)
+                .map(|c| (img.plane(c)[a] - img.plane(c)[b]).abs() as f64)
+                .sum()
+        };
+        let (mut across, mut inside) = (Vec::new(), Vec::new());
+        for y in 0..h {
+            for x in 0..w {
+                let i = y * w + x;
+                let right = (y * w + (x + 1) % w, x + 1 == w);
+                let down = (((y + 1) % h) * w + x, y + 1 == h);
+                for (j, wraps) in [right, down] {
+                    // A side of one texel has no pair along it.
+                    if j == i {
+                        continue;
+                    }
+                    if known[i] && known[j] {
+                        if wraps {
+                            across.push(d(i, j))
+                        } else {
+                            inside.push(d(i, j))
+                        }
+                    }
+                }
+            }
+        }
+        let m = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+        (!across.is_empty() && !inside.is_empty() && m(&inside) > 0.0)
+            .then(|| m(&across) / m(&inside))
+    }
+
+    /// Seeded random textures and known masks on edge shapes: the ratio
+    /// equals the reference's.
+    #[test]
+    fn known_seam_ratio_matches_reference() {
+        for &(h, w) in &[(1, 1), (1, 6), (5, 1), (2, 2), (7, 9), (16, 12)] {
+            for k in 0..4u64 {
+                let u = image(3, h, w, |c, y, x| {
+                    noise(((k as usize * 7 + c) * 100 + y) * 100 + x)
+                });
+                let density = [1.0, 0.7, 0.3, 0.0][k as usize];
+                let known: Vec<bool> = (0..h * w)
+                    .map(|i| noise(i * 31 + k as usize * 1000 + 5) < density)
+                    .collect();
+                let (a, b) = (
+                    known_seam_ratio(&u, &known),
+                    known_seam_ratio_reference(&u, &known),
+                );
+                match (a, b) {
+                    (Some(a), Some(b)) => {
+                        assert!((a - b).abs() < 1e-9 * b.max(1.0), "{h}x{w} k{k}: {a} {b}")
+                    }
+                    (a, b) => assert_eq!(a.is_some(), b.is_some(), "{h}x{w} k{k}"),
+                }
+            }
+        }
+    }
+
+    /// A crop of a ramp (its edges two different places) gets a band along
+    /// both wrap edges cleared and nothing else; a texture that tiles, or
+    /// one whose wrap edges were not observed, gets none.
+    #[test]
+    fn seam_band_clears_the_edges_of_a_crop_only() {
+        let (h, w) = (48, 64);
+        let ramp = image(3, h, w, |c, y, x| {
+            0.2 + 0.5 * x as f32 / w as f32
+                + 0.2 * y as f32 / h as f32
+                + 0.02 * noise((c * 100 + y) * 100 + x)
+        });
+        let all = vec![true; h * w];
+        let band = seam_band(&ramp, &all).expect("a crop of a ramp has a seam");
+        let (bx, by) = (2, 2); // 64/32 and 48/32 rounded
+        for y in 0..h {
+            for x in 0..w {
+                let edge = x < bx || x + bx >= w || y < by || y + by >= h;
+                assert_eq!(band[y * w + x], !edge, "({x}, {y})");
+            }
+        }
+        // Unknown texels stay unknown.
+        let mut holes = all.clone();
+        holes[20 * w + 30] = false;
+        assert!(!seam_band(&ramp, &holes).unwrap()[20 * w + 30]);
+        // A texture that tiles: no band.
+        use std::f32::consts::TAU;
+        let tiles = image(3, h, w, |c, y, x| {
+            0.5 + 0.1 * noise((c * 100 + y) * 100 + x) + 0.2 * (TAU * x as f32 / w as f32).sin()
+        });
+        assert!(seam_band(&tiles, &all).is_none());
+        // The ramp with its wrap edges unobserved: nothing to measure.
+        let middle: Vec<bool> = (0..h * w)
+            .map(|i| (8..56).contains(&(i % w)) && (8..40).contains(&(i / w)))
+            .collect();
+        assert!(known_seam_ratio(&ramp, &middle).is_none());
+        assert!(seam_band(&ramp, &middle).is_none());
+        // Every known texel in the band: the seam is kept rather than nothing known.
+        let edges: Vec<bool> = (0..h * w).map(|i| i % w == 0 || i % w == w - 1).collect();
+        assert!(seam_band(&ramp, &edges).is_none());
+    }
+
+    /// A crop of a ramp inpainted (toroidal PatchMatch) with its seam band
+    /// cleared tiles with a seam ratio near that of the texture's inside;
+    /// inpainted with its observed edges kept, the seam stays.
+    #[test]
+    fn an_inpainted_seam_band_makes_a_crop_tile() {
+        use crate::{InpaintOptions, Inpainter, PatchMatchInpainter};
+        let (h, w) = (48, 48);
+        let crop = image(3, h, w, |c, y, x| {
+            let checks = if ((x + 1) / 3 + (y + 1) / 3) % 2 == 0 {
+                0.05
+            } else {
+                0.0
+            };
+            0.2 + 0.4 * x as f32 / w as f32 + checks + 0.03 * noise((c * 100 + y) * 100 + x)
+        });
+        let mut known = vec![true; h * w];
+        for y in 18..30 {
+            for x in 18..30 {
+                known[y * w + x] = false;
+            }
+        }
+        let opts = InpaintOptions {
+            toroidal: true,
+            seed: 3,
+            ..InpaintOptions::default()
+        };
+        let pm = PatchMatchInpainter::default();
+        let kept = seam_score(&pm.inpaint(&crop, &known, &opts).unwrap());
+        let band = seam_band(&crop, &known).expect("the ramp's crop has a seam");
+        let healed = seam_score(&pm.inpaint(&crop, &band, &opts).unwrap());
+        assert!(kept.ratio > 2.0, "{kept:?}");
+        assert!(
+            healed.ratio < 2.0 && healed.ratio < kept.ratio / 3.0,
+            "{kept:?} -> {healed:?}"
+        );
     }
 }
