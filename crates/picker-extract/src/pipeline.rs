@@ -1921,6 +1921,85 @@ mod tests {
         assert!(b.ratio > 2.0 && a.ratio < b.ratio / 2.0, "{b:?} -> {a:?}");
     }
 
+    /// The networks' UV mode's counterpart of the folded chessboard: wrapped
+    /// UVs whose square (64 pixels) holds 4 × 4 periods of a chessboard of
+    /// 8-pixel squares; the mask is the board, its surest part the white
+    /// squares and the black ones of the top-left quarter only (so that it
+    /// shows the period). The square repeats, and the black squares the
+    /// surest part did not show are filled from the rest of the mask; without
+    /// the fill they are left to the inpainter, which paints them white.
+    #[test]
+    fn repeating_uvs_take_the_unseen_squares_from_the_rest_of_the_mask() {
+        let (h, w) = (96, 128);
+        let white = |i: usize| ((i % w) / 8 + (i / w) / 8).is_multiple_of(2);
+        let mut p = frontal_plane(w, h, &|i| if white(i) { 0.9 } else { 0.15 });
+        let uv = |c: usize, i: usize| match c {
+            0 => ((i % w) as f32 + 0.5) / 64.0 % 1.0,
+            1 => ((i / w) as f32 + 0.5) / 64.0 % 1.0,
+            _ => 1.0,
+        };
+        p.inputs.elements.uv = Some(
+            Image::new(
+                3,
+                h,
+                w,
+                (0..3 * h * w)
+                    .map(|k| uv(k / (h * w), k % (h * w)))
+                    .collect(),
+            )
+            .unwrap(),
+        );
+        let pm = PickMask {
+            mask: Mask {
+                width: w,
+                height: h,
+                data: vec![true; w * h],
+            },
+            colour: [0.5; 3],
+            tolerance: 0.1,
+            sure: (0..w * h)
+                .map(|i| white(i) || (i % w < 32 && i / w < 32))
+                .collect(),
+        };
+        let inpainter = picker_inpaint::DiffusionInpainter::default();
+        let run = |fill_from_mask: bool| {
+            let opts = Options {
+                mask: MaskOptions::default(),
+                uv: UvChoice::Net,
+                size: Some(64),
+                max_size: 256,
+                fov_deg: None,
+                line_refine: false,
+                fold_period: true,
+                fill_from_mask,
+                tileable: true,
+                heal_seams: true,
+                seamless: false,
+                seed: 1,
+                inpainter: &inpainter,
+            };
+            let (m, diag) = extract(&p, "board", Some([4, 4]), &pm, &opts).unwrap();
+            let t = m.texture.expect("textured").texture;
+            let n = t.width * t.height;
+            let dark = (0..n).filter(|&i| t.rgb(i).x < 0.4).count() as f64 / n as f64;
+            (dark, diag)
+        };
+        let (dark, diag) = run(true);
+        assert!(
+            diag.uv.as_ref().unwrap().repeats.is_some(),
+            "the square repeats"
+        );
+        let filled = diag.filled_from_mask.expect("filled from the mask");
+        assert!(filled > 0.2, "filled {filled}");
+        assert!((0.35..0.6).contains(&dark), "dark share {dark}");
+        let (dark_without, diag) = run(false);
+        assert!(diag.filled_from_mask.is_none());
+        assert!(
+            dark_without < dark - 0.2,
+            "dark share without the fill {dark_without}"
+        );
+    }
+
     /// A frontal chessboard (squares of 8 pixels, sRGB 0.9 and 0.15) whose
     /// mask is the whole board but whose surest part is the white squares
     /// only, as an embedding that follows the squares makes it: with the
