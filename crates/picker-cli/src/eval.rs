@@ -111,6 +111,10 @@ pub struct Args {
     /// error costs the extraction. Needs the networks' working size to be the scene's.
     #[arg(long, value_enum, value_delimiter = ',', value_name = "PARTS")]
     pub truth: Vec<TruthPart>,
+    /// Long side of the networks' working resolution in pixels (as `extract --work-size`); with
+    /// --truth it must make the working size the scene's.
+    #[arg(long, default_value_t = 320, value_parser = clap::value_parser!(u32).range(8..=4096))]
+    pub work_size: u32,
 }
 
 /// One evaluated material.
@@ -377,8 +381,9 @@ fn with_truth(
     let (ww, wh) = (inputs.elements.width(), inputs.elements.height());
     if (ww, wh) != (w, h) {
         bail!(
-            "{}: --truth needs the networks' working size ({ww}x{wh}) to be the scene's ({w}x{h})",
-            dir.display()
+            "{}: --truth needs the networks' working size ({ww}x{wh}) to be the scene's ({w}x{h}): give --work-size {}",
+            dir.display(),
+            w.max(h)
         );
     }
     let el = &mut inputs.elements;
@@ -434,7 +439,7 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
     let photo_path = dir.join("image.png");
     let truth = ElementImages::load(dir)?;
     let inputs = if let Some(models) = models {
-        let est = crate::extract::infer_inputs(models, &photo_path, 320)?;
+        let est = crate::extract::infer_inputs(models, &photo_path, a.work_size)?;
         with_truth(est, &a.truth, &truth, dir, (w, h))?
     } else {
         let env_path = dir.join("envmap.exr");
@@ -778,6 +783,7 @@ pub fn run(a: Args) -> Result<()> {
             "format": "material-picker-eval", "format_version": 1,
             "dir": a.dir.display().to_string(),
             "elements": if models.is_none() { "ground truth" } else { "networks" },
+            "work_size": models.as_ref().map(|_| a.work_size),
             "truth": &a.truth,
             "weights": models.as_ref().map(|m| m.paths().iter().map(|p| p.display().to_string()).collect::<Vec<_>>()),
             "min_area": a.min_area, "aggregate": agg, "rows": rows,

@@ -278,9 +278,10 @@ fn eval_masks_only_scores_the_same_masks_without_textures() {
 }
 
 /// `picker eval --truth` with every part from the ground truth scores each
-/// material exactly as the ground-truth evaluation does; the segmentation
-/// alone gives the ground truth's masks; without networks, or with a
-/// working size that is not the scene's, it is refused.
+/// material exactly as the ground-truth evaluation does (at any scene size,
+/// with `--work-size` the scene's); the segmentation alone gives the ground
+/// truth's masks; without networks, or with a working size that is not the
+/// scene's, it is refused.
 #[test]
 fn eval_truth_parts_replace_the_networks_estimate() {
     let tmp = tempfile::tempdir().unwrap();
@@ -330,9 +331,18 @@ fn eval_truth_parts_replace_the_networks_estimate() {
     assert!(!e.status.success());
     let err = String::from_utf8_lossy(&e.stderr);
     assert!(
-        err.contains("working size (320x240)") && err.contains("(160x120)"),
+        err.contains("working size (320x240)") && err.contains("(160x120): give --work-size 160"),
         "{err}"
     );
+    // At the scene's size it runs, and every part from the truth is the truth's row again.
+    let (_, gt) = eval_report(&small, &[], &tmp.path().join("small-truth.json"));
+    let (_, sw) = eval_report(
+        &small,
+        &[w[0], w[1], "--work-size", "160", "--truth", all],
+        &tmp.path().join("small-all.json"),
+    );
+    assert_eq!(sw["work_size"], 160);
+    assert_eq!(rows(&gt), rows(&sw));
 }
 
 /// Compares two images value by value (8-bit PNGs: ±1 code value).
