@@ -1921,6 +1921,56 @@ mod tests {
         assert!(b.ratio > 2.0 && a.ratio < b.ratio / 2.0, "{b:?} -> {a:?}");
     }
 
+    /// A mask of the whole `w × h` image whose surest part is `sure`.
+    fn whole_mask(w: usize, h: usize, sure: &dyn Fn(usize) -> bool) -> PickMask {
+        PickMask {
+            mask: Mask {
+                width: w,
+                height: h,
+                data: vec![true; w * h],
+            },
+            colour: [0.5; 3],
+            tolerance: 0.1,
+            sure: (0..w * h).map(sure).collect(),
+        }
+    }
+
+    /// The extraction of `pm` in `p` (diffusion inpainting, seed 1,
+    /// tileable) with `uv`, `size`, `fov_deg`, `fold_period` and
+    /// `fill_from_mask`: the share of its texture's texels darker than 0.4
+    /// (linear red) and the diagnostics.
+    fn dark_share(
+        p: &Prepared,
+        pm: &PickMask,
+        uv: UvChoice,
+        size: Option<usize>,
+        fov_deg: Option<f32>,
+        fold_period: bool,
+        fill_from_mask: bool,
+    ) -> (f64, Diagnostics) {
+        let inpainter = picker_inpaint::DiffusionInpainter::default();
+        let opts = Options {
+            mask: MaskOptions::default(),
+            uv,
+            size,
+            max_size: 256,
+            fov_deg,
+            line_refine: false,
+            fold_period,
+            fill_from_mask,
+            tileable: true,
+            heal_seams: true,
+            seamless: false,
+            seed: 1,
+            inpainter: &inpainter,
+        };
+        let (m, diag) = extract(p, "board", Some([4, 4]), pm, &opts).unwrap();
+        let t = m.texture.expect("textured").texture;
+        let n = t.width * t.height;
+        let dark = (0..n).filter(|&i| t.rgb(i).x < 0.4).count() as f64 / n as f64;
+        (dark, diag)
+    }
+
     /// The networks' UV mode's counterpart of the folded chessboard: wrapped
     /// UVs whose square (64 pixels) holds 4 × 4 periods of a chessboard of
     /// 8-pixel squares; the mask is the board, its surest part the white
@@ -1949,41 +1999,8 @@ mod tests {
             )
             .unwrap(),
         );
-        let pm = PickMask {
-            mask: Mask {
-                width: w,
-                height: h,
-                data: vec![true; w * h],
-            },
-            colour: [0.5; 3],
-            tolerance: 0.1,
-            sure: (0..w * h)
-                .map(|i| white(i) || (i % w < 32 && i / w < 32))
-                .collect(),
-        };
-        let inpainter = picker_inpaint::DiffusionInpainter::default();
-        let run = |fill_from_mask: bool| {
-            let opts = Options {
-                mask: MaskOptions::default(),
-                uv: UvChoice::Net,
-                size: Some(64),
-                max_size: 256,
-                fov_deg: None,
-                line_refine: false,
-                fold_period: true,
-                fill_from_mask,
-                tileable: true,
-                heal_seams: true,
-                seamless: false,
-                seed: 1,
-                inpainter: &inpainter,
-            };
-            let (m, diag) = extract(&p, "board", Some([4, 4]), &pm, &opts).unwrap();
-            let t = m.texture.expect("textured").texture;
-            let n = t.width * t.height;
-            let dark = (0..n).filter(|&i| t.rgb(i).x < 0.4).count() as f64 / n as f64;
-            (dark, diag)
-        };
+        let pm = whole_mask(w, h, &|i| white(i) || (i % w < 32 && i / w < 32));
+        let run = |fill| dark_share(&p, &pm, UvChoice::Net, Some(64), None, true, fill);
         let (dark, diag) = run(true);
         assert!(
             diag.uv.as_ref().unwrap().repeats.is_some(),
@@ -2011,39 +2028,8 @@ mod tests {
         let (h, w) = (96, 128);
         let white = |i: usize| ((i % w) / 8 + (i / w) / 8).is_multiple_of(2);
         let p = frontal_plane(w, h, &|i| if white(i) { 0.9 } else { 0.15 });
-        let pm = PickMask {
-            mask: Mask {
-                width: w,
-                height: h,
-                data: vec![true; w * h],
-            },
-            colour: [0.5; 3],
-            tolerance: 0.1,
-            sure: (0..w * h).map(white).collect(),
-        };
-        let inpainter = picker_inpaint::DiffusionInpainter::default();
-        let run = |fold_period: bool, fill_from_mask: bool| {
-            let opts = Options {
-                mask: MaskOptions::default(),
-                uv: UvChoice::Plane,
-                size: None,
-                max_size: 256,
-                fov_deg: Some(60.0),
-                line_refine: false,
-                fold_period,
-                fill_from_mask,
-                tileable: true,
-                heal_seams: true,
-                seamless: false,
-                seed: 1,
-                inpainter: &inpainter,
-            };
-            let (m, diag) = extract(&p, "board", Some([4, 4]), &pm, &opts).unwrap();
-            let t = m.texture.expect("textured").texture;
-            let n = t.width * t.height;
-            let dark = (0..n).filter(|&i| t.rgb(i).x < 0.4).count() as f64 / n as f64;
-            (dark, diag)
-        };
+        let pm = whole_mask(w, h, &white);
+        let run = |fold, fill| dark_share(&p, &pm, UvChoice::Plane, None, Some(60.0), fold, fill);
         let (dark, diag) = run(true, true);
         assert!(
             diag.uv.as_ref().unwrap().period.is_some(),
