@@ -1508,6 +1508,27 @@ fn preview_sphere_reference(m: &Material, env: &EnvMap, size: usize, repeats: f3
 mod tests {
     use super::*;
 
+    /// The options the tests start from: `uv`, automatic size capped at 256,
+    /// no `--fov`, no line refinement, fold and fill and seam band on,
+    /// tileable, seed 1, with `inpainter`.
+    fn test_options(inpainter: &dyn Inpainter, uv: UvChoice) -> Options<'_> {
+        Options {
+            mask: MaskOptions::default(),
+            uv,
+            size: None,
+            max_size: 256,
+            fov_deg: None,
+            line_refine: false,
+            fold_period: true,
+            fill_from_mask: true,
+            tileable: true,
+            heal_seams: true,
+            seamless: false,
+            seed: 1,
+            inpainter,
+        }
+    }
+
     #[test]
     fn cell_under_maps_centres_both_ways() {
         for (small, big) in [
@@ -1805,21 +1826,7 @@ mod tests {
         let p = unreprojectable();
         let pm = p.pick_mask([16, 12], &MaskOptions::default()).unwrap();
         let inpainter = picker_inpaint::DiffusionInpainter::default();
-        let opts = |uv| Options {
-            mask: MaskOptions::default(),
-            uv,
-            size: None,
-            max_size: 256,
-            fov_deg: None,
-            line_refine: false,
-            fold_period: true,
-            fill_from_mask: true,
-            tileable: true,
-            heal_seams: true,
-            seamless: false,
-            seed: 1,
-            inpainter: &inpainter,
-        };
+        let opts = |uv| test_options(&inpainter, uv);
         let (m, diag) = extract(&p, "m", Some([16, 12]), &pm, &opts(UvChoice::Auto)).unwrap();
         assert!(!m.textured && m.texture.is_none());
         assert!(diag.textured_flag >= conv::TEXTURED_THRESHOLD);
@@ -1895,19 +1902,10 @@ mod tests {
         let inpainter = picker_inpaint::PatchMatchInpainter::default();
         let run = |heal_seams: bool| {
             let opts = Options {
-                mask: MaskOptions::default(),
-                uv: UvChoice::Plane,
-                size: None,
                 max_size: 64,
                 fov_deg: Some(60.0),
-                line_refine: false,
-                fold_period: true,
-                fill_from_mask: true,
-                tileable: true,
                 heal_seams,
-                seamless: false,
-                seed: 1,
-                inpainter: &inpainter,
+                ..test_options(&inpainter, UvChoice::Plane)
             };
             extract(&p, "ramp", Some([40, 30]), &pm, &opts).unwrap()
         };
@@ -1950,19 +1948,11 @@ mod tests {
     ) -> (f64, Diagnostics) {
         let inpainter = picker_inpaint::DiffusionInpainter::default();
         let opts = Options {
-            mask: MaskOptions::default(),
-            uv,
             size,
-            max_size: 256,
             fov_deg,
-            line_refine: false,
             fold_period,
             fill_from_mask,
-            tileable: true,
-            heal_seams: true,
-            seamless: false,
-            seed: 1,
-            inpainter: &inpainter,
+            ..test_options(&inpainter, uv)
         };
         let (m, diag) = extract(p, "board", Some([4, 4]), pm, &opts).unwrap();
         let t = m.texture.expect("textured").texture;
@@ -2069,19 +2059,8 @@ mod tests {
         };
         let inpainter = picker_inpaint::DiffusionInpainter::default();
         let opts = Options {
-            mask: MaskOptions::default(),
-            uv: UvChoice::Auto,
-            size: None,
             max_size: 64,
-            fov_deg: None,
-            line_refine: false,
-            fold_period: true,
-            fill_from_mask: true,
-            tileable: true,
-            heal_seams: true,
-            seamless: false,
-            seed: 1,
-            inpainter: &inpainter,
+            ..test_options(&inpainter, UvChoice::Auto)
         };
         let p = Prepared::new(inputs.clone()).unwrap();
         assert!(p.greyscale);
