@@ -167,6 +167,12 @@ pub struct Row {
     uv_repeats: Option<[usize; 2]>,
     /// Networks' UV mode: share of the square filled from another repeat.
     repeat_filled: Option<f64>,
+    /// Share of the texture's texels filled from the rest of the mask
+    /// (`diagnostics.filled_from_mask`), when it was.
+    mask_filled: Option<f64>,
+    /// The observed seam ratio when a band across the wrap edges was
+    /// inpainted (`diagnostics.seam_band`).
+    seam_band: Option<f64>,
 }
 
 fn scene_dirs(dir: &Path) -> Result<Vec<PathBuf>> {
@@ -559,6 +565,8 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
             folded: None,
             uv_repeats: None,
             repeat_filled: None,
+            mask_filled: None,
+            seam_band: None,
         };
         let Some((mat, diag)) = extracted else {
             rows.push(row);
@@ -577,6 +585,8 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
             .map(|f| f.periods_per_tile);
         row.uv_repeats = diag.uv.as_ref().and_then(|u| u.repeats).map(|r| r.repeats);
         row.repeat_filled = diag.uv.as_ref().and_then(|u| u.repeats).map(|r| r.filled);
+        row.mask_filled = diag.filled_from_mask;
+        row.seam_band = diag.seam_band;
         if let Some(uv) = diag.uv.as_ref().filter(|u| u.mode == UvMode::Plane) {
             // The true plane at the pick (the same rule as the extraction's:
             // a material of several planes is rectified from the one picked),
@@ -770,6 +780,8 @@ pub fn run(a: Args) -> Result<()> {
         "plane_rows": rows.iter().filter(|r| r.plane_error_deg.is_some()).count(),
         "folded_rows": rows.iter().filter(|r| r.folded.is_some()).count(),
         "uv_repeat_rows": rows.iter().filter(|r| r.uv_repeats.is_some()).count(),
+        "mask_filled_rows": rows.iter().filter(|r| r.mask_filled.is_some()).count(),
+        "seam_band_rows": rows.iter().filter(|r| r.seam_band.is_some()).count(),
         "mean_plane_predicted_error_deg": mean(rows.iter().filter_map(|r| r.plane_predicted_error_deg)),
         "mean_plane_error_deg": mean(rows.iter().filter_map(|r| r.plane_error_deg)),
         "median_plane_error_deg": median(rows.iter().filter_map(|r| r.plane_error_deg).collect()),

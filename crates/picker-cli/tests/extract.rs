@@ -303,6 +303,16 @@ fn eval_truth_parts_replace_the_networks_estimate() {
     );
     let (_, nets) = eval_report(&scenes, &w, &tmp.path().join("nets.json"));
     assert_eq!(swapped["truth"].as_array().unwrap().len(), 7);
+    // The rows' fill and seam-band figures and their aggregate counts agree.
+    for key in ["mask_filled", "seam_band"] {
+        let n = nets["rows"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|r| !r[key].is_null())
+            .count();
+        assert_eq!(nets["aggregate"][format!("{key}_rows")], n, "{key}");
+    }
     let rows = |v: &Value| v["rows"].as_array().unwrap().clone();
     let (t, a, s, n) = (rows(&truth), rows(&swapped), rows(&seg), rows(&nets));
     assert!(!t.is_empty() && t.len() == a.len() && t.len() == s.len());
