@@ -157,8 +157,12 @@ pub struct Options<'a> {
     /// photo's region, or a tile of a measured period): when the observed
     /// texels join worse across the wrap edges than inside
     /// ([`picker_inpaint::seam_band`]), inpaint a band across each wrap edge
-    /// as well, so that the texture tiles without a visible seam. Wrapped
-    /// UVs join at the edges by construction and are left alone.
+    /// as well, so that the texture tiles without a visible seam; when they
+    /// cannot tell (no edge has both sides observed) and the inpainted
+    /// texture's seam ratio is above [`picker_inpaint::SEAM_BAND_MIN_RATIO`],
+    /// inpaint again with the band cleared and keep that when it tiles
+    /// better. Wrapped UVs join at the edges by construction and are left
+    /// alone.
     pub heal_seams: bool,
     /// Also remove colour jumps across the wrap edges when they show (see
     /// [`make_seamless`]); only with `tileable`. Off by default: on synthetic
@@ -605,9 +609,10 @@ pub struct Diagnostics {
     /// the fill was off.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub filled_from_mask: Option<f64>,
-    /// The observed texels' seam ratio ([`picker_inpaint::known_seam_ratio`])
-    /// when it was high enough for a band across the wrap edges to be
-    /// inpainted ([`Options::heal_seams`]); absent otherwise.
+    /// The seam ratio for which a band across the wrap edges was inpainted
+    /// ([`Options::heal_seams`]): the observed texels'
+    /// ([`picker_inpaint::known_seam_ratio`]), or, when they could not tell,
+    /// the first inpainted texture's; absent when no band was.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub seam_band: Option<f64>,
     /// The photo has no colour ([`Prepared::greyscale`]): the extracted
@@ -1190,30 +1195,50 @@ fn extract_as(
                 }
             )));
         }
-        let inpaint = |t: &Image, known: &[bool], band: &mut Option<f64>| {
-            // A band across the wrap edges where the observed sides differ:
-            // only for a rectified plane, whose square is a crop of the
-            // photo's region (folded, its tile's sides meet only as well as
-            // the measured period is right). Wrapped UVs meet themselves at
-            // the edges by construction (a texture whose period ends on a
-            // strong edge, a brick's mortar, has a high seam ratio of its
-            // own: banding them cost 0.5–0.7 dB with ground-truth UVs).
-            let healed = (opts.tileable && opts.heal_seams && mode == UvMode::Plane)
-                .then(|| picker_inpaint::seam_band(t, known))
-                .flatten();
-            if healed.is_some() {
-                *band = picker_inpaint::known_seam_ratio(t, known);
-            }
-            opts.inpainter.inpaint(
-                t,
-                healed.as_deref().unwrap_or(known),
-                &InpaintOptions {
+        let inpaint =
+            |t: &Image, known: &[bool], band: &mut Option<f64>| -> picker_inpaint::Result<Image> {
+                // A band across the wrap edges where the observed sides differ:
+                // only for a rectified plane, whose square is a crop of the
+                // photo's region (folded, its tile's sides meet only as well as
+                // the measured period is right). Wrapped UVs meet themselves at
+                // the edges by construction (a texture whose period ends on a
+                // strong edge, a brick's mortar, has a high seam ratio of its
+                // own: banding them cost 0.5–0.7 dB with ground-truth UVs).
+                let heal = opts.tileable && opts.heal_seams && mode == UvMode::Plane;
+                let healed = heal.then(|| picker_inpaint::seam_band(t, known)).flatten();
+                if healed.is_some() {
+                    *band = picker_inpaint::known_seam_ratio(t, known);
+                }
+                let io = InpaintOptions {
                     toroidal: opts.tileable,
                     seed: opts.seed,
                     ..InpaintOptions::default()
-                },
-            )
-        };
+                };
+                let out = opts
+                    .inpainter
+                    .inpaint(t, healed.as_deref().unwrap_or(known), &io)?;
+                if !heal || healed.is_some() {
+                    return Ok(out);
+                }
+                // The observed texels could not tell (an edge whose other side
+                // was not observed) and the inpainted square still shows its
+                // seams: inpainted again with the band cleared, kept when it
+                // tiles better.
+                let first = picker_inpaint::seam_score(&out).ratio;
+                if first <= picker_inpaint::SEAM_BAND_MIN_RATIO {
+                    return Ok(out);
+                }
+                let Some(k) = picker_inpaint::clear_seam_band(known, t.width, t.height) else {
+                    return Ok(out);
+                };
+                let again = opts.inpainter.inpaint(t, &k, &io)?;
+                if picker_inpaint::seam_score(&again).ratio < first {
+                    *band = Some(first);
+                    Ok(again)
+                } else {
+                    Ok(out)
+                }
+            };
         // What the report and coverage.png show as observed: the
         // reprojection, with the texels filled from other repeats (at the
         // tile's coverage there) when the square repeats.
@@ -2006,6 +2031,50 @@ mod tests {
             dark_without < dark - 0.2,
             "dark share without the fill {dark_without}"
         );
+    }
+
+    /// A diagonal strip of a ramp (a table seen along its length): no wrap
+    /// edge has both sides observed, so the observed texels cannot tell the
+    /// seam; the first inpainting shows it (ratio ~20), and the square is
+    /// inpainted again with the band cleared, which tiles (ratio ~1).
+    #[test]
+    fn a_strip_whose_edges_were_not_both_observed_gets_a_second_look() {
+        let (h, w) = (96, 96);
+        let p = frontal_plane(w, h, &|i| {
+            let (x, y) = ((i % w) as f32, (i / w) as f32);
+            let n =
+                ((i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 40) as f32 / (1u64 << 24) as f32;
+            0.1 + 0.8 * (x + y) / (w + h) as f32 + 0.01 * n
+        });
+        let strip = |i: usize| ((i % w) as i64 - (i / w) as i64).abs() < 14;
+        let pm = whole_mask(w, h, &strip);
+        let pm = PickMask {
+            mask: Mask {
+                data: (0..w * h).map(strip).collect(),
+                ..pm.mask
+            },
+            ..pm
+        };
+        let inpainter = picker_inpaint::PatchMatchInpainter::default();
+        let run = |heal_seams: bool| {
+            let opts = Options {
+                max_size: 64,
+                fov_deg: Some(60.0),
+                heal_seams,
+                ..test_options(&inpainter, UvChoice::Plane)
+            };
+            extract(&p, "strip", Some([48, 48]), &pm, &opts).unwrap()
+        };
+        let (kept, kept_diag) = run(false);
+        let (healed, diag) = run(true);
+        assert!(kept_diag.seam_band.is_none());
+        let first = diag.seam_band.expect("a second look");
+        let (a, b) = (healed.texture.unwrap().seam, kept.texture.unwrap().seam);
+        assert!(
+            (first - b.ratio).abs() < 1e-9,
+            "the first look is the kept texture: {first} {b:?}"
+        );
+        assert!(b.ratio > 5.0 && a.ratio < 2.0, "{b:?} -> {a:?}");
     }
 
     /// A frontal chessboard (squares of 8 pixels, sRGB 0.9 and 0.15) whose

@@ -52,8 +52,8 @@ pub use metrics::{colour_stats_distance, psnr};
 pub use patchmatch::PatchMatchInpainter;
 pub use picker_render::io::Image;
 pub use seam::{
-    known_seam_ratio, make_seamless, periodic_component, seam_band, seam_score, SeamScore,
-    SEAMLESS_MIN_RATIO, SEAM_BAND_FRACTION, SEAM_BAND_MIN_RATIO,
+    clear_seam_band, known_seam_ratio, make_seamless, periodic_component, seam_band, seam_score,
+    SeamScore, SEAMLESS_MIN_RATIO, SEAM_BAND_FRACTION, SEAM_BAND_MIN_RATIO,
 };
 
 /// Options common to every [`Inpainter`].

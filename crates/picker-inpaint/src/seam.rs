@@ -247,7 +247,18 @@ pub fn seam_band(img: &Image, known: &[bool]) -> Option<Vec<bool>> {
     if r <= SEAM_BAND_MIN_RATIO {
         return None;
     }
-    let (h, w) = (img.height, img.width);
+    clear_seam_band(known, img.width, img.height)
+}
+
+/// `known` (a `w × h` square) with the texels within [`SEAM_BAND_FRACTION`]
+/// of the side of either wrap edge cleared, whatever the seam looks like
+/// ([`seam_band`] decides from the observed texels); `None` when that
+/// leaves no texel known.
+///
+/// # Panics
+/// If `known` does not hold `w·h` flags.
+pub fn clear_seam_band(known: &[bool], w: usize, h: usize) -> Option<Vec<bool>> {
+    assert_eq!(known.len(), w * h, "clear_seam_band: one flag per texel");
     let bx = ((w as f64 * SEAM_BAND_FRACTION).round() as usize).max(1);
     let by = ((h as f64 * SEAM_BAND_FRACTION).round() as usize).max(1);
     let mut k = known.to_vec();
@@ -469,6 +480,10 @@ mod tests {
         // Every known texel in the band: the seam is kept rather than nothing known.
         let edges: Vec<bool> = (0..h * w).map(|i| i % w == 0 || i % w == w - 1).collect();
         assert!(seam_band(&ramp, &edges).is_none());
+        assert!(clear_seam_band(&edges, w, h).is_none());
+        // Clearing alone is the same band, whatever the texels show.
+        assert_eq!(clear_seam_band(&all, w, h), Some(band.clone()));
+        assert_eq!(clear_seam_band(&all, w, h), seam_band(&ramp, &all));
     }
 
     /// A crop of a ramp inpainted (toroidal PatchMatch) with its seam band
