@@ -1071,6 +1071,24 @@ fn extract_as(
         // The observed density, measured once: the coordinates keep it
         // unless the plane mode folds them.
         let sizing_area = coords.sizing_area(&full.data);
+        // The networks' UVs of the rest of the mask, upsampled within the
+        // whole mask (its pixels lie outside the surest part the texture's
+        // UVs were upsampled in); made when first needed.
+        let rest_uv = std::cell::OnceCell::new();
+        let rest_uv = || -> Option<&Coords> {
+            let (rest, uv) = (rest_full.as_ref()?, el.uv.as_ref()?);
+            Some(rest_uv.get_or_init(|| {
+                let wf: Vec<f32> = whole_mw.iter().map(|&b| b as u8 as f32).collect();
+                let up = resample::upsample_uv_where(uv, &wf, fw, fh, &rest.data);
+                Coords {
+                    width: fw,
+                    height: fh,
+                    u: up.plane(0).to_vec(),
+                    v: up.plane(1).to_vec(),
+                    wrap: true,
+                }
+            }))
+        };
         let (coords, fold, mut uv_fold) = if opts.fold_period {
             let probe = reproject::texture_size(sizing_area, observed_cap);
             match mode {
@@ -1109,13 +1127,29 @@ fn extract_as(
                     }
                 }
                 UvMode::Net => {
-                    let r = crate::period::fold_uv_if_periodic(
+                    let mut r = crate::period::fold_uv_if_periodic(
                         &coords,
                         &full.data,
                         &delit,
                         &confidence,
                         probe,
                     );
+                    // No repeats in the texture's pixels: looked for again
+                    // with the rest of the mask, as the plane mode does.
+                    if let (None, Some(rest), Some(ru)) = (&r, &rest_full, rest_uv()) {
+                        let mut both = coords.clone();
+                        let mut seen = full.data.clone();
+                        for (i, _) in rest.data.iter().enumerate().filter(|(_, &b)| b) {
+                            (both.u[i], both.v[i], seen[i]) = (ru.u[i], ru.v[i], true);
+                        }
+                        r = crate::period::fold_uv_if_periodic(
+                            &both,
+                            &seen,
+                            &delit,
+                            &confidence,
+                            probe,
+                        );
+                    }
                     (coords, None, r)
                 }
             }
@@ -1162,24 +1196,11 @@ fn extract_as(
         // (`Options::fill_from_mask`).
         let rest = match (mode, &rest_full) {
             (UvMode::Plane, _) if fold.is_some() => plane_rest.as_ref().map(|m| (m, None)),
-            (UvMode::Net, Some(rest)) if uv_fold.is_some() => el.uv.as_ref().map(|uv| {
-                // The UVs upsampled within the whole mask: its rest lies
-                // outside the surest part the texture's UVs were upsampled in.
-                let wf: Vec<f32> = whole_mw.iter().map(|&b| b as u8 as f32).collect();
-                let up = resample::upsample_uv_where(uv, &wf, fw, fh, &rest.data);
-                let c = Coords {
-                    width: fw,
-                    height: fh,
-                    u: up.plane(0).to_vec(),
-                    v: up.plane(1).to_vec(),
-                    wrap: true,
-                };
-                (rest, Some(c))
-            }),
+            (UvMode::Net, Some(rest)) if uv_fold.is_some() => rest_uv().map(|c| (rest, Some(c))),
             _ => None,
         };
         if let Some((rest, rest_coords)) = rest {
-            let c = rest_coords.as_ref().unwrap_or(&coords);
+            let c = rest_coords.unwrap_or(&coords);
             let o = reproject::reproject(c, &rest.data, &delit, &confidence, size);
             let n = reproject::fill_unknown_from(&mut r, &o);
             diag.filled_from_mask = Some(n as f64 / r.known.len().max(1) as f64);
@@ -1990,8 +2011,9 @@ mod tests {
     /// The networks' UV mode's counterpart of the folded chessboard: wrapped
     /// UVs whose square (64 pixels) holds 4 × 4 periods of a chessboard of
     /// 8-pixel squares; the mask is the board, its surest part the white
-    /// squares and the black ones of the top-left quarter only (so that it
-    /// shows the period). The square repeats, and the black squares the
+    /// squares, with or without the black ones of the top-left quarter (with
+    /// them it shows the period; without, the repeats are found with the
+    /// rest of the mask). The square repeats, and the black squares the
     /// surest part did not show are filled from the rest of the mask; without
     /// the fill they are left to the inpainter, which paints them white.
     #[test]
@@ -2015,22 +2037,31 @@ mod tests {
             )
             .unwrap(),
         );
-        let pm = whole_mask(w, h, &|i| white(i) || (i % w < 32 && i / w < 32));
-        let run = |fill| dark_share(&p, &pm, UvChoice::Net, Some(64), None, true, fill);
-        let (dark, diag) = run(true);
-        assert!(
-            diag.uv.as_ref().unwrap().repeats.is_some(),
-            "the square repeats"
-        );
-        let filled = diag.filled_from_mask.expect("filled from the mask");
-        assert!(filled > 0.2, "filled {filled}");
-        assert!((0.35..0.6).contains(&dark), "dark share {dark}");
-        let (dark_without, diag) = run(false);
-        assert!(diag.filled_from_mask.is_none());
-        assert!(
-            dark_without < dark - 0.2,
-            "dark share without the fill {dark_without}"
-        );
+        // The surest part shows the period (black squares in its top-left
+        // quarter), or does not (white squares only: the repeats are then
+        // found with the rest of the mask).
+        for quarter in [true, false] {
+            let pm = whole_mask(w, h, &|i| white(i) || (quarter && i % w < 32 && i / w < 32));
+            let run = |fill| dark_share(&p, &pm, UvChoice::Net, Some(64), None, true, fill);
+            let (dark, diag) = run(true);
+            assert!(
+                diag.uv.as_ref().unwrap().repeats.is_some(),
+                "quarter {quarter}: the square repeats"
+            );
+            let filled = diag.filled_from_mask.expect("filled from the mask");
+            assert!(filled > 0.2, "quarter {quarter}: filled {filled}");
+            assert!(
+                (0.35..0.6).contains(&dark),
+                "quarter {quarter}: dark share {dark}"
+            );
+            let (dark_without, diag) = run(false);
+            assert!(diag.filled_from_mask.is_none());
+            assert_eq!(diag.uv.as_ref().unwrap().repeats.is_some(), quarter);
+            assert!(
+                dark_without < dark - 0.2,
+                "quarter {quarter}: dark share without the fill {dark_without}"
+            );
+        }
     }
 
     /// A diagonal strip of a ramp (a table seen along its length): no wrap
