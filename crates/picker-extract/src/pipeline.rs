@@ -1946,16 +1946,7 @@ mod tests {
         });
         let pm = p.pick_mask([40, 30], &MaskOptions::default()).unwrap();
         assert_eq!(pm.mask.count(), w * h);
-        let inpainter = picker_inpaint::PatchMatchInpainter::default();
-        let run = |heal_seams: bool| {
-            let opts = Options {
-                max_size: 64,
-                fov_deg: Some(60.0),
-                heal_seams,
-                ..test_options(&inpainter, UvChoice::Plane)
-            };
-            extract(&p, "ramp", Some([40, 30]), &pm, &opts).unwrap()
-        };
+        let run = |heal_seams| plane_crop(&p, &pm, [40, 30], heal_seams);
         let (healed, diag) = run(true);
         let (kept, kept_diag) = run(false);
         assert!(diag
@@ -1968,16 +1959,44 @@ mod tests {
 
     /// A mask of the whole `w × h` image whose surest part is `sure`.
     fn whole_mask(w: usize, h: usize, sure: &dyn Fn(usize) -> bool) -> PickMask {
+        mask_of(w, h, &|_| true, sure)
+    }
+
+    /// The pick mask `mask` of a `w × h` image with the surest part `sure`.
+    fn mask_of(
+        w: usize,
+        h: usize,
+        mask: &dyn Fn(usize) -> bool,
+        sure: &dyn Fn(usize) -> bool,
+    ) -> PickMask {
         PickMask {
             mask: Mask {
                 width: w,
                 height: h,
-                data: vec![true; w * h],
+                data: (0..w * h).map(mask).collect(),
             },
             colour: [0.5; 3],
             tolerance: 0.1,
             sure: (0..w * h).map(sure).collect(),
         }
+    }
+
+    /// The plane-mode extraction of `pm` in `p` at `pick` (PatchMatch, sides
+    /// up to 64, a 60° field of view), with or without the seam band.
+    fn plane_crop(
+        p: &Prepared,
+        pm: &PickMask,
+        pick: [u32; 2],
+        heal_seams: bool,
+    ) -> (Material, Diagnostics) {
+        let inpainter = picker_inpaint::PatchMatchInpainter::default();
+        let opts = Options {
+            max_size: 64,
+            fov_deg: Some(60.0),
+            heal_seams,
+            ..test_options(&inpainter, UvChoice::Plane)
+        };
+        extract(p, "crop", Some(pick), pm, &opts).unwrap()
     }
 
     /// The extraction of `pm` in `p` (diffusion inpainting, seed 1,
@@ -2078,24 +2097,8 @@ mod tests {
             0.1 + 0.8 * (x + y) / (w + h) as f32 + 0.01 * n
         });
         let strip = |i: usize| ((i % w) as i64 - (i / w) as i64).abs() < 14;
-        let pm = whole_mask(w, h, &strip);
-        let pm = PickMask {
-            mask: Mask {
-                data: (0..w * h).map(strip).collect(),
-                ..pm.mask
-            },
-            ..pm
-        };
-        let inpainter = picker_inpaint::PatchMatchInpainter::default();
-        let run = |heal_seams: bool| {
-            let opts = Options {
-                max_size: 64,
-                fov_deg: Some(60.0),
-                heal_seams,
-                ..test_options(&inpainter, UvChoice::Plane)
-            };
-            extract(&p, "strip", Some([48, 48]), &pm, &opts).unwrap()
-        };
+        let pm = mask_of(w, h, &strip, &strip);
+        let run = |heal_seams| plane_crop(&p, &pm, [48, 48], heal_seams);
         let (kept, kept_diag) = run(false);
         let (healed, diag) = run(true);
         assert!(kept_diag.seam_band.is_none());
