@@ -855,7 +855,6 @@ fn extract_as(
             })
             .filter(|m| m.count() > 0);
         // Coordinates.
-        let mwf: Vec<f32> = mw.iter().map(|&b| b as u8 as f32).collect();
         // Upsampled only inside the mask (the only pixels any use reads), and
         // not at all when the plane was asked for.
         let normal = plane::plane_normal(&el.normals, mw);
@@ -881,16 +880,7 @@ fn extract_as(
             .filter(|_| {
                 opts.uv != UvChoice::Plane && !(opts.uv == UvChoice::Auto && collapsed && planar)
             })
-            .map(|uv| {
-                let up = resample::upsample_uv_where(uv, &mwf, fw, fh, &full.data);
-                Coords {
-                    width: fw,
-                    height: fh,
-                    u: up.plane(0).to_vec(),
-                    v: up.plane(1).to_vec(),
-                    wrap: true,
-                }
-            });
+            .map(|uv| upsampled_uv(uv, mw, fw, fh, &full.data));
         let whole_cap = observed_cap(opts.max_size, full.count());
         // Collapsed UVs are not used whatever their consistency: skip measuring it.
         let net_r2 = match (&net_coords, opts.uv) {
@@ -1077,17 +1067,7 @@ fn extract_as(
         let rest_uv = std::cell::OnceCell::new();
         let rest_uv = || -> Option<&Coords> {
             let (rest, uv) = (rest_full.as_ref()?, el.uv.as_ref()?);
-            Some(rest_uv.get_or_init(|| {
-                let wf: Vec<f32> = whole_mw.iter().map(|&b| b as u8 as f32).collect();
-                let up = resample::upsample_uv_where(uv, &wf, fw, fh, &rest.data);
-                Coords {
-                    width: fw,
-                    height: fh,
-                    u: up.plane(0).to_vec(),
-                    v: up.plane(1).to_vec(),
-                    wrap: true,
-                }
-            }))
+            Some(rest_uv.get_or_init(|| upsampled_uv(uv, whole_mw, fw, fh, &rest.data)))
         };
         let (coords, fold, mut uv_fold) = if opts.fold_period {
             let probe = reproject::texture_size(sizing_area, observed_cap);
@@ -1506,6 +1486,21 @@ fn cell_under(i: usize, from: usize, to: usize) -> usize {
 /// The photo-resolution mask `full` limited to the photo pixels whose
 /// working-resolution pixel (`w × h` grid, the one under the pixel's centre)
 /// is in `part`.
+/// The networks' UVs `uv` (working resolution) upsampled to `fw × fh`
+/// within the working mask `within` ([`resample::upsample_uv_where`]), as
+/// wrapping coordinates at the pixels `keep` (NaN elsewhere).
+fn upsampled_uv(uv: &Image, within: &[bool], fw: usize, fh: usize, keep: &[bool]) -> Coords {
+    let weight: Vec<f32> = within.iter().map(|&b| b as u8 as f32).collect();
+    let up = resample::upsample_uv_where(uv, &weight, fw, fh, keep);
+    Coords {
+        width: fw,
+        height: fh,
+        u: up.plane(0).to_vec(),
+        v: up.plane(1).to_vec(),
+        wrap: true,
+    }
+}
+
 fn restrict_to_work(full: &Mask, part: &[bool], w: usize, h: usize) -> Mask {
     let (fw, fh) = (full.width, full.height);
     let col: Vec<usize> = (0..fw).map(|x| cell_under(x, fw, w)).collect();
