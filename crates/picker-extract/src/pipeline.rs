@@ -1207,9 +1207,10 @@ fn extract_as(
                 // own: banding them cost 0.5–0.7 dB with ground-truth UVs).
                 let heal = opts.tileable && opts.heal_seams && mode == UvMode::Plane;
                 let healed = heal.then(|| picker_inpaint::seam_band(t, known)).flatten();
-                if healed.is_some() {
-                    *band = picker_inpaint::known_seam_ratio(t, known);
-                }
+                let healed = healed.map(|(k, ratio)| {
+                    *band = Some(ratio);
+                    k
+                });
                 let io = InpaintOptions {
                     toroidal: opts.tileable,
                     seed: opts.seed,

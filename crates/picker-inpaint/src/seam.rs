@@ -230,7 +230,8 @@ pub const SEAM_BAND_MIN_RATIO: f64 = SEAMLESS_MIN_RATIO;
 /// (at least one texel).
 pub const SEAM_BAND_FRACTION: f64 = 1.0 / 32.0;
 
-/// The known flags of a texture square to inpaint so that it tiles: when its
+/// The known flags of a texture square to inpaint so that it tiles, with the
+/// observed seam ratio that called for them: when its
 /// observed texels join worse across the wrap edges than inside
 /// ([`known_seam_ratio`] above [`SEAM_BAND_MIN_RATIO`]), `known` with the
 /// texels within [`SEAM_BAND_FRACTION`] of the side of either wrap edge
@@ -242,12 +243,12 @@ pub const SEAM_BAND_FRACTION: f64 = 1.0 / 32.0;
 ///
 /// # Panics
 /// If `known` does not hold one flag per texel.
-pub fn seam_band(img: &Image, known: &[bool]) -> Option<Vec<bool>> {
+pub fn seam_band(img: &Image, known: &[bool]) -> Option<(Vec<bool>, f64)> {
     let r = known_seam_ratio(img, known)?;
     if r <= SEAM_BAND_MIN_RATIO {
         return None;
     }
-    clear_seam_band(known, img.width, img.height)
+    clear_seam_band(known, img.width, img.height).map(|k| (k, r))
 }
 
 /// `known` (a `w × h` square) with the texels within [`SEAM_BAND_FRACTION`]
@@ -453,7 +454,8 @@ mod tests {
                 + 0.02 * noise((c * 100 + y) * 100 + x)
         });
         let all = vec![true; h * w];
-        let band = seam_band(&ramp, &all).expect("a crop of a ramp has a seam");
+        let (band, ratio) = seam_band(&ramp, &all).expect("a crop of a ramp has a seam");
+        assert_eq!(Some(ratio), known_seam_ratio(&ramp, &all));
         let (bx, by) = (2, 2); // 64/32 and 48/32 rounded
         for y in 0..h {
             for x in 0..w {
@@ -464,7 +466,7 @@ mod tests {
         // Unknown texels stay unknown.
         let mut holes = all.clone();
         holes[20 * w + 30] = false;
-        assert!(!seam_band(&ramp, &holes).unwrap()[20 * w + 30]);
+        assert!(!seam_band(&ramp, &holes).unwrap().0[20 * w + 30]);
         // A texture that tiles: no band.
         use std::f32::consts::TAU;
         let tiles = image(3, h, w, |c, y, x| {
@@ -483,7 +485,10 @@ mod tests {
         assert!(clear_seam_band(&edges, w, h).is_none());
         // Clearing alone is the same band, whatever the texels show.
         assert_eq!(clear_seam_band(&all, w, h), Some(band.clone()));
-        assert_eq!(clear_seam_band(&all, w, h), seam_band(&ramp, &all));
+        assert_eq!(
+            clear_seam_band(&all, w, h),
+            seam_band(&ramp, &all).map(|b| b.0)
+        );
     }
 
     /// A crop of a ramp inpainted (toroidal PatchMatch) with its seam band
@@ -514,7 +519,7 @@ mod tests {
         };
         let pm = PatchMatchInpainter::default();
         let kept = seam_score(&pm.inpaint(&crop, &known, &opts).unwrap());
-        let band = seam_band(&crop, &known).expect("the ramp's crop has a seam");
+        let (band, _) = seam_band(&crop, &known).expect("the ramp's crop has a seam");
         let healed = seam_score(&pm.inpaint(&crop, &band, &opts).unwrap());
         assert!(kept.ratio > 2.0, "{kept:?}");
         assert!(
