@@ -97,6 +97,9 @@ pub struct Args {
     /// (by default a band across each such edge is inpainted so the texture tiles without a seam).
     #[arg(long)]
     pub keep_seams: bool,
+    /// Even out broad light and dark patches in each texture, as `extract --even-out [SCALE]`.
+    #[arg(long, value_name = "SCALE", num_args = 0..=1, default_missing_value = "0.125")]
+    pub even_out: Option<f64>,
     /// Texture coordinates, as `extract --uv`: `plane` with the ground-truth elements measures the
     /// plane mode alone (true normals, masks and albedo, rectified instead of the true UVs).
     #[arg(long, value_enum, default_value_t = crate::extract::UvArg::Auto)]
@@ -482,6 +485,7 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
         heal_seams: !a.keep_seams,
         tileable: true,
         seamless: false,
+        even_out: a.even_out,
         seed: 0,
         inpainter: &inpainter,
     };
@@ -702,6 +706,9 @@ pub fn run(a: Args) -> Result<()> {
     crate::threads::init(a.threads)?;
     if !a.truth.is_empty() && a.weights.is_empty() && !a.embedded {
         bail!("--truth replaces parts of the networks' estimate: give --embedded or --weights");
+    }
+    if let Some(s) = a.even_out {
+        crate::extract::check_even_out(s)?;
     }
     let dirs = scene_dirs(&a.dir)?;
     let models = if a.weights.is_empty() && !a.embedded {

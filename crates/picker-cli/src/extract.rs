@@ -115,6 +115,13 @@ pub struct Flags {
     /// synthetic scenes it cost 0.7-0.9 dB of texture PSNR.
     #[arg(long, conflicts_with = "no_tile")]
     pub seamless: bool,
+    /// Even out broad light and dark patches the de-lighting left in the texture: its brightness
+    /// divided by a wrap-around blur of it, SCALE times the texture's side wide (default 0.125
+    /// when given without a value); colour and fine detail stay. Off by default: it also
+    /// flattens a pattern whose own light and dark areas are that wide (a chessboard of few
+    /// squares, a marble's veins).
+    #[arg(long, value_name = "SCALE", num_args = 0..=1, default_missing_value = "0.125")]
+    pub even_out: Option<f64>,
     /// Inpainter: `patchmatch` (default), `diffusion`, or a learned inpainter's weights file.
     #[arg(long, default_value = "patchmatch", value_name = "NAME_OR_FILE")]
     pub inpainter: String,
@@ -149,6 +156,9 @@ impl Flags {
         if !(self.max_megapixels.is_finite() && self.max_megapixels > 0.0) {
             bail!("--max-megapixels {} must be positive", self.max_megapixels);
         }
+        if let Some(s) = self.even_out {
+            check_even_out(s)?;
+        }
         Ok(())
     }
 
@@ -166,6 +176,7 @@ impl Flags {
             heal_seams: !self.keep_seams,
             tileable: !self.no_tile,
             seamless: self.seamless,
+            even_out: self.even_out,
             seed: self.seed,
             inpainter,
         }
@@ -204,6 +215,7 @@ impl Flags {
             "max_size": self.max_size,
             "tileable": !self.no_tile,
             "seamless": self.seamless,
+            "even_out": self.even_out,
             "inpainter": self.inpainter,
             "sixteen_bit": self.sixteen_bit,
             "seed": self.seed,
@@ -248,6 +260,14 @@ pub struct Args {
     /// Worker threads (default: one per logical core).
     #[arg(long)]
     pub threads: Option<usize>,
+}
+
+/// Refuses an `--even-out` scale outside `(0, 1]`.
+pub fn check_even_out(s: f64) -> Result<()> {
+    if !(s > 0.0 && s <= 1.0) {
+        bail!("--even-out {s} must be in (0, 1] (a fraction of the texture's side)");
+    }
+    Ok(())
 }
 
 /// Parses `X,Y` pixel coordinates.

@@ -1049,3 +1049,72 @@ fn seamless_removes_the_visible_wrap_seams_of_a_textured_box() {
         "--seamless with --no-tile must be refused"
     );
 }
+
+/// `--even-out` on the box of the Cycles-rendered fixture scene (true render
+/// elements): the gains it applied are recorded (`diagnostics.even_out_gain`,
+/// around 1) with the setting (0.125 when given without a value), the
+/// texture changes, and without the flag nothing is recorded; a scale
+/// outside (0, 1] is refused before anything is written.
+#[test]
+fn even_out_is_applied_on_request_and_recorded() {
+    let scene = repo().join("fixtures/blender/scene_000002");
+    let tmp = tempfile::tempdir().unwrap();
+    let run_with = |name: &str, extra: &[&str]| {
+        let out = tmp.path().join(name);
+        let mut args = vec![
+            "extract",
+            "--elements",
+            scene.to_str().unwrap(),
+            "--pick",
+            "95,93",
+            "--out",
+            out.to_str().unwrap(),
+            "--threads",
+            "2",
+        ];
+        args.extend_from_slice(extra);
+        ok(&args);
+        out
+    };
+    let plain = run_with("plain", &[]);
+    let even = run_with("even", &["--even-out"]);
+    let wide = run_with("wide", &["--even-out", "0.5"]);
+    let diag = |d: &Path| json_file(&d.join("material.json"))["diagnostics"].clone();
+    let setting = |d: &Path| json_file(&d.join("summary.json"))["settings"]["even_out"].clone();
+    assert!(diag(&plain).get("even_out_gain").is_none());
+    assert!(setting(&plain).is_null());
+    assert_eq!(setting(&even).as_f64(), Some(0.125));
+    assert_eq!(setting(&wide).as_f64(), Some(0.5));
+    for d in [&even, &wide] {
+        let g = diag(d)["even_out_gain"].clone();
+        let (lo, hi) = (g[0].as_f64().unwrap(), g[1].as_f64().unwrap());
+        assert!(
+            lo > 0.25 && lo <= 1.0 && (1.0..4.0).contains(&hi) && lo < hi,
+            "{g}"
+        );
+    }
+    let bytes = |d: &Path| std::fs::read(d.join("texture.png")).unwrap();
+    assert_ne!(
+        bytes(&plain),
+        bytes(&even),
+        "--even-out left the texture as it was"
+    );
+    for bad in ["0", "1.5", "-0.1", "nan"] {
+        let out = tmp.path().join(format!("bad{bad}"));
+        let flag = format!("--even-out={bad}");
+        let r = run(&[
+            "extract",
+            "--elements",
+            scene.to_str().unwrap(),
+            "--pick",
+            "95,93",
+            "--out",
+            out.to_str().unwrap(),
+            &flag,
+        ]);
+        assert!(!r.status.success(), "--even-out {bad} was accepted");
+        let err = String::from_utf8_lossy(&r.stderr);
+        assert!(err.contains("--even-out"), "{err}");
+        assert!(!out.exists(), "--even-out {bad}: wrote {out:?}");
+    }
+}

@@ -9,7 +9,8 @@
 //!   from its colour.
 //! - [`plane`], [`period`], [`reproject`]: texture coordinates (predicted UVs or a
 //!   rectified plane) and the scatter into the texture square with coverage.
-//! - inpainting ([`picker_inpaint`]) fills the unobserved texels, tileably.
+//! - inpainting ([`picker_inpaint`]) fills the unobserved texels, tileably;
+//!   [`equalize`] evens out broad light and dark patches on request.
 //! - [`select`]: order statistics (quantiles, medians) of photo-resolution
 //!   values in parallel, without sorting them.
 //! - [`pipeline`]: the whole extraction, material parameters and the
@@ -17,6 +18,7 @@
 
 #![warn(missing_docs)]
 
+pub mod equalize;
 pub mod error;
 pub mod eval;
 pub mod export;

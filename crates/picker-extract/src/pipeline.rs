@@ -169,6 +169,11 @@ pub struct Options<'a> {
     /// scenes with true elements it lowered the aligned texture PSNR (the
     /// seam ratio cannot tell a lighting jump from a pattern's own edge).
     pub seamless: bool,
+    /// Even out the texture's broad brightness ([`crate::equalize::even_out`]):
+    /// the blur's width as a fraction of the texture's side, or `None` (the
+    /// default: it also flattens patterns whose light and dark areas are that
+    /// wide).
+    pub even_out: Option<f64>,
     /// Seed of the inpainter.
     pub seed: u64,
     /// The inpainter.
@@ -615,6 +620,10 @@ pub struct Diagnostics {
     /// the first inpainted texture's; absent when no band was.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub seam_band: Option<f64>,
+    /// The smallest and largest gain [`Options::even_out`] applied to the
+    /// texture's texels; absent when it was off or had nothing to do.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub even_out_gain: Option<[f64; 2]>,
     /// The photo has no colour ([`Prepared::greyscale`]): the extracted
     /// colours are grey.
     pub greyscale_photo: bool,
@@ -823,6 +832,7 @@ fn extract_as(
         filled_from_mask: None,
         greyscale_photo: p.greyscale,
         seam_band: None,
+        even_out_gain: None,
         timings_ms: Default::default(),
     };
     let mut texture = None;
@@ -1282,6 +1292,18 @@ fn extract_as(
         // de-lighting, a rectified region that is not one period): on
         // request, remove the colour jumps across the wrap edges when they
         // show. Colours stay non-negative.
+        // On request, broad light and dark patches evened out (before the
+        // seam correction, which then sees the evened texture).
+        let final_tex = match opts
+            .even_out
+            .and_then(|s| crate::equalize::even_out(&final_tex, s))
+        {
+            Some((t, info)) => {
+                diag.even_out_gain = Some(info.gain_range);
+                t
+            }
+            None => final_tex,
+        };
         let (final_tex, seam_corrected) = if opts.tileable && opts.seamless {
             let (mut t, corrected) = make_seamless(final_tex);
             if corrected {
@@ -1567,6 +1589,7 @@ mod tests {
             tileable: true,
             heal_seams: true,
             seamless: false,
+            even_out: None,
             seed: 1,
             inpainter,
         }
