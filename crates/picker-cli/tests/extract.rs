@@ -999,6 +999,26 @@ fn embedded_weights_find_the_ceiling_of_the_readme_example() {
     );
 }
 
+/// Runs `picker extract` on the box of the Cycles-rendered fixture scene
+/// (`fixtures/blender/scene_000002`, its true render elements, pick 95,93)
+/// into `out` with `extra` flags; the run's output, whatever its status.
+fn extract_fixture_box(out: &Path, extra: &[&str]) -> Output {
+    let scene = repo().join("fixtures/blender/scene_000002");
+    let mut args = vec![
+        "extract",
+        "--elements",
+        scene.to_str().unwrap(),
+        "--pick",
+        "95,93",
+        "--out",
+        out.to_str().unwrap(),
+        "--threads",
+        "2",
+    ];
+    args.extend_from_slice(extra);
+    run(&args)
+}
+
 /// `--seamless` on the box of the Cycles-rendered fixture scene, from its
 /// true render elements (so the test does not depend on the embedded
 /// weights), without the fold into one tile (`--no-fold`): the inpainted
@@ -1009,25 +1029,15 @@ fn embedded_weights_find_the_ceiling_of_the_readme_example() {
 /// with the stop-12 IRN and is 1.18 with the stop-29 one.)
 #[test]
 fn seamless_removes_the_visible_wrap_seams_of_a_textured_box() {
-    let scene = repo().join("fixtures/blender/scene_000002");
     let photo = repo().join("fixtures/examples/room.png");
     let tmp = tempfile::tempdir().unwrap();
     let seam = |extra: &[&str]| {
         let out = tmp.path().join(format!("out{}", extra.len()));
-        let mut args = vec![
-            "extract",
-            "--elements",
-            scene.to_str().unwrap(),
-            "--pick",
-            "95,93",
-            "--out",
-            out.to_str().unwrap(),
-            "--threads",
-            "2",
-            "--no-fold",
-        ];
-        args.extend_from_slice(extra);
-        ok(&args);
+        let flags: Vec<&str> = std::iter::once("--no-fold")
+            .chain(extra.iter().copied())
+            .collect();
+        let r = extract_fixture_box(&out, &flags);
+        assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
         json_file(&out.join("material.json"))["texture"]["seam"].clone()
     };
     let plain = seam(&[]);
@@ -1057,23 +1067,11 @@ fn seamless_removes_the_visible_wrap_seams_of_a_textured_box() {
 /// outside (0, 1] is refused before anything is written.
 #[test]
 fn even_out_is_applied_on_request_and_recorded() {
-    let scene = repo().join("fixtures/blender/scene_000002");
     let tmp = tempfile::tempdir().unwrap();
     let run_with = |name: &str, extra: &[&str]| {
         let out = tmp.path().join(name);
-        let mut args = vec![
-            "extract",
-            "--elements",
-            scene.to_str().unwrap(),
-            "--pick",
-            "95,93",
-            "--out",
-            out.to_str().unwrap(),
-            "--threads",
-            "2",
-        ];
-        args.extend_from_slice(extra);
-        ok(&args);
+        let r = extract_fixture_box(&out, extra);
+        assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
         out
     };
     let plain = run_with("plain", &[]);
@@ -1101,17 +1099,7 @@ fn even_out_is_applied_on_request_and_recorded() {
     );
     for bad in ["0", "1.5", "-0.1", "nan"] {
         let out = tmp.path().join(format!("bad{bad}"));
-        let flag = format!("--even-out={bad}");
-        let r = run(&[
-            "extract",
-            "--elements",
-            scene.to_str().unwrap(),
-            "--pick",
-            "95,93",
-            "--out",
-            out.to_str().unwrap(),
-            &flag,
-        ]);
+        let r = extract_fixture_box(&out, &[&format!("--even-out={bad}")]);
         assert!(!r.status.success(), "--even-out {bad} was accepted");
         let err = String::from_utf8_lossy(&r.stderr);
         assert!(err.contains("--even-out"), "{err}");
