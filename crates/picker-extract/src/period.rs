@@ -96,31 +96,16 @@ pub fn detect(tex: &Image, known: &[bool]) -> (Option<AxisPeriod>, Option<AxisPe
         w * h,
         "period::detect: one known flag per texel"
     );
-    if w == 0 || h == 0 || tex.channels == 0 {
+    let Some(LumaGrid {
+        luma,
+        ok,
+        w: sw,
+        h: sh,
+        f,
+    }) = LumaGrid::new(tex, known)
+    else {
         return (None, None);
-    }
-    let f = w.max(h).div_ceil(MAX_SIDE).max(1);
-    let (sw, sh) = (w / f, h / f);
-    if sw == 0 || sh == 0 {
-        return (None, None);
-    }
-    // Box-downsampled luma; a block is known when all its texels are.
-    let mut luma = vec![0.0f32; sw * sh];
-    let mut ok = vec![false; sw * sh];
-    for by in 0..sh {
-        for bx in 0..sw {
-            let (mut sum, mut all) = (0.0f32, true);
-            for y in by * f..(by + 1) * f {
-                for x in bx * f..(bx + 1) * f {
-                    let i = y * w + x;
-                    all &= known[i];
-                    sum += texel_luma(tex, i);
-                }
-            }
-            luma[by * sw + bx] = sum / (f * f) as f32;
-            ok[by * sw + bx] = all;
-        }
-    }
+    };
     let scale = f as f32 / SUBSTEPS as f32;
     let along = |dx: usize, dy: usize, n: usize| {
         // What does not vary along the axis (a tile grid's grout lines
@@ -137,6 +122,55 @@ pub fn detect(tex: &Image, known: &[bool]) -> (Option<AxisPeriod>, Option<AxisPe
         })
     };
     (along(1, 0, sw / 2), along(0, 1, sh / 2))
+}
+
+/// The luma of a texture's known texels, box-downsampled by a whole factor
+/// `f` to at most [`MAX_SIDE`] texels a side (a block is known when all its
+/// texels are): what [`detect`] and [`snap_repeats`] measure on.
+struct LumaGrid {
+    luma: Vec<f32>,
+    ok: Vec<bool>,
+    w: usize,
+    h: usize,
+    f: usize,
+}
+
+impl LumaGrid {
+    /// `None` for an empty texture (or one smaller than the factor).
+    fn new(tex: &Image, known: &[bool]) -> Option<LumaGrid> {
+        let (w, h) = (tex.width, tex.height);
+        if w == 0 || h == 0 || tex.channels == 0 {
+            return None;
+        }
+        let f = w.max(h).div_ceil(MAX_SIDE).max(1);
+        let (sw, sh) = (w / f, h / f);
+        if sw == 0 || sh == 0 {
+            return None;
+        }
+        let mut luma = vec![0.0f32; sw * sh];
+        let mut ok = vec![false; sw * sh];
+        for by in 0..sh {
+            for bx in 0..sw {
+                let (mut sum, mut all) = (0.0f32, true);
+                for y in by * f..(by + 1) * f {
+                    for x in bx * f..(bx + 1) * f {
+                        let i = y * w + x;
+                        all &= known[i];
+                        sum += texel_luma(tex, i);
+                    }
+                }
+                luma[by * sw + bx] = sum / (f * f) as f32;
+                ok[by * sw + bx] = all;
+            }
+        }
+        Some(LumaGrid {
+            luma,
+            ok,
+            w: sw,
+            h: sh,
+            f,
+        })
+    }
 }
 
 /// `v` with the mean (`trend == false`) or the least-squares line (`true`)
@@ -217,69 +251,90 @@ fn autocorrelation(
     dy: usize,
     n: usize,
 ) -> Vec<f32> {
-    let known = ok.iter().filter(|&&k| k).count();
-    let least = ((MIN_PAIR_SHARE * known as f32).ceil() as usize).max(8);
+    let least = least_pairs(ok);
     // Shifts in parallel, each summed alone: the same bits for any thread count.
     (0..=n)
         .into_par_iter()
-        .map(|d| {
-            let (whole, part) = (d / SUBSTEPS, (d % SUBSTEPS) as f32 / SUBSTEPS as f32);
-            // Both sides are interpolated by half the fractional shift, in
-            // opposite directions (`a` at `p − part/2`, `b` at `p + whole +
-            // part/2`), so they are equally smooth: a sharp pattern aligned
-            // with itself still correlates fully at any fractional shift.
-            let t = 0.5 * part;
-            let frac = usize::from(part > 0.0);
-            // `a` needs its texel and, when fractional, the one before; `b`
-            // its texel and the one after.
-            let span = whole + frac;
-            if (dx > 0 && span + frac >= w) || (dy > 0 && span + frac >= h) {
-                return f32::NAN;
-            }
-            let step = dy * w + dx;
-            let (x0, y0) = (frac * dx, frac * dy);
-            let (x1, y1) = (w - span * dx, h - span * dy);
-            let (mut cnt, mut sa, mut sb) = (0usize, 0.0f64, 0.0f64);
-            let (mut saa, mut sbb, mut sab) = (0.0f64, 0.0f64, 0.0f64);
-            for y in y0..y1 {
-                for x in x0..x1 {
-                    let i = y * w + x;
-                    let j = i + whole * step;
-                    if !(ok[i] && ok[j]) {
-                        continue;
-                    }
-                    let (a, b) = if frac == 0 {
-                        (v[i], v[j])
-                    } else {
-                        if !(ok[i - step] && ok[j + step]) {
-                            continue;
-                        }
-                        (
-                            (1.0 - t) * v[i] + t * v[i - step],
-                            (1.0 - t) * v[j] + t * v[j + step],
-                        )
-                    };
-                    let (a, b) = (f64::from(a), f64::from(b));
-                    cnt += 1;
-                    sa += a;
-                    sb += b;
-                    saa += a * a;
-                    sbb += b * b;
-                    sab += a * b;
-                }
-            }
-            if cnt < least {
-                return f32::NAN;
-            }
-            let k = cnt as f64;
-            let (va, vb) = (saa - sa * sa / k, sbb - sb * sb / k);
-            let cov = sab - sa * sb / k;
-            if va <= 1e-12 * k || vb <= 1e-12 * k {
-                return f32::NAN;
-            }
-            (cov / (va * vb).sqrt()) as f32
-        })
+        .map(|d| correlation_at(v, ok, w, h, dx, dy, d, least))
         .collect()
+}
+
+/// Known pairs a shift needs: [`MIN_PAIR_SHARE`] of the known texels, at
+/// least 8.
+fn least_pairs(ok: &[bool]) -> usize {
+    let known = ok.iter().filter(|&&k| k).count();
+    ((MIN_PAIR_SHARE * known as f32).ceil() as usize).max(8)
+}
+
+/// One shift `d` (in 1/[`SUBSTEPS`] texels) of [`autocorrelation`]: the
+/// Pearson correlation of the known pairs, NaN with fewer than `least` of
+/// them or a constant side.
+#[allow(clippy::too_many_arguments)]
+fn correlation_at(
+    v: &[f32],
+    ok: &[bool],
+    w: usize,
+    h: usize,
+    dx: usize,
+    dy: usize,
+    d: usize,
+    least: usize,
+) -> f32 {
+    let (whole, part) = (d / SUBSTEPS, (d % SUBSTEPS) as f32 / SUBSTEPS as f32);
+    // Both sides are interpolated by half the fractional shift, in
+    // opposite directions (`a` at `p − part/2`, `b` at `p + whole +
+    // part/2`), so they are equally smooth: a sharp pattern aligned
+    // with itself still correlates fully at any fractional shift.
+    let t = 0.5 * part;
+    let frac = usize::from(part > 0.0);
+    // `a` needs its texel and, when fractional, the one before; `b`
+    // its texel and the one after.
+    let span = whole + frac;
+    if (dx > 0 && span + frac >= w) || (dy > 0 && span + frac >= h) {
+        return f32::NAN;
+    }
+    let step = dy * w + dx;
+    let (x0, y0) = (frac * dx, frac * dy);
+    let (x1, y1) = (w - span * dx, h - span * dy);
+    let (mut cnt, mut sa, mut sb) = (0usize, 0.0f64, 0.0f64);
+    let (mut saa, mut sbb, mut sab) = (0.0f64, 0.0f64, 0.0f64);
+    for y in y0..y1 {
+        for x in x0..x1 {
+            let i = y * w + x;
+            let j = i + whole * step;
+            if !(ok[i] && ok[j]) {
+                continue;
+            }
+            let (a, b) = if frac == 0 {
+                (v[i], v[j])
+            } else {
+                if !(ok[i - step] && ok[j + step]) {
+                    continue;
+                }
+                (
+                    (1.0 - t) * v[i] + t * v[i - step],
+                    (1.0 - t) * v[j] + t * v[j + step],
+                )
+            };
+            let (a, b) = (f64::from(a), f64::from(b));
+            cnt += 1;
+            sa += a;
+            sb += b;
+            saa += a * a;
+            sbb += b * b;
+            sab += a * b;
+        }
+    }
+    if cnt < least {
+        return f32::NAN;
+    }
+    let k = cnt as f64;
+    let (va, vb) = (saa - sa * sa / k, sbb - sb * sb / k);
+    let cov = sab - sa * sb / k;
+    if va <= 1e-12 * k || vb <= 1e-12 * k {
+        return f32::NAN;
+    }
+    (cov / (va * vb).sqrt()) as f32
 }
 
 /// The period in an autocorrelation `r` (index = shift), see the module docs.
@@ -477,6 +532,73 @@ pub fn whole_repeats(p: AxisPeriod, side: usize) -> Option<usize> {
     (n >= 2.0 && n <= MAX_UV_REPEATS as f32 && drift <= UV_REPEAT_TOLERANCE).then_some(n as usize)
 }
 
+/// Largest gap between a measured period and `side / n` for
+/// [`snap_repeats`] to try `n` repeats: a period measured on a small
+/// observed part of the square is a few percent off, too much for
+/// [`UV_REPEAT_TOLERANCE`] over twenty repeats.
+pub const SNAP_TOLERANCE: f32 = 0.05;
+/// Least margin by which the chosen number of repeats must correlate better
+/// than the next best in [`snap_repeats`].
+pub const SNAP_MARGIN: f32 = 0.05;
+
+/// The whole number of repeats `n` of a texture square of side `side`
+/// (texels of `tex`) along axis `(dx, dy)` when the measured period `p`
+/// is within [`SNAP_TOLERANCE`] of `side / n` but [`whole_repeats`] cannot
+/// tell (its estimate drifts by more than [`UV_REPEAT_TOLERANCE`] of a
+/// period over the side): each candidate `n` (the one or two nearest
+/// `side / p.texels`, from 2 to [`MAX_UV_REPEATS`]) is scored by the mean
+/// correlation of `tex`'s known texels at the shifts `k · side / n` for
+/// every `k ≥ 1` the known texels pair at, where a wrong `n` drifts off the
+/// pattern by `k` times its error. The best is taken when it correlates at
+/// least [`MIN_WEAK_PEAK`] on average and at its farthest multiple at least
+/// [`HARMONIC_SHARE`] of the period's strength, over at least two
+/// multiples, and beats every other candidate by [`SNAP_MARGIN`].
+pub fn snap_repeats(
+    tex: &Image,
+    known: &[bool],
+    (dx, dy): (usize, usize),
+    p: AxisPeriod,
+    side: usize,
+) -> Option<usize> {
+    if p.texels.is_nan() || p.texels <= 0.0 || side == 0 || known.len() != tex.width * tex.height {
+        return None;
+    }
+    let g = LumaGrid::new(tex, known)?;
+    let v = without_line_trends(&g.luma, &g.ok, g.w, g.h, dy, false);
+    let least = least_pairs(&g.ok);
+    let exact = side as f32 / p.texels;
+    let mut candidates: Vec<usize> = [exact.floor(), exact.ceil()]
+        .into_iter()
+        .map(|n| n as usize)
+        .filter(|&n| (2..=MAX_UV_REPEATS).contains(&n))
+        .filter(|&n| (side as f32 / n as f32 - p.texels).abs() <= SNAP_TOLERANCE * p.texels)
+        .collect();
+    candidates.dedup();
+    // (n, mean correlation, farthest multiple's correlation)
+    let scored: Vec<(usize, f32, f32)> = candidates
+        .iter()
+        .filter_map(|&n| {
+            let period = side as f32 / n as f32 / g.f as f32 * SUBSTEPS as f32;
+            let r: Vec<f32> = (1..)
+                .map(|k| (k as f32 * period).round() as usize)
+                .map(|d| correlation_at(&v, &g.ok, g.w, g.h, dx, dy, d, least))
+                .take_while(|r| r.is_finite())
+                .collect();
+            (r.len() >= 2).then(|| (n, r.iter().sum::<f32>() / r.len() as f32, r[r.len() - 1]))
+        })
+        .collect();
+    let best = scored.iter().copied().max_by(|a, b| a.1.total_cmp(&b.1))?;
+    let runner_up = scored
+        .iter()
+        .filter(|c| c.0 != best.0)
+        .map(|c| c.1)
+        .fold(f32::NEG_INFINITY, f32::max);
+    (best.1 >= MIN_WEAK_PEAK
+        && best.2 >= HARMONIC_SHARE * p.strength
+        && best.1 >= runner_up + SNAP_MARGIN)
+        .then_some(best.0)
+}
+
 /// The repeats found inside the wrapped texture square of the networks'
 /// UVs (`material.json`, `diagnostics.uv.repeats`).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
@@ -558,8 +680,14 @@ pub fn fold_uv_if_periodic(
     // when it still fits the square a whole number of times.
     let px = px.map(prefer_double);
     let py = py.map(prefer_double);
-    let n = |p: Option<AxisPeriod>| p.and_then(|p| whole_repeats(p, probe));
-    let (nx, ny) = (n(px), n(py));
+    // A whole number of repeats, or the nearest that the texels show better
+    // than its neighbours (a period measured on a small part of the square).
+    let n = |p: Option<AxisPeriod>, axis| {
+        p.and_then(|p| {
+            whole_repeats(p, probe).or_else(|| snap_repeats(&tex, &known, axis, p, probe))
+        })
+    };
+    let (nx, ny) = (n(px, (1, 0)), n(py, (0, 1)));
     if nx.is_none() && ny.is_none() {
         return None;
     }
@@ -1198,5 +1326,80 @@ mod tests {
             noise[(y as usize).min(h - 1) * w + (x as usize).min(w - 1)]
         });
         assert!(fold_uv_if_periodic(&coords, &mask, &img, &conf, 120).is_none());
+    }
+
+    /// A square of side 150 whose pattern repeats exactly 21 times along x
+    /// (a weave-like sharp stripe, period 7.14 texels), known only in a
+    /// 48-texel window: a period measured 1.5 % off drifts by 0.3 of a
+    /// period over the side, so `whole_repeats` refuses it, and
+    /// `snap_repeats` finds the 21 the texels show. A pattern whose period
+    /// does not divide the side (7.0: 21.4 repeats) seen over most of the
+    /// square is not snapped; nor is an axis along which nothing varies,
+    /// nor a period more than 5 % from `side / n` for every `n`.
+    #[test]
+    fn snap_repeats_finds_the_whole_number_a_small_window_shows() {
+        let side = 150;
+        let stripes = |period: f32| {
+            move |x: f32, _y: f32| {
+                if (x / period).fract() < 0.4 {
+                    0.8
+                } else {
+                    0.2
+                }
+            }
+        };
+        let window = |x0: usize, y0: usize, n: usize| -> Vec<bool> {
+            (0..side * side)
+                .map(|i| {
+                    let (x, y) = (i % side, i / side);
+                    (x0..x0 + n).contains(&x) && (y0..y0 + n).contains(&y)
+                })
+                .collect()
+        };
+        let exact = texture(side, side, stripes(side as f32 / 21.0));
+        let known = window(37, 61, 48);
+        let measured = AxisPeriod {
+            texels: side as f32 / 21.0 * 1.015,
+            strength: 0.9,
+            double: None,
+        };
+        assert_eq!(whole_repeats(measured, side), None);
+        assert_eq!(
+            snap_repeats(&exact, &known, (1, 0), measured, side),
+            Some(21)
+        );
+        let low = AxisPeriod {
+            texels: side as f32 / 21.0 * 0.988,
+            ..measured
+        };
+        assert_eq!(snap_repeats(&exact, &known, (1, 0), low, side), Some(21));
+        // Along y nothing varies: no correlation to score.
+        assert_eq!(snap_repeats(&exact, &known, (0, 1), measured, side), None);
+        // More than SNAP_TOLERANCE from side/n for every n (2.5 repeats):
+        // no candidate. (Near 21 repeats, both neighbours are within it and
+        // the texels choose.)
+        let between = AxisPeriod {
+            texels: side as f32 / 2.5,
+            ..measured
+        };
+        assert_eq!(snap_repeats(&exact, &known, (1, 0), between, side), None);
+        // A period of 7.0 (21.4 repeats) over most of the square: the
+        // multiples of 150/21 and 150/22 drift off it.
+        let off = texture(side, side, stripes(7.0));
+        let wide = window(5, 5, 140);
+        let seen = AxisPeriod {
+            texels: 7.0,
+            ..measured
+        };
+        assert_eq!(snap_repeats(&off, &wide, (1, 0), seen, side), None);
+        // Mismatched `known` or an empty texture: nothing.
+        assert_eq!(
+            snap_repeats(&exact, &known[1..], (1, 0), measured, side),
+            None
+        );
+        assert_eq!(
+            snap_repeats(&Image::zeros(3, 0, 0), &[], (1, 0), measured, side),
+            None
+        );
     }
 }
