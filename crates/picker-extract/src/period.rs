@@ -114,7 +114,13 @@ pub fn detect(tex: &Image, known: &[bool]) -> (Option<AxisPeriod>, Option<AxisPe
         // drift of shading along the axis that hides a weak repeat).
         [false, true].into_iter().find_map(|trend| {
             let v = without_line_trends(&luma, &ok, sw, sh, dy, trend);
-            let r = autocorrelation(&v, &ok, sw, sh, dx, dy, n * SUBSTEPS);
+            let grid = Grid {
+                v: &v,
+                ok: &ok,
+                w: sw,
+                h: sh,
+            };
+            let r = autocorrelation(grid, (dx, dy), n * SUBSTEPS);
             period_of(&r).map(|p| AxisPeriod {
                 texels: p.texels * scale,
                 ..p
@@ -242,21 +248,23 @@ fn texel_luma(tex: &Image, i: usize) -> f32 {
 /// texels used all known); NaN where fewer than
 /// [`MIN_PAIR_SHARE`] of the known texels are paired or either side is
 /// constant.
-fn autocorrelation(
-    v: &[f32],
-    ok: &[bool],
-    w: usize,
-    h: usize,
-    dx: usize,
-    dy: usize,
-    n: usize,
-) -> Vec<f32> {
-    let least = least_pairs(ok);
+fn autocorrelation(g: Grid<'_>, (dx, dy): (usize, usize), n: usize) -> Vec<f32> {
+    let least = least_pairs(g.ok);
     // Shifts in parallel, each summed alone: the same bits for any thread count.
     (0..=n)
         .into_par_iter()
-        .map(|d| correlation_at(v, ok, w, h, dx, dy, d, least))
+        .map(|d| correlation_at(g, (dx, dy), d, least))
         .collect()
+}
+
+/// Values on a `w × h` grid with the flags of the known ones, as
+/// [`autocorrelation`] and [`correlation_at`] read them.
+#[derive(Clone, Copy)]
+struct Grid<'a> {
+    v: &'a [f32],
+    ok: &'a [bool],
+    w: usize,
+    h: usize,
 }
 
 /// Known pairs a shift needs: [`MIN_PAIR_SHARE`] of the known texels, at
@@ -269,17 +277,8 @@ fn least_pairs(ok: &[bool]) -> usize {
 /// One shift `d` (in 1/[`SUBSTEPS`] texels) of [`autocorrelation`]: the
 /// Pearson correlation of the known pairs, NaN with fewer than `least` of
 /// them or a constant side.
-#[allow(clippy::too_many_arguments)]
-fn correlation_at(
-    v: &[f32],
-    ok: &[bool],
-    w: usize,
-    h: usize,
-    dx: usize,
-    dy: usize,
-    d: usize,
-    least: usize,
-) -> f32 {
+fn correlation_at(g: Grid<'_>, (dx, dy): (usize, usize), d: usize, least: usize) -> f32 {
+    let Grid { v, ok, w, h } = g;
     let (whole, part) = (d / SUBSTEPS, (d % SUBSTEPS) as f32 / SUBSTEPS as f32);
     // Both sides are interpolated by half the fractional shift, in
     // opposite directions (`a` at `p − part/2`, `b` at `p + whole +
@@ -565,6 +564,12 @@ pub fn snap_repeats(
     }
     let g = LumaGrid::new(tex, known)?;
     let v = without_line_trends(&g.luma, &g.ok, g.w, g.h, dy, false);
+    let grid = Grid {
+        v: &v,
+        ok: &g.ok,
+        w: g.w,
+        h: g.h,
+    };
     let least = least_pairs(&g.ok);
     let exact = side as f32 / p.texels;
     let mut candidates: Vec<usize> = [exact.floor(), exact.ceil()]
@@ -581,7 +586,7 @@ pub fn snap_repeats(
             let period = side as f32 / n as f32 / g.f as f32 * SUBSTEPS as f32;
             let r: Vec<f32> = (1..)
                 .map(|k| (k as f32 * period).round() as usize)
-                .map(|d| correlation_at(&v, &g.ok, g.w, g.h, dx, dy, d, least))
+                .map(|d| correlation_at(grid, (dx, dy), d, least))
                 .take_while(|r| r.is_finite())
                 .collect();
             (r.len() >= 2).then(|| (n, r.iter().sum::<f32>() / r.len() as f32, r[r.len() - 1]))
@@ -994,7 +999,16 @@ mod tests {
         let luma: Vec<f32> = (0..w * h).map(|i| texel_luma(&t, i)).collect();
         let found = |trend: bool| {
             let v = without_line_trends(&luma, &known, w, h, 0, trend);
-            period_of(&autocorrelation(&v, &known, w, h, 1, 0, (w / 2) * SUBSTEPS))
+            period_of(&autocorrelation(
+                Grid {
+                    v: &v,
+                    ok: &known,
+                    w,
+                    h,
+                },
+                (1, 0),
+                (w / 2) * SUBSTEPS,
+            ))
         };
         let p = found(true).expect("a period with the trend removed");
         assert!((p.texels / SUBSTEPS as f32 - px).abs() < 0.5, "{p:?}");
