@@ -1077,13 +1077,15 @@ fn even_out_is_applied_on_request_and_recorded() {
     let plain = run_with("plain", &[]);
     let even = run_with("even", &["--even-out"]);
     let wide = run_with("wide", &["--even-out", "0.5"]);
+    // A texture that does not tile is evened out with mirrored edges.
+    let untiled = run_with("untiled", &["--even-out", "--no-tile"]);
     let diag = |d: &Path| json_file(&d.join("material.json"))["diagnostics"].clone();
     let setting = |d: &Path| json_file(&d.join("summary.json"))["settings"]["even_out"].clone();
     assert!(diag(&plain).get("even_out_gain").is_none());
     assert!(setting(&plain).is_null());
     assert_eq!(setting(&even).as_f64(), Some(0.125));
     assert_eq!(setting(&wide).as_f64(), Some(0.5));
-    for d in [&even, &wide] {
+    for d in [&even, &wide, &untiled] {
         let g = diag(d)["even_out_gain"].clone();
         let (lo, hi) = (g[0].as_f64().unwrap(), g[1].as_f64().unwrap());
         assert!(

@@ -1,12 +1,13 @@
-//! Evening out the broad brightness of a tileable texture (`extract
-//! --even-out`), the "equalise" step of photo-texture tools.
+//! Evening out the broad brightness of a texture (`extract --even-out`), the
+//! "equalise" step of photo-texture tools.
 //!
 //! The de-lighting divides the photo by an estimated shading; where that
 //! estimate is off, the texture keeps the residue as broad light and dark
 //! patches (a floor brighter towards the window, a vignette). For a
 //! stationary material, brightness changes much wider than its features are
-//! such residue: the luminance is blurred with a wide wrap-around (toroidal,
-//! as the texture tiles) filter and each texel is scaled by the texture's
+//! such residue: the luminance is blurred with a wide filter that wraps
+//! around the edges as the texture tiles (or mirrors them, for one that does
+//! not tile), and each texel is scaled by the texture's
 //! mean luminance over the blurred one, one gain for the three channels, so
 //! colour and fine detail stay. It also flattens a pattern whose own light
 //! and dark areas are that wide (a chessboard of few squares, a marble's
@@ -35,29 +36,50 @@ pub struct EvenOut {
     pub radius: usize,
 }
 
-/// Wrap-around box blur of a `w × h` plane (row-major) with half-width `r`
-/// along rows and then columns, each output the mean of the `2r + 1` values
-/// around it, indices wrapping at the edges (a box wider than the plane
-/// wraps around again). `plane.len()` must be `w · h`.
-pub fn toroidal_box_blur(plane: &[f64], w: usize, h: usize, r: usize) -> Vec<f64> {
-    assert_eq!(
-        plane.len(),
-        w * h,
-        "toroidal_box_blur: plane is not {w}x{h}"
-    );
+/// How a blur reads past the edges of a texture.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Edges {
+    /// The texture tiles: index `−1` is the last texel.
+    Wrap,
+    /// Mirrored about the edge texels (`…, 2, 1, 0, 1, 2, …`): a texture
+    /// that does not tile (`extract --no-tile`).
+    Mirror,
+}
+
+impl Edges {
+    /// Index `j` of a line of `n ≥ 1` values.
+    fn index(self, j: isize, n: usize) -> usize {
+        match self {
+            Edges::Wrap => j.rem_euclid(n as isize) as usize,
+            Edges::Mirror if n == 1 => 0,
+            Edges::Mirror => {
+                let m = 2 * n as isize - 2;
+                let k = j.rem_euclid(m);
+                (if k < n as isize { k } else { m - k }) as usize
+            }
+        }
+    }
+}
+
+/// Box blur of a `w × h` plane (row-major) with half-width `r` along rows
+/// and then columns, each output the mean of the `2r + 1` values around it,
+/// read past the edges as `edges` says (a box wider than the plane wraps or
+/// mirrors again). `plane.len()` must be `w · h`.
+pub fn box_blur(plane: &[f64], w: usize, h: usize, r: usize, edges: Edges) -> Vec<f64> {
+    assert_eq!(plane.len(), w * h, "box_blur: plane is not {w}x{h}");
     let mut out = plane.to_vec();
     if w == 0 || h == 0 {
         return out;
     }
     let mut tmp = vec![0.0; plane.len()];
     // `count` lines of `n` values: line `l` starts at `l·step`, its values
-    // `stride` apart. A running sum over the wrapped window.
+    // `stride` apart. A running sum over the window.
     let pass =
         |src: &[f64], dst: &mut [f64], n: usize, stride: usize, count: usize, step: usize| {
             let k = (2 * r + 1) as f64;
             let ri = r as isize;
             for l in 0..count {
-                let at = |j: isize| l * step + j.rem_euclid(n as isize) as usize * stride;
+                let at = |j: isize| l * step + edges.index(j, n) * stride;
                 let mut s: f64 = (-ri..=ri).map(|d| src[at(d)]).sum();
                 for i in 0..n as isize {
                     dst[at(i)] = s / k;
@@ -78,13 +100,14 @@ fn radius_for(sigma: f64) -> usize {
     ((width - 1.0) / 2.0).round().max(1.0) as usize
 }
 
-/// `t` (linear RGB, tileable) with its brightness evened out at scales above
+/// `t` (linear RGB; tileable when `edges` is [`Edges::Wrap`]) with its
+/// brightness evened out at scales above
 /// `scale` times its side (the standard deviation of the Gaussian that the
 /// box passes approximate): each texel scaled by the mean luminance over the
 /// blurred luminance, within `[1/MAX_GAIN, MAX_GAIN]`, the same for every
 /// colour channel. `None` (nothing to do) for fewer than 3 channels, an
 /// empty or black texture, or a `scale` that is not a positive number.
-pub fn even_out(t: &Image, scale: f64) -> Option<(Image, EvenOut)> {
+pub fn even_out(t: &Image, scale: f64, edges: Edges) -> Option<(Image, EvenOut)> {
     let (w, h) = (t.width, t.height);
     if t.channels < 3 || w == 0 || h == 0 || !(scale > 0.0 && scale.is_finite()) {
         return None;
@@ -103,7 +126,7 @@ pub fn even_out(t: &Image, scale: f64) -> Option<(Image, EvenOut)> {
     let radius = radius_for(scale * w.max(h) as f64);
     let mut blurred = lum;
     for _ in 0..PASSES {
-        blurred = toroidal_box_blur(&blurred, w, h, radius);
+        blurred = box_blur(&blurred, w, h, radius, edges);
     }
     let mut out = t.clone();
     let mut range = [f64::INFINITY, 0.0f64];
@@ -128,10 +151,26 @@ mod tests {
     use super::*;
     use picker_tensor::Rng;
 
-    /// The plain definition: every output the mean over its wrapped window.
-    fn blur_reference(p: &[f64], w: usize, h: usize, r: usize) -> Vec<f64> {
+    /// The plain definition: every output the mean over its window, indices
+    /// past the edges wrapped, or mirrored by repeated reflection.
+    fn blur_reference(p: &[f64], w: usize, h: usize, r: usize, edges: Edges) -> Vec<f64> {
         let k = (2 * r + 1) as f64;
-        let wrap = |j: isize, n: usize| j.rem_euclid(n as isize) as usize;
+        let wrap = |j: isize, n: usize| match edges {
+            Edges::Wrap => j.rem_euclid(n as isize) as usize,
+            Edges::Mirror => {
+                let mut j = j;
+                while !(0..n as isize).contains(&j) {
+                    j = if n == 1 {
+                        0
+                    } else if j < 0 {
+                        -j
+                    } else {
+                        2 * (n as isize - 1) - j
+                    };
+                }
+                j as usize
+            }
+        };
         let rows: Vec<f64> = (0..w * h)
             .map(|i| {
                 let (y, x) = (i / w, i % w);
@@ -166,19 +205,31 @@ mod tests {
             (32, 17, 5),
         ] {
             let p: Vec<f64> = (0..w * h).map(|_| rng.f64() * 2.0 - 0.5).collect();
-            let got = toroidal_box_blur(&p, w, h, r);
-            let want = blur_reference(&p, w, h, r);
-            for (i, (a, b)) in got.iter().zip(&want).enumerate() {
-                assert!((a - b).abs() < 1e-12, "{w}x{h} r {r} at {i}: {a} vs {b}");
+            for edges in [Edges::Wrap, Edges::Mirror] {
+                let got = box_blur(&p, w, h, r, edges);
+                let want = blur_reference(&p, w, h, r, edges);
+                for (i, (a, b)) in got.iter().zip(&want).enumerate() {
+                    assert!(
+                        (a - b).abs() < 1e-12,
+                        "{w}x{h} r {r} {edges:?} at {i}: {a} vs {b}"
+                    );
+                }
             }
-            // The mean is kept (every value is spread over equal windows).
+            // Wrapped, the mean is kept (every value is spread over equal windows).
+            let got = box_blur(&p, w, h, r, Edges::Wrap);
             let (ma, mb) = (got.iter().sum::<f64>(), p.iter().sum::<f64>());
             assert!(
                 (ma - mb).abs() < 1e-9 * (w * h) as f64,
                 "{w}x{h} r {r}: mean moved"
             );
         }
-        assert!(toroidal_box_blur(&[], 0, 3, 2).is_empty());
+        assert!(box_blur(&[], 0, 3, 2, Edges::Wrap).is_empty());
+        // Mirrored, a ramp's ends are not pulled towards each other.
+        let ramp: Vec<f64> = (0..16).map(f64::from).collect();
+        let m = box_blur(&ramp, 16, 1, 2, Edges::Mirror);
+        assert!(m[0] < 2.0 && m[15] > 13.0, "{m:?}");
+        let t = box_blur(&ramp, 16, 1, 2, Edges::Wrap);
+        assert!(t[0] > 5.0, "{t:?}");
     }
 
     #[test]
@@ -224,7 +275,7 @@ mod tests {
         let t = Image::new(3, s, s, data).unwrap();
         // A blur 8 texels wide passes the broad change (one period over
         // the side) almost whole and takes out the 8-texel pattern.
-        let (e, info) = even_out(&t, 0.0625).expect("evened out");
+        let (e, info) = even_out(&t, 0.0625, Edges::Wrap).expect("evened out");
         // Texel over pattern: near constant after, far from it before.
         let spread = |img: &Image| {
             let r: Vec<f64> = (0..n)
@@ -237,7 +288,7 @@ mod tests {
         assert!(spread(&e) < 0.06, "{}", spread(&e));
         // At the default width (16 texels here) the blur passes only part
         // of the broad change: about half of it remains (0.16 of 0.30).
-        let (d, _) = even_out(&t, DEFAULT_SCALE).expect("evened out");
+        let (d, _) = even_out(&t, DEFAULT_SCALE, Edges::Wrap).expect("evened out");
         assert!(
             spread(&d) < 0.6 * spread(&t),
             "{} vs {}",
@@ -259,7 +310,7 @@ mod tests {
     #[test]
     fn flat_texture_is_unchanged_and_gains_are_bounded() {
         let flat = Image::new(3, 8, 12, vec![0.25; 3 * 96]).unwrap();
-        let (e, info) = even_out(&flat, 0.3).unwrap();
+        let (e, info) = even_out(&flat, 0.3, Edges::Mirror).unwrap();
         for (a, b) in e.data.iter().zip(&flat.data) {
             assert!((a - b).abs() < 1e-6);
         }
@@ -273,7 +324,7 @@ mod tests {
             }
         }
         let t = Image::new(3, h, w, data).unwrap();
-        let (_, info) = even_out(&t, 0.05).unwrap();
+        let (_, info) = even_out(&t, 0.05, Edges::Wrap).unwrap();
         assert!(info.gain_range[1] <= MAX_GAIN + 1e-12 && info.gain_range[0] >= 1.0 / MAX_GAIN);
         assert!(info.gain_range[1] > 3.9, "{info:?}");
     }
@@ -281,13 +332,13 @@ mod tests {
     #[test]
     fn nothing_to_do_is_none() {
         let grey = Image::new(1, 4, 4, vec![0.5; 16]).unwrap();
-        assert!(even_out(&grey, 0.1).is_none());
+        assert!(even_out(&grey, 0.1, Edges::Wrap).is_none());
         let black = Image::new(3, 4, 4, vec![0.0; 48]).unwrap();
-        assert!(even_out(&black, 0.1).is_none());
+        assert!(even_out(&black, 0.1, Edges::Wrap).is_none());
         let rgb = Image::new(3, 4, 4, vec![0.5; 48]).unwrap();
         for s in [0.0, -1.0, f64::NAN, f64::INFINITY] {
-            assert!(even_out(&rgb, s).is_none(), "{s}");
+            assert!(even_out(&rgb, s, Edges::Wrap).is_none(), "{s}");
         }
-        assert!(even_out(&Image::new(3, 0, 0, vec![]).unwrap(), 0.1).is_none());
+        assert!(even_out(&Image::new(3, 0, 0, vec![]).unwrap(), 0.1, Edges::Mirror).is_none());
     }
 }

@@ -1294,9 +1294,15 @@ fn extract_as(
         // show. Colours stay non-negative.
         // On request, broad light and dark patches evened out (before the
         // seam correction, which then sees the evened texture).
+        // A texture that does not tile is mirrored at its edges, not wrapped.
+        let edges = if opts.tileable {
+            crate::equalize::Edges::Wrap
+        } else {
+            crate::equalize::Edges::Mirror
+        };
         let final_tex = match opts
             .even_out
-            .and_then(|s| crate::equalize::even_out(&final_tex, s))
+            .and_then(|s| crate::equalize::even_out(&final_tex, s, edges))
         {
             Some((t, info)) => {
                 diag.even_out_gain = Some(info.gain_range);
