@@ -118,9 +118,8 @@ pub struct Flags {
     /// Even out broad light and dark patches the de-lighting left in the texture: its brightness
     /// divided by a blur of it, SCALE times the texture's side wide (default 0.125 when given
     /// without a value), that wraps around the edges (mirrors them with --no-tile); colour and
-    /// fine detail stay. Off by default: it also
-    /// flattens a pattern whose own light and dark areas are that wide (a chessboard of few
-    /// squares, a marble's veins).
+    /// fine detail stay. Off by default: it also flattens a pattern whose own light and dark
+    /// areas are that wide (a chessboard of few squares, a marble's veins).
     #[arg(long, value_name = "SCALE", num_args = 0..=1, default_missing_value = "0.125")]
     pub even_out: Option<f64>,
     /// Inpainter: `patchmatch` (default), `diffusion`, or a learned inpainter's weights file.

@@ -1288,10 +1288,6 @@ fn extract_as(
         if let Some(d) = diag.uv.as_mut() {
             d.repeats = uv_fold.as_ref().map(|f| f.1);
         }
-        // The observed texels at opposite edges need not match (imperfect
-        // de-lighting, a rectified region that is not one period): on
-        // request, remove the colour jumps across the wrap edges when they
-        // show. Colours stay non-negative.
         // On request, broad light and dark patches evened out (before the
         // seam correction, which then sees the evened texture).
         // A texture that does not tile is mirrored at its edges, not wrapped.
@@ -1310,6 +1306,10 @@ fn extract_as(
             }
             None => final_tex,
         };
+        // The observed texels at opposite edges need not match (imperfect
+        // de-lighting, a rectified region that is not one period): on
+        // request, remove the colour jumps across the wrap edges when they
+        // show. Colours stay non-negative.
         let (final_tex, seam_corrected) = if opts.tileable && opts.seamless {
             let (mut t, corrected) = make_seamless(final_tex);
             if corrected {
