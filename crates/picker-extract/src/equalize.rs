@@ -17,7 +17,10 @@
 //! (no shading residue to remove) it lowered it by 2.4–2.7 dB (see the
 //! README).
 
+use glam::Vec3;
 use picker_render::io::Image;
+
+use crate::pipeline::luminance;
 
 /// The default width of the blur, as a fraction of the texture's side
 /// (`extract --even-out` without a value).
@@ -114,10 +117,7 @@ pub fn even_out(t: &Image, scale: f64, edges: Edges) -> Option<(Image, EvenOut)>
     }
     let n = w * h;
     let lum: Vec<f64> = (0..n)
-        .map(|i| {
-            let c = |k: usize| f64::from(t.data[k * n + i]).max(0.0);
-            0.2126 * c(0) + 0.7152 * c(1) + 0.0722 * c(2)
-        })
+        .map(|i| f64::from(luminance(t.rgb(i).max(Vec3::ZERO))))
         .collect();
     let mean = lum.iter().sum::<f64>() / n as f64;
     if !(mean > 0.0 && mean.is_finite()) {

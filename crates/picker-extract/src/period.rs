@@ -235,8 +235,7 @@ fn without_line_trends(
 /// first channel when there are fewer).
 fn texel_luma(tex: &Image, i: usize) -> f32 {
     if tex.channels >= 3 {
-        let c = tex.rgb(i);
-        0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
+        crate::pipeline::luminance(tex.rgb(i))
     } else {
         tex.data[i]
     }
