@@ -85,6 +85,9 @@ pub struct Args {
     /// Do not refine the plane mode's focal and normal with the photo's lines (`extract --no-lines`).
     #[arg(long)]
     pub no_lines: bool,
+    /// Do not turn the plane mode's texture axes to the pattern's grain (`extract --no-grain`).
+    #[arg(long)]
+    pub no_grain: bool,
     /// Do not use a texture's repeats: no plane-mode fold, no net-UV fill from other repeats
     /// (`extract --no-fold`).
     #[arg(long)]
@@ -480,6 +483,7 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
         max_size: pipeline::DEFAULT_MAX_SIZE,
         fov_deg: None,
         line_refine: !a.no_lines,
+        align_grain: !a.no_grain,
         fold_period: !a.no_fold,
         fill_from_mask: !a.no_mask_fill,
         heal_seams: !a.keep_seams,

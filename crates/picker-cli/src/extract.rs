@@ -85,6 +85,10 @@ pub struct Flags {
     /// directions of the photo's straight lines in the picked region.
     #[arg(long)]
     pub no_lines: bool,
+    /// Keep the plane mode's texture axes where the photo's lines give none: do not turn them
+    /// to the direction the texture's pattern runs along (a table's wood grain).
+    #[arg(long)]
+    pub no_grain: bool,
     /// Do not use a texture's repeats: keep the whole rectified region for --uv plane (no fold of
     /// a texture that repeats along both axes into one tile of whole periods), and do not fill the
     /// holes of a net-UV texture square that repeats a whole number of times from its other
@@ -171,6 +175,7 @@ impl Flags {
             max_size: self.max_size as usize,
             fov_deg: self.fov,
             line_refine: !self.no_lines,
+            align_grain: !self.no_grain,
             fold_period: !self.no_fold,
             fill_from_mask: !self.no_mask_fill,
             heal_seams: !self.keep_seams,

@@ -867,6 +867,41 @@ fn embedded_default_weights_run_without_any_weights_flag() {
     );
 }
 
+/// The coffee table of `fixtures/examples/coffee.jpg` (embedded weights):
+/// no straight lines, so the plane mode's texture axes are turned to the
+/// wood grain (recorded in `diagnostics.uv.grain`); `--no-grain` keeps them
+/// and measures nothing.
+#[test]
+fn the_coffee_tables_texture_is_turned_to_its_grain_unless_told_not_to() {
+    let photo = repo().join("fixtures/examples/coffee.jpg");
+    let tmp = tempfile::tempdir().unwrap();
+    let uv = |name: &str, extra: &[&str]| {
+        let out = tmp.path().join(name);
+        let mut args = vec![
+            "extract",
+            photo.to_str().unwrap(),
+            "--pick",
+            "20,190",
+            "--out",
+            out.to_str().unwrap(),
+            "--threads",
+            "2",
+        ];
+        args.extend_from_slice(extra);
+        ok(&args);
+        json_file(&out.join("material.json"))["diagnostics"]["uv"].clone()
+    };
+    let turned = uv("turned", &[]);
+    assert_eq!(turned["mode"], "plane", "{turned}");
+    assert_eq!(turned["grain_applied"], true, "{turned}");
+    let g = &turned["grain"];
+    assert!(g["turn_deg"].as_f64().unwrap().abs() >= 3.0, "{g}");
+    assert!(g["coherence"].as_f64().unwrap() >= 0.3, "{g}");
+    let kept = uv("kept", &["--no-grain"]);
+    assert_eq!(kept["grain_applied"], false, "{kept}");
+    assert!(kept["grain"].is_null(), "{kept}");
+}
+
 #[test]
 fn weights_inspect_default_describes_the_trained_embedded_nets() {
     let out = ok(&["weights", "inspect", "--default", "--json", "--check"]);

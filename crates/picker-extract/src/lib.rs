@@ -22,6 +22,7 @@ pub mod equalize;
 pub mod error;
 pub mod eval;
 pub mod export;
+pub mod grain;
 pub mod guided;
 pub mod lines;
 pub mod mask;

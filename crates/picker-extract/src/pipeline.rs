@@ -134,6 +134,10 @@ pub struct Options<'a> {
     /// Refine the plane mode's normal with the vanishing directions of the
     /// photo's straight lines in the mask ([`crate::lines`]).
     pub line_refine: bool,
+    /// In the plane mode, when the photo's lines give no axis, turn the
+    /// texture's axes to the direction its pattern runs along (a table's
+    /// wood grain; [`crate::grain`]).
+    pub align_grain: bool,
     /// In the plane mode, fold the repeats of a texture that repeats along
     /// both of its axes into one tile; in the networks' UV mode, fold the
     /// whole repeats inside the texture square into one tile and lay it over
@@ -574,6 +578,12 @@ pub struct UvDecision {
     pub focal_px: Option<f32>,
     /// The plane mode's line refinement, when it ran.
     pub lines: Option<crate::lines::LineRefinement>,
+    /// The plane mode's grain ([`crate::grain`]), when it was measured (no
+    /// axis from the lines, [`Options::align_grain`]); the axes were turned
+    /// to it when `grain_applied`.
+    pub grain: Option<crate::grain::Grain>,
+    /// Whether the texture's axes were turned to the measured grain.
+    pub grain_applied: bool,
     /// The plane mode's fold of a periodic texture into one tile, when one
     /// was found ([`crate::period`]).
     pub period: Option<crate::period::Fold>,
@@ -959,6 +969,7 @@ fn extract_as(
         };
         let plane_coords = |diag_focal: &mut Option<f32>,
                             diag_lines: &mut Option<crate::lines::LineRefinement>,
+                            diag_grain: &mut (Option<crate::grain::Grain>, bool),
                             rest_src: &mut Option<Mask>|
          -> Option<Coords> {
             let n = normal?;
@@ -1001,15 +1012,29 @@ fn extract_as(
             // A plane seen edge-on or from behind at every picked pixel
             // gives no coordinates: no plane.
             let rest = rest_plane();
-            let c = plane::plane_coords_with(
-                fw,
-                fh,
-                &full.data,
-                rest.as_ref().map(|m| &m.data[..]),
-                n,
-                f,
-                along,
-            );
+            let coords_along = |along: Option<Vec3>| {
+                plane::plane_coords_with(
+                    fw,
+                    fh,
+                    &full.data,
+                    rest.as_ref().map(|m| &m.data[..]),
+                    n,
+                    f,
+                    along,
+                )
+            };
+            let mut c = coords_along(along);
+            // No axis from the lines: the pattern's own direction, if clear.
+            if along.is_none() && opts.align_grain {
+                let g = crate::grain::measure(&c, &full.data, &p.luma);
+                if let Some(g) = g.filter(crate::grain::Grain::decisive) {
+                    let (e1, e2) = plane::plane_basis(n, None);
+                    // Texture direction (du, dv) is e1·du − e2·dv on the plane.
+                    c = coords_along(Some(e1 * g.along[0] - e2 * g.along[1]));
+                    diag_grain.1 = true;
+                }
+                diag_grain.0 = g;
+            }
             let usable = c.u.iter().zip(&full.data).any(|(u, &m)| m && u.is_finite());
             *rest_src = rest;
             usable.then_some(c)
@@ -1024,6 +1049,7 @@ fn extract_as(
         };
         let mut focal = None;
         let mut lines = None;
+        let mut grain = (None, false);
         let mut plane_rest = None;
         let (mode, coords) =
             match opts.uv {
@@ -1034,7 +1060,7 @@ fn extract_as(
                             .into(),
                     )),
                 },
-                UvChoice::Plane => match plane_coords(&mut focal, &mut lines, &mut plane_rest) {
+                UvChoice::Plane => match plane_coords(&mut focal, &mut lines, &mut grain, &mut plane_rest) {
                     Some(c) => (UvMode::Plane, c),
                     None => {
                         return Err(Error::Invalid(
@@ -1050,11 +1076,11 @@ fn extract_as(
                             Some(c) => (UvMode::Net, c),
                             None => (
                                 UvMode::Plane,
-                                plane_coords(&mut focal, &mut lines, &mut plane_rest).ok_or_else(neither)?,
+                                plane_coords(&mut focal, &mut lines, &mut grain, &mut plane_rest).ok_or_else(neither)?,
                             ),
                         }
                     } else {
-                        match plane_coords(&mut focal, &mut lines, &mut plane_rest) {
+                        match plane_coords(&mut focal, &mut lines, &mut grain, &mut plane_rest) {
                             Some(c) => (UvMode::Plane, c),
                             None => (
                                 UvMode::Net,
@@ -1154,6 +1180,8 @@ fn extract_as(
             plane_spread_deg: spread,
             focal_px: focal,
             lines,
+            grain: grain.0,
+            grain_applied: grain.1,
             period: fold,
             repeats: None,
             plane_part_share: part.as_ref().map(|pp| pp.share),
@@ -1590,6 +1618,7 @@ mod tests {
             max_size: 256,
             fov_deg: None,
             line_refine: false,
+            align_grain: false,
             fold_period: true,
             fill_from_mask: true,
             tileable: true,
@@ -1956,6 +1985,64 @@ mod tests {
             envmap: None,
         })
         .unwrap()
+    }
+
+    /// The grain of a texture square (`luma` of its texels, `size × size`)
+    /// measured with the square as its own photo.
+    fn texture_grain(t: &Image) -> crate::grain::Grain {
+        let (w, h) = (t.width, t.height);
+        let coords = Coords {
+            width: w,
+            height: h,
+            u: (0..w * h)
+                .map(|i| ((i % w) as f32 + 0.5) / w as f32)
+                .collect(),
+            v: (0..w * h)
+                .map(|i| ((i / w) as f32 + 0.5) / h as f32)
+                .collect(),
+            wrap: false,
+        };
+        let luma: Vec<f32> = (0..w * h).map(|i| luminance(t.rgb(i))).collect();
+        crate::grain::measure(&coords, &vec![true; w * h], &luma).unwrap()
+    }
+
+    /// Stripes running at 30° across a frontal plane, no straight-line axis
+    /// (the lines are off): with the grain alignment the texture's stripes run
+    /// along one of its axes and the diagnostics say so; without it they keep
+    /// the photo's angle and nothing is recorded.
+    #[test]
+    fn the_plane_modes_axes_follow_the_grain() {
+        let (h, w) = (96, 128);
+        let (c, s) = (120f32.to_radians().cos(), 120f32.to_radians().sin());
+        let p = frontal_plane(w, h, &|i| {
+            let (x, y) = ((i % w) as f32, (i / w) as f32);
+            0.45 + 0.3 * (std::f32::consts::TAU * (x * c + y * s) / 11.0).sin()
+        });
+        let pm = p.pick_mask([60, 50], &MaskOptions::default()).unwrap();
+        let inpainter = picker_inpaint::DiffusionInpainter::default();
+        let run = |align_grain| {
+            let opts = Options {
+                size: Some(64),
+                fov_deg: Some(60.0),
+                fold_period: false,
+                align_grain,
+                ..test_options(&inpainter, UvChoice::Plane)
+            };
+            extract(&p, "stripes", Some([60, 50]), &pm, &opts).unwrap()
+        };
+        let (turned, diag) = run(true);
+        let uv = diag.uv.unwrap();
+        let g = uv.grain.expect("measured");
+        assert!(uv.grain_applied, "{g:?}");
+        // Drawn at 30° below the x axis in the photo (y down): (du, dv) at +30°.
+        assert!((g.angle_deg - 30.0).abs() < 1.5, "{g:?}");
+        let out = texture_grain(&turned.texture.unwrap().texture);
+        assert!(out.turn_deg.abs() < 3.0 && out.coherence > 0.5, "{out:?}");
+        let (kept, diag) = run(false);
+        let uv = diag.uv.unwrap();
+        assert!(uv.grain.is_none() && !uv.grain_applied);
+        let out = texture_grain(&kept.texture.unwrap().texture);
+        assert!((out.angle_deg - 30.0).abs() < 3.0, "{out:?}");
     }
 
     /// A frontal plane whose photo is a ramp with fine bars (a crop: its left

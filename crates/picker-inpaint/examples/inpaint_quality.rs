@@ -2,7 +2,7 @@
 //!
 //! ```text
 //! cargo run --release -p picker-inpaint --example inpaint_quality -- \
-//!     MASK.png TEXTURE... [--em N] [--em-finest N] [--finest-mean-tolerance X]
+//!     MASK.png TEXTURE... [--em N] [--em-finest N] [--finest-mean-tolerance X] [--save DIR]
 //! ```
 //!
 //! Each texture is tiled to the mask's size (periodic, like a reprojected
@@ -10,9 +10,11 @@
 //! toroidal PatchMatch fills them. Prints the hole PSNR against the texture
 //! (capped at 60 dB in the mean, so exact copies do not dominate it) and the
 //! time per texture. The mask of a real extraction is its `coverage.png`.
+//! With `--save DIR`, each filled texture is written to `DIR/NAME.png`, to
+//! look at.
 
 use picker_inpaint::{InpaintOptions, Inpainter, PatchMatchInpainter};
-use picker_render::io::{read_image, Image};
+use picker_render::io::{read_image, write_png, Image};
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -29,6 +31,7 @@ fn main() -> ExitCode {
 fn run() -> Result<(), String> {
     let mut ip = PatchMatchInpainter::default();
     let mut files: Vec<PathBuf> = Vec::new();
+    let mut save: Option<PathBuf> = None;
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         let mut value = |name: &str| args.next().ok_or(format!("{name} needs a value"));
@@ -46,11 +49,12 @@ fn run() -> Result<(), String> {
                     .parse()
                     .map_err(|e| format!("--finest-mean-tolerance: {e}"))?
             }
+            "--save" => save = Some(value("--save")?.into()),
             _ => files.push(a.into()),
         }
     }
     if files.len() < 2 {
-        return Err("usage: inpaint_quality MASK.png TEXTURE... [--em N] [--em-finest N] [--finest-mean-tolerance X]".into());
+        return Err("usage: inpaint_quality MASK.png TEXTURE... [--em N] [--em-finest N] [--finest-mean-tolerance X] [--save DIR]".into());
     }
     let mask_path = files.remove(0);
     let mask = read_image(&mask_path).map_err(|e| format!("{}: {e}", mask_path.display()))?;
@@ -97,6 +101,10 @@ fn run() -> Result<(), String> {
             .file_stem()
             .map(|s| s.to_string_lossy().into_owned())
             .unwrap_or_default();
+        if let Some(dir) = &save {
+            let p = dir.join(format!("{name}.png"));
+            write_png(&p, &out).map_err(|e| format!("{}: {e}", p.display()))?;
+        }
         println!("{name:<24} hole PSNR {db:7.2} dB  {s:.3} s");
         total_db += db.min(60.0);
         total_s += s;
