@@ -16,7 +16,8 @@
 //!   than about one repeat) and reach at least [`AUTO_MIN_UV_FOOTPRINT`] of the
 //!   texture square (collapsed UVs, all on a point or a line, do not), otherwise
 //!   rectifies a plane when the picked normals agree within
-//!   [`AUTO_MAX_PLANE_SPREAD_DEG`], otherwise keeps the UVs. A plane is
+//!   [`AUTO_MAX_PLANE_SPREAD_DEG`] or the UVs have collapsed, otherwise keeps
+//!   the UVs. A plane is
 //!   rectified from the part of the material on the plane at the pick
 //!   ([`plane::coplanar_part`]: walls meeting at corners, a box's faces, a
 //!   mask that took in a neighbour), which also decides whether a plane is
@@ -1071,7 +1072,11 @@ fn extract_as(
                 UvChoice::Auto => {
                     // Unmeasurable (the halves share too few texels): trust the UVs,
                     // unless they have collapsed into a tiny part of the square.
-                    if net_ok || !planar {
+                    // Inconsistent UVs are kept when no plane fits; collapsed
+                    // ones are not: a rough plane through curved or noisy
+                    // normals still shows most of the texture, UVs on a point
+                    // or a line show almost none of it.
+                    if net_ok || (!planar && !collapsed) {
                         match net_coords {
                             Some(c) => (UvMode::Net, c),
                             None => (
@@ -1985,6 +1990,51 @@ mod tests {
             envmap: None,
         })
         .unwrap()
+    }
+
+    /// Collapsed UVs (every pixel at one point of the square) on a material
+    /// whose normals are too noisy for a plane by the spread rule (a third
+    /// facing the camera, a third tilted 31° either way): `auto` rectifies a
+    /// plane anyway, since UVs on a point show almost nothing of the texture;
+    /// inconsistent but not collapsed UVs would have been kept.
+    #[test]
+    fn collapsed_uvs_give_way_to_a_rough_plane() {
+        let (h, w) = (48, 64);
+        let mut p = frontal_plane(w, h, &|i| {
+            let (x, y) = (i % w, i / w);
+            if (x / 4 + y / 4) % 2 == 0 {
+                0.8
+            } else {
+                0.3
+            }
+        });
+        let tilt = |i: usize| [-0.6f32, 0.0, 0.6][(i % w + i / w) % 3];
+        let normals: Vec<f32> = (0..3 * h * w)
+            .map(|k| {
+                let (c, i) = (k / (h * w), k % (h * w));
+                let n = Vec3::new(tilt(i), 0.0, 1.0).normalize();
+                n[c]
+            })
+            .collect();
+        p.inputs.elements.normals = Image::new(3, h, w, normals).unwrap();
+        let pm = p.pick_mask([30, 20], &MaskOptions::default()).unwrap();
+        let inpainter = picker_inpaint::DiffusionInpainter::default();
+        let opts = Options {
+            fov_deg: Some(60.0),
+            ..test_options(&inpainter, UvChoice::Auto)
+        };
+        let (m, diag) = extract(&p, "rough", Some([30, 20]), &pm, &opts).unwrap();
+        let uv = diag.uv.unwrap();
+        assert!(
+            uv.plane_spread_deg.unwrap() > AUTO_MAX_PLANE_SPREAD_DEG,
+            "{uv:?}"
+        );
+        assert!(
+            uv.net_uv_footprint.unwrap() < AUTO_MIN_UV_FOOTPRINT,
+            "{uv:?}"
+        );
+        assert_eq!(uv.mode, UvMode::Plane, "{uv:?}");
+        assert!(m.texture.unwrap().coverage_fraction > 0.5);
     }
 
     /// The grain of a texture square (`luma` of its texels, `size × size`)
