@@ -15,7 +15,9 @@
 //!   colour-statistics distance) and the seam ratio of the result next to the
 //!   true texture's own; a textured material extracted as a single colour is
 //!   scored as that flat colour (what the artist gets), so that calling a
-//!   texture plain is not left out of the mean;
+//!   texture plain is not left out of the mean; for the plane mode also the
+//!   score at the best quarter turn of the texture
+//!   ([`picker_extract::eval::turned_texture_score`]);
 //! - for single-colour materials, the RMSE of the diffuse colour.
 //!
 //! - the IoU of a baseline without networks: a 4-connected flood fill from the
@@ -148,6 +150,13 @@ pub struct Row {
     albedo_rmse: f64,
     normal_error_deg: f64,
     texture_psnr_db: Option<f64>,
+    /// Plane mode: the aligned PSNR at the best quarter turn of the texture
+    /// ([`metrics::turned_texture_score`]; a rectified plane's axes are
+    /// turned to the nearest axis of its lines or grain, which may be the
+    /// truth's other one); other rows: `texture_psnr_db`.
+    texture_psnr_any_turn_db: Option<f64>,
+    /// Plane mode: the clockwise quarter turns that gave `texture_psnr_any_turn_db`.
+    texture_turns: Option<usize>,
     texture_colour_distance: Option<f64>,
     texture_size: Option<usize>,
     texture_scale: Option<f64>,
@@ -559,6 +568,8 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
             albedo_rmse: metrics::albedo_error(&el_diffuse, &truth.diffuse, &true_mask),
             normal_error_deg: metrics::normal_error_deg(&el_normals, &truth.normals, &true_mask),
             texture_psnr_db: None,
+            texture_psnr_any_turn_db: None,
+            texture_turns: None,
             texture_colour_distance: None,
             texture_size: None,
             texture_scale: None,
@@ -650,6 +661,12 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
             if let Some(t) = &mat.texture {
                 let s = metrics::aligned_texture_score(&t.texture, &true_tex);
                 row.texture_psnr_db = Some(s.psnr_db);
+                row.texture_psnr_any_turn_db = Some(s.psnr_db);
+                if t.uv_mode == UvMode::Plane {
+                    let (turned, k) = metrics::turned_texture_score(&t.texture, &true_tex);
+                    row.texture_psnr_any_turn_db = Some(turned.psnr_db);
+                    row.texture_turns = Some(k);
+                }
                 row.texture_colour_distance = Some(s.colour_distance);
                 row.texture_scale = Some(s.scale);
                 row.seam_ratio = Some(t.seam.ratio);
@@ -668,6 +685,7 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
                 )?;
                 let s = metrics::aligned_texture_score(&flat, &true_tex);
                 row.texture_psnr_db = Some(s.psnr_db);
+                row.texture_psnr_any_turn_db = Some(s.psnr_db);
                 row.texture_colour_distance = Some(s.colour_distance);
             }
         } else if let Some(c) = m["diffuse_colour"].as_array() {
@@ -782,6 +800,8 @@ pub fn run(a: Args) -> Result<()> {
             mean(rows.iter().map(|r| f64::from(u8::from(r.oracle_tolerance_iou >= 0.8)))),
         "mean_texture_psnr_db": mean(tex.iter().filter_map(|r| r.texture_psnr_db)),
         "min_texture_psnr_db": min(tex.iter().filter_map(|r| r.texture_psnr_db)),
+        "mean_texture_psnr_any_turn_db": mean(tex.iter().filter_map(|r| r.texture_psnr_any_turn_db)),
+        "turned_rows": rows.iter().filter(|r| r.texture_turns.is_some_and(|k| k != 0)).count(),
         "mean_texture_colour_distance": mean(tex.iter().filter_map(|r| r.texture_colour_distance)),
         "mean_seam_ratio": mean(tex.iter().filter_map(|r| r.seam_ratio)),
         "mean_truth_seam_ratio": mean(tex.iter().filter_map(|r| r.truth_seam_ratio)),

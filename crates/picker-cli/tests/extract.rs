@@ -179,6 +179,41 @@ fn extraction_from_a_cycles_scene_meets_the_issue_bounds() {
     assert_eq!(textured, 2);
 }
 
+/// `picker eval --uv plane` on the Cycles scene: every textured row (all in
+/// the plane mode) is also scored at the best quarter turn of its texture,
+/// which is never below the unturned score, with the turn recorded; the
+/// aggregate carries the mean and the count of rows a turn helped.
+#[test]
+fn eval_scores_plane_textures_at_their_best_quarter_turn() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scenes = repo().join("fixtures/blender");
+    let (_, r) = eval_report(&scenes, &["--uv", "plane"], &tmp.path().join("eval.json"));
+    let mut plane = 0;
+    for row in r["rows"].as_array().unwrap() {
+        if !row["textured_truth"].as_bool().unwrap() {
+            assert!(row["texture_psnr_any_turn_db"].is_null(), "{row}");
+            continue;
+        }
+        assert_eq!(row["uv_mode"], "plane", "{row}");
+        plane += 1;
+        let (plain, turned) = (
+            row["texture_psnr_db"].as_f64().unwrap(),
+            row["texture_psnr_any_turn_db"].as_f64().unwrap(),
+        );
+        assert!(turned >= plain, "{row}");
+        let k = row["texture_turns"].as_u64().unwrap();
+        assert!(k < 4, "{row}");
+        assert_eq!(k == 0, turned == plain, "{row}");
+    }
+    assert_eq!(plane, 2);
+    let agg = &r["aggregate"];
+    assert!(
+        agg["mean_texture_psnr_any_turn_db"].as_f64().unwrap()
+            >= agg["mean_texture_psnr_db"].as_f64().unwrap()
+    );
+    assert!(agg["turned_rows"].as_u64().unwrap() <= 2);
+}
+
 /// `picker eval` with networks on a scene that is not the networks' working
 /// size (the 120×160 Cycles fixture; the nets run at 240×320): the elements
 /// are compared at the scene's size (this panicked until stop 29), and a

@@ -123,6 +123,47 @@ pub fn aligned_texture_score(extracted: &Image, truth: &Image) -> AlignedScore {
 }
 
 /// `10·log10(1 / mse)` (peak 1); `+inf` for 0.
+/// `img` turned by `quarter_turns` × 90° clockwise (0–3; larger values wrap).
+pub fn quarter_turn(img: &Image, quarter_turns: usize) -> Image {
+    let (h, w, c) = (img.height, img.width, img.channels);
+    let k = quarter_turns % 4;
+    let (oh, ow) = if k.is_multiple_of(2) { (h, w) } else { (w, h) };
+    let mut data = vec![0.0f32; c * oh * ow];
+    for ch in 0..c {
+        let src = img.plane(ch);
+        let dst = &mut data[ch * oh * ow..(ch + 1) * oh * ow];
+        for y in 0..oh {
+            for x in 0..ow {
+                // Output (y, x) reads the source texel that lands there.
+                let (sy, sx) = match k {
+                    0 => (y, x),
+                    1 => (h - 1 - x, y),
+                    2 => (h - 1 - y, w - 1 - x),
+                    _ => (x, w - 1 - y),
+                };
+                dst[y * ow + x] = src[sy * w + sx];
+            }
+        }
+    }
+    Image::new(c, oh, ow, data).expect("same number of values")
+}
+
+/// [`aligned_texture_score`] at the best of the four quarter turns of
+/// `extracted`, with the number of clockwise quarter turns that gave it
+/// (ties keep the fewest). For a texture whose orientation is a choice, not
+/// a measurement: a rectified plane's axes are turned to the nearest axis of
+/// the region's lines or grain, which may be the truth's other axis.
+pub fn turned_texture_score(extracted: &Image, truth: &Image) -> (AlignedScore, usize) {
+    let mut best = (aligned_texture_score(extracted, truth), 0);
+    for k in 1..4 {
+        let s = aligned_texture_score(&quarter_turn(extracted, k), truth);
+        if s.psnr_db > best.0.psnr_db {
+            best = (s, k);
+        }
+    }
+    best
+}
+
 fn psnr_from_mse(mse: f64) -> f64 {
     if mse <= 0.0 {
         f64::INFINITY

@@ -3,7 +3,8 @@
 use std::time::Instant;
 
 use picker_extract::eval::{
-    albedo_error, aligned_texture_score, colour_distance, mask_iou, normal_error_deg,
+    albedo_error, aligned_texture_score, colour_distance, mask_iou, normal_error_deg, quarter_turn,
+    turned_texture_score,
 };
 use picker_render::io::Image;
 use picker_tensor::Rng;
@@ -227,4 +228,52 @@ fn albedo_error_is_rmse_inside_the_mask() {
     let mask = [false, true, true, true];
     assert_eq!(albedo_error(&c, &a, &mask), 0.0);
     assert!(albedo_error(&a, &b, &[false; 4]).is_nan());
+}
+
+/// Quarter turns against the plain definition (a texel at row r, column c
+/// of an h × w image lands at row c, column h−1−r after one clockwise turn),
+/// on odd and even shapes; four turns give the image back.
+#[test]
+fn quarter_turns_match_their_definition() {
+    for (h, w) in [(1, 1), (1, 5), (4, 1), (3, 7), (6, 6)] {
+        let t = texture(h, w, 40 + h as u64);
+        let mut cur = t.clone();
+        for k in 1..=4 {
+            let next = quarter_turn(&t, k);
+            let once = quarter_turn(&cur, 1);
+            assert_eq!((once.height, once.width), (cur.width, cur.height));
+            for c in 0..3 {
+                for r in 0..cur.height {
+                    for x in 0..cur.width {
+                        let want = cur.plane(c)[r * cur.width + x];
+                        let got = once.plane(c)[x * once.width + (cur.height - 1 - r)];
+                        assert_eq!(got, want, "{h}x{w} turn {k}");
+                    }
+                }
+            }
+            assert_eq!(
+                next.data, once.data,
+                "{h}x{w}: turn {k} at once vs one by one"
+            );
+            cur = once;
+        }
+        assert_eq!(cur.data, t.data);
+        assert_eq!(quarter_turn(&t, 5).data, quarter_turn(&t, 1).data);
+    }
+}
+
+/// A texture turned by a quarter turn (and shifted) is found at the turn
+/// that undoes it, exactly; unturned, the plain score's alignment is kept.
+#[test]
+fn turned_textures_are_scored_at_the_turn_that_undoes_them() {
+    let t = texture(40, 40, 9);
+    for k in 0..4 {
+        let e = quarter_turn(&shifted(&t, 7, 3), k);
+        let (s, turns) = turned_texture_score(&e, &t);
+        assert_eq!(turns, (4 - k) % 4, "turned {k}");
+        assert!(s.psnr_db > 100.0, "turned {k}: {}", s.psnr_db);
+        if k != 0 {
+            assert!(aligned_texture_score(&e, &t).psnr_db < 40.0, "turned {k}");
+        }
+    }
 }
