@@ -227,8 +227,16 @@ pub fn known_seam_ratio(img: &Image, known: &[bool]) -> Option<f64> {
 pub const SEAM_BAND_MIN_RATIO: f64 = SEAMLESS_MIN_RATIO;
 
 /// Width of each half of [`seam_band`]'s band, as a fraction of the side
-/// (at least one texel).
-pub const SEAM_BAND_FRACTION: f64 = 1.0 / 32.0;
+/// (at least one texel). 1/8 rather than the 1/32 of stops 21–38: a thin
+/// band is too narrow for the coarse pyramid levels, so the multi-scale
+/// completion fills it by averaging its two sides, a blurred cross through
+/// the tiled texture (pebbles, grass, a stone wall, a carpet: the band's
+/// neighbour differences 0.44–0.65 of the interior's at 1/32); at 1/8 it
+/// synthesises the texture across it. Measured with the embedded networks
+/// (`picker eval DIR --embedded`): mean aligned PSNR +0.01 to +0.13 dB on
+/// three of four sets (−0.015 on the fourth), colour distance 1–2 % higher;
+/// with ground-truth elements in the plane mode +0.07 and +0.11 dB.
+pub const SEAM_BAND_FRACTION: f64 = 1.0 / 8.0;
 
 /// The known flags of a texture square to inpaint so that it tiles, with the
 /// observed seam ratio that called for them: when its
@@ -456,7 +464,7 @@ mod tests {
         let all = vec![true; h * w];
         let (band, ratio) = seam_band(&ramp, &all).expect("a crop of a ramp has a seam");
         assert_eq!(Some(ratio), known_seam_ratio(&ramp, &all));
-        let (bx, by) = (2, 2); // 64/32 and 48/32 rounded
+        let (bx, by) = (8, 6); // 64/8 and 48/8
         for y in 0..h {
             for x in 0..w {
                 let edge = x < bx || x + bx >= w || y < by || y + by >= h;
