@@ -2,7 +2,7 @@
 //!
 //! ```text
 //! cargo run --release -p picker-inpaint --example inpaint_quality -- \
-//!     MASK.png TEXTURE... [--em N] [--em-finest N] [--finest-mean-tolerance X] [--save DIR]
+//!     MASK.png TEXTURE... [--em N] [--em-finest N] [--finest-mean-tolerance X] [--no-adaptive] [--save DIR]
 //! ```
 //!
 //! Each texture is tiled to the mask's size (periodic, like a reprojected
@@ -50,11 +50,12 @@ fn run() -> Result<(), String> {
                     .map_err(|e| format!("--finest-mean-tolerance: {e}"))?
             }
             "--save" => save = Some(value("--save")?.into()),
+            "--no-adaptive" => ip.adaptive_levels = false,
             _ => files.push(a.into()),
         }
     }
     if files.len() < 2 {
-        return Err("usage: inpaint_quality MASK.png TEXTURE... [--em N] [--em-finest N] [--finest-mean-tolerance X] [--save DIR]".into());
+        return Err("usage: inpaint_quality MASK.png TEXTURE... [--em N] [--em-finest N] [--finest-mean-tolerance X] [--no-adaptive] [--save DIR]".into());
     }
     let mask_path = files.remove(0);
     let mask = read_image(&mask_path).map_err(|e| format!("{}: {e}", mask_path.display()))?;
