@@ -53,6 +53,9 @@ use crate::{
     mask, plane, resample, Error, Material, MaterialParams, Result, TextureResult, UvMode,
 };
 
+/// [`Prepared::palette`]: a segmentation-colour bin seeds a material while it
+/// holds at least this share of the smallest material's area.
+pub const PALETTE_SEED_SHARE: f64 = 0.25;
 /// Smallest cross-validated R² for which `auto` trusts the predicted UVs.
 pub const AUTO_MIN_R2: f64 = 0.5;
 /// Smallest share of a [`AUTO_FOOTPRINT_CELLS`]² grid over the texture square
@@ -428,7 +431,11 @@ impl Prepared {
             else {
                 break;
             };
-            if (members.len() as f64) < min_fraction * (w * h) as f64 {
+            // A material's segmentation colours can spread over several
+            // bins (a white cup's shaded rim), so its mask grows past its
+            // bin: bins down to PALETTE_SEED_SHARE of the area still seed
+            // one, and only the mask must cover `min_fraction`.
+            if (members.len() as f64) < PALETTE_SEED_SHARE * min_fraction * (w * h) as f64 {
                 break;
             }
             // The member nearest to the bin's median colour seeds the mask.
@@ -1883,6 +1890,57 @@ mod tests {
             envmap: None,
         })
         .unwrap()
+    }
+
+    /// A palette of two materials on 24×32 pixels: the left 22 columns one
+    /// segmentation colour, the right 10 a second material whose colour
+    /// ramps over two quantisation bins (its shading), each under the
+    /// smallest area asked for but the material over it. Both are found,
+    /// the ramp as one material; asked for more than the ramp covers, only
+    /// the first.
+    #[test]
+    fn a_palette_finds_a_material_whose_colours_span_several_bins() {
+        let (h, w) = (24, 32);
+        let seg = Image::new(
+            3,
+            h,
+            w,
+            (0..3 * h * w)
+                .map(|k| {
+                    let (c, x) = (k / (h * w), k % w);
+                    match (c, x < 22) {
+                        (_, true) => 0.2,
+                        (0, false) => 0.52 + 0.09 * (x - 22) as f32 / 9.0,
+                        _ => 0.7,
+                    }
+                })
+                .collect(),
+        )
+        .unwrap();
+        let p = Prepared::new(Inputs {
+            photo: flat(3, &[0.5, 0.5, 0.5]),
+            elements: flat_elements([0.0, 0.0, 1.0], None),
+            segmentation: seg,
+            embedding: None,
+            segmentation_estimated: false,
+            envmap: None,
+        })
+        .unwrap();
+        // Bins 8 and 9 of channel 0 hold 4 and 6 columns: 12.5 % and 19 %.
+        let pal = p.palette(0.25, 8);
+        assert_eq!(
+            pal.len(),
+            2,
+            "{:?}",
+            pal.iter().map(|m| m.0).collect::<Vec<_>>()
+        );
+        let right = &pal[1].1.mask;
+        for y in 0..h {
+            for x in 0..w {
+                assert_eq!(right.data[y * w + x], x >= 22, "({x}, {y})");
+            }
+        }
+        assert_eq!(p.palette(0.4, 8).len(), 1);
     }
 
     #[test]
