@@ -895,22 +895,6 @@ mod tests {
         t
     }
 
-    /// The coordinates of a frontal `w × h` photo of the square: pixel
-    /// centre `(x, y)` at `((x + ½)/w, (y + ½)/h)`.
-    fn frontal(w: usize, h: usize, wrap: bool) -> Coords {
-        Coords {
-            width: w,
-            height: h,
-            u: (0..w * h)
-                .map(|i| ((i % w) as f32 + 0.5) / w as f32)
-                .collect(),
-            v: (0..w * h)
-                .map(|i| ((i / w) as f32 + 0.5) / h as f32)
-                .collect(),
-            wrap,
-        }
-    }
-
     /// A grid of tiles `px × py` with grout lines `g` wide, and brightness
     /// jitter per tile from a hash.
     fn tiles(px: f32, py: f32, g: f32) -> impl Fn(f32, f32) -> f32 {
@@ -1101,7 +1085,7 @@ mod tests {
         // same place.
         let (w, h) = (160usize, 160usize);
         let img = texture(w, h, tiles(20.0, 16.0, 2.0));
-        let coords = frontal(w, h, false);
+        let coords = Coords::identity(w, h, false);
         let (mask, conf) = (vec![true; w * h], vec![1.0; w * h]);
         let (folded, fold) = fold_if_periodic(coords, &mask, &img, &conf, 160);
         let fold = fold.expect("a fold");
@@ -1297,7 +1281,7 @@ mod tests {
         // the seen ones match the truth.
         let (w, h) = (120usize, 120usize);
         let truth = texture(w, h, tiles(30.0, 40.0, 3.0));
-        let coords = frontal(w, h, true);
+        let coords = Coords::identity(w, h, true);
         let mask: Vec<bool> = (0..w * h).map(|i| i % w < 48 && i / w < 66).collect();
         let conf = vec![1.0; w * h];
         let (folded, rep) =

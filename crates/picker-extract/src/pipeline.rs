@@ -2095,21 +2095,11 @@ mod tests {
         assert!(m.texture.unwrap().coverage_fraction > 0.5);
     }
 
-    /// The grain of a texture square (`luma` of its texels, `size × size`)
-    /// measured with the square as its own photo.
+    /// The grain of a texture square measured with the square as its own
+    /// photo.
     fn texture_grain(t: &Image) -> crate::grain::Grain {
         let (w, h) = (t.width, t.height);
-        let coords = Coords {
-            width: w,
-            height: h,
-            u: (0..w * h)
-                .map(|i| ((i % w) as f32 + 0.5) / w as f32)
-                .collect(),
-            v: (0..w * h)
-                .map(|i| ((i / w) as f32 + 0.5) / h as f32)
-                .collect(),
-            wrap: false,
-        };
+        let coords = Coords::identity(w, h, false);
         let luma: Vec<f32> = (0..w * h).map(|i| luminance(t.rgb(i))).collect();
         crate::grain::measure(&coords, &vec![true; w * h], &luma).unwrap()
     }

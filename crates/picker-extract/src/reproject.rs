@@ -50,6 +50,23 @@ pub struct Coords {
 }
 
 impl Coords {
+    /// The coordinates of a `w × h` image that is the texture square itself
+    /// (a frontal photo of it filling the frame): pixel centre `(x, y)` at
+    /// `((x + ½)/w, (y + ½)/h)`.
+    pub fn identity(w: usize, h: usize, wrap: bool) -> Self {
+        Self {
+            width: w,
+            height: h,
+            u: (0..w * h)
+                .map(|i| ((i % w) as f32 + 0.5) / w as f32)
+                .collect(),
+            v: (0..w * h)
+                .map(|i| ((i / w) as f32 + 0.5) / h as f32)
+                .collect(),
+            wrap,
+        }
+    }
+
     fn delta(&self, a: f32, b: f32) -> f32 {
         let d = b - a;
         if self.wrap {
