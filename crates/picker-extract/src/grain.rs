@@ -11,7 +11,8 @@
 //!
 //! **Measure.** The structure tensor of the picked pixels' luminance, taken
 //! in texture-square coordinates: at every pixel whose 3×3 neighbourhood is
-//! picked, the central-difference gradient `g` of the luminance in the photo
+//! picked (every `k`-th along both axes when there are more than
+//! [`MAX_SAMPLES`]), the central-difference gradient `g` of the luminance in the photo
 //! is carried into the square by the coordinates' Jacobian `M` (`(u, v)` per
 //! pixel step): `g_uv = M⁻ᵀ g`, and `S = Σ |det M| · g_uv g_uvᵀ` (each pixel
 //! weighted by the texture area it covers). The gradients are clipped at
