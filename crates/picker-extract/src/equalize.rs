@@ -35,7 +35,7 @@ const PASSES: usize = 3;
 pub struct EvenOut {
     /// The smallest and largest gain applied to a texel.
     pub gain_range: [f64; 2],
-    /// The half-width of the box filter, in texels ([`PASSES`] passes).
+    /// The half-width of the box filter, in texels (three passes).
     pub radius: usize,
 }
 
