@@ -12,7 +12,8 @@
 //! **Measure.** The structure tensor of the picked pixels' luminance, taken
 //! in texture-square coordinates: at every pixel whose 3×3 neighbourhood is
 //! picked (every `k`-th along both axes when there are more than
-//! [`MAX_SAMPLES`]), the central-difference gradient `g` of the luminance in the photo
+//! [`MAX_SAMPLES`]), the gradient `g` of the luminance in the photo (Scharr's
+//! 3×3 derivative, the most rotation-invariant of its size)
 //! is carried into the square by the coordinates' Jacobian `M` (`(u, v)` per
 //! pixel step): `g_uv = M⁻ᵀ g`, and `S = Σ |det M| · g_uv g_uvᵀ` (each pixel
 //! weighted by the texture area it covers). The gradients are clipped at
@@ -177,9 +178,20 @@ pub fn measure(coords: &Coords, mask: &[bool], luma: &[f32]) -> Option<Grain> {
             }
             // M⁻ᵀ = [[m11, −m10], [−m01, m00]] / det.
             let inv_t = [[m11 / det, -m10 / det], [-m01 / det, m00 / det]];
+            let l = |j: usize| f64::from(luma[j]);
+            // Scharr's 3×3 derivative (weights 3, 10, 3 across): its
+            // direction error is a tenth of the central difference's, whose
+            // damping of fine stripes differs between the axes (a floor's
+            // stripes at 30° measured 33.8° with it, 30.0° with this).
             let g = [
-                f64::from(luma[i + 1] - luma[i - 1]) / 2.0,
-                f64::from(luma[i + w] - luma[i - w]) / 2.0,
+                (3.0 * (l(i - w + 1) - l(i - w - 1))
+                    + 10.0 * (l(i + 1) - l(i - 1))
+                    + 3.0 * (l(i + w + 1) - l(i + w - 1)))
+                    / 32.0,
+                (3.0 * (l(i + w - 1) - l(i - w - 1))
+                    + 10.0 * (l(i + w) - l(i - w))
+                    + 3.0 * (l(i + w + 1) - l(i - w + 1)))
+                    / 32.0,
             ];
             (g[0].is_finite() && g[1].is_finite()).then_some((g, inv_t, det.abs()))
         })
@@ -270,7 +282,7 @@ mod tests {
             let luma = stripes(w, h, grad, 12.0);
             let g = measure(&coords, &mask, &luma).unwrap();
             let along = grad + 90.0;
-            assert!(line_off(g.angle_deg, along) < 1.0, "{grad}: {g:?}");
+            assert!(line_off(g.angle_deg, along) < 0.2, "{grad}: {g:?}");
             assert!(
                 g.coherence > 0.9 && g.photo_coherence > 0.9,
                 "{grad}: {g:?}"
@@ -310,7 +322,7 @@ mod tests {
         let mask: Vec<bool> = (0..w * h).map(|i| i / w > h / 3).collect();
         let c = plane_coords(w, h, &mask, n, f, None);
         let g = measure(&c, &mask, &luma).unwrap();
-        assert!(line_off(g.angle_deg, -30.0) < 5.0, "{g:?}");
+        assert!(line_off(g.angle_deg, -30.0) < 0.5, "{g:?}");
         assert!(g.decisive(), "{g:?}");
         let turned = e1 * g.along[0] - e2 * g.along[1];
         let c2 = plane_coords(w, h, &mask, n, f, Some(turned));
