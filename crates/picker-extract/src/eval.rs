@@ -87,42 +87,89 @@ pub struct AlignedScore {
 /// the first 3 channels are used) and are sRGB-encoded before comparing;
 /// their sizes may differ. An empty image gives NaN scores.
 pub fn aligned_texture_score(extracted: &Image, truth: &Image) -> AlignedScore {
+    score_turns(extracted, truth, 1)[0]
+}
+
+/// The truth's resampled candidates (one pyramid per [`ALIGN_SCALES`]
+/// entry), made for the size and pyramid depth of the first extracted image
+/// that needs them and kept for the next of the same size.
+struct Candidates<'a> {
+    truth: &'a Image,
+    /// `(height, width, levels)` and one pyramid per scale.
+    made: Vec<(SizeKey, Vec<Vec<Image>>)>,
+}
+
+/// An extracted image's `(height, width, pyramid levels)`.
+type SizeKey = (usize, usize, usize);
+
+impl Candidates<'_> {
+    fn for_size(&mut self, h: usize, w: usize, levels: usize) -> &[Vec<Image>] {
+        let key = (h, w, levels);
+        if let Some(k) = self.made.iter().position(|(k, _)| *k == key) {
+            return &self.made[k].1;
+        }
+        let pyramids = ALIGN_SCALES
+            .iter()
+            .map(|&s| {
+                let hc = ((s * h as f64).round() as usize).max(1);
+                let wc = ((s * w as f64).round() as usize).max(1);
+                // Resample in linear light, then encode.
+                pyramid(&srgb3(&resize(self.truth, hc, wc, true)), levels)
+            })
+            .collect();
+        self.made.push((key, pyramids));
+        &self.made.last().expect("just pushed").1
+    }
+}
+
+/// [`aligned_texture_score`] of `extracted` turned by 0, 1, …, `turns − 1`
+/// clockwise quarter turns, the truth's resampled candidates made once per
+/// size and the colour distance (which no turn changes) once.
+fn score_turns(extracted: &Image, truth: &Image, turns: usize) -> Vec<AlignedScore> {
     let empty = |i: &Image| i.width == 0 || i.height == 0 || i.channels == 0;
     if empty(extracted) || empty(truth) {
-        return AlignedScore {
+        let nan = AlignedScore {
             psnr_db: f64::NAN,
             shift: (0, 0),
             scale: 1.0,
             colour_distance: f64::NAN,
         };
+        return vec![nan; turns];
     }
-    let e = srgb3(extracted);
+    let e0 = srgb3(extracted);
     let t = three(truth);
-    let e_pyr = pyramid(&e, levels(e.height, e.width));
-    let levels = e_pyr.len() - 1;
-
-    let mut best: Option<(f64, (usize, usize), f64)> = None;
-    for &s in &ALIGN_SCALES {
-        let hc = ((s * e.height as f64).round() as usize).max(1);
-        let wc = ((s * e.width as f64).round() as usize).max(1);
-        // Resample in linear light, then encode.
-        let cand = srgb3(&resize(&t, hc, wc, true));
-        let c_pyr = pyramid(&cand, levels);
-        let (mse, shift) = best_shift(&e_pyr, &c_pyr);
-        if best.is_none_or(|(b, _, _)| mse < b) {
-            best = Some((mse, shift, s));
-        }
-    }
-    let (mse, shift, scale) = best.unwrap_or((f64::NAN, (0, 0), 1.0));
-    AlignedScore {
-        psnr_db: psnr_from_mse(mse),
-        shift,
-        scale,
-        colour_distance: colour_distance_srgb(&e, &srgb3(&t)),
-    }
+    let colour_distance = colour_distance_srgb(&e0, &srgb3(&t));
+    let mut cands = Candidates {
+        truth: &t,
+        made: Vec::new(),
+    };
+    (0..turns)
+        .map(|k| {
+            let e = if k == 0 {
+                e0.clone()
+            } else {
+                quarter_turn(&e0, k)
+            };
+            let e_pyr = pyramid(&e, levels(e.height, e.width));
+            let c_pyrs = cands.for_size(e.height, e.width, e_pyr.len() - 1);
+            let mut best: Option<(f64, (usize, usize), f64)> = None;
+            for (&s, c_pyr) in ALIGN_SCALES.iter().zip(c_pyrs) {
+                let (mse, shift) = best_shift(&e_pyr, c_pyr);
+                if best.is_none_or(|(b, _, _)| mse < b) {
+                    best = Some((mse, shift, s));
+                }
+            }
+            let (mse, shift, scale) = best.unwrap_or((f64::NAN, (0, 0), 1.0));
+            AlignedScore {
+                psnr_db: psnr_from_mse(mse),
+                shift,
+                scale,
+                colour_distance,
+            }
+        })
+        .collect()
 }
 
-/// `10·log10(1 / mse)` (peak 1); `+inf` for 0.
 /// `img` turned by `quarter_turns` × 90° clockwise (0–3; larger values wrap).
 pub fn quarter_turn(img: &Image, quarter_turns: usize) -> Image {
     let (h, w, c) = (img.height, img.width, img.channels);
@@ -148,22 +195,27 @@ pub fn quarter_turn(img: &Image, quarter_turns: usize) -> Image {
     Image::new(c, oh, ow, data).expect("same number of values")
 }
 
-/// [`aligned_texture_score`] at the best of the four quarter turns of
-/// `extracted`, with the number of clockwise quarter turns that gave it
-/// (ties keep the fewest). For a texture whose orientation is a choice, not
-/// a measurement: a rectified plane's axes are turned to the nearest axis of
-/// the region's lines or grain, which may be the truth's other axis.
-pub fn turned_texture_score(extracted: &Image, truth: &Image) -> (AlignedScore, usize) {
-    let mut best = (aligned_texture_score(extracted, truth), 0);
+/// [`aligned_texture_score`] of `extracted` as it is and at each of its
+/// four quarter turns: `(unturned, best, clockwise quarter turns of the
+/// best)` (ties keep the fewest turns). For a texture whose orientation is
+/// a choice, not a measurement: a rectified plane's axes are turned to the
+/// nearest axis of the region's lines or grain, which may be the truth's
+/// other axis.
+pub fn turned_texture_score(
+    extracted: &Image,
+    truth: &Image,
+) -> (AlignedScore, AlignedScore, usize) {
+    let scores = score_turns(extracted, truth, 4);
+    let mut best = 0;
     for k in 1..4 {
-        let s = aligned_texture_score(&quarter_turn(extracted, k), truth);
-        if s.psnr_db > best.0.psnr_db {
-            best = (s, k);
+        if scores[k].psnr_db > scores[best].psnr_db {
+            best = k;
         }
     }
-    best
+    (scores[0], scores[best], best)
 }
 
+/// `10·log10(1 / mse)` (peak 1); `+inf` for 0.
 fn psnr_from_mse(mse: f64) -> f64 {
     if mse <= 0.0 {
         f64::INFINITY

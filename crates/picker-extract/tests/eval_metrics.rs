@@ -269,7 +269,8 @@ fn turned_textures_are_scored_at_the_turn_that_undoes_them() {
     let t = texture(40, 40, 9);
     for k in 0..4 {
         let e = quarter_turn(&shifted(&t, 7, 3), k);
-        let (s, turns) = turned_texture_score(&e, &t);
+        let (plain, s, turns) = turned_texture_score(&e, &t);
+        assert_eq!(plain, aligned_texture_score(&e, &t), "turned {k}");
         assert_eq!(turns, (4 - k) % 4, "turned {k}");
         assert!(s.psnr_db > 100.0, "turned {k}: {}", s.psnr_db);
         if k != 0 {
