@@ -876,10 +876,19 @@ fn one_pixel_high_and_wide_photos_extract_with_a_bounded_report() {
 /// embedded weights (no `--weights`); returns the temporary folder and the
 /// output folder inside it (one pick: the material's files are directly there).
 fn extract_example_embedded(example: &str, pick: &str) -> (tempfile::TempDir, PathBuf) {
+    extract_example_embedded_with(example, pick, &[])
+}
+
+/// [`extract_example_embedded`] with `extra` flags.
+fn extract_example_embedded_with(
+    example: &str,
+    pick: &str,
+    extra: &[&str],
+) -> (tempfile::TempDir, PathBuf) {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("out");
     let photo = repo().join("fixtures/examples").join(example);
-    ok(&[
+    let mut args = vec![
         "extract",
         photo.to_str().unwrap(),
         "--pick",
@@ -888,7 +897,9 @@ fn extract_example_embedded(example: &str, pick: &str) -> (tempfile::TempDir, Pa
         out.to_str().unwrap(),
         "--threads",
         "2",
-    ]);
+    ];
+    args.extend_from_slice(extra);
+    ok(&args);
     (tmp, out)
 }
 
@@ -908,31 +919,17 @@ fn embedded_default_weights_run_without_any_weights_flag() {
 /// and measures nothing.
 #[test]
 fn the_coffee_tables_texture_is_turned_to_its_grain_unless_told_not_to() {
-    let photo = repo().join("fixtures/examples/coffee.jpg");
-    let tmp = tempfile::tempdir().unwrap();
-    let uv = |name: &str, extra: &[&str]| {
-        let out = tmp.path().join(name);
-        let mut args = vec![
-            "extract",
-            photo.to_str().unwrap(),
-            "--pick",
-            "20,190",
-            "--out",
-            out.to_str().unwrap(),
-            "--threads",
-            "2",
-        ];
-        args.extend_from_slice(extra);
-        ok(&args);
+    let uv = |extra: &[&str]| {
+        let (_tmp, out) = extract_example_embedded_with("coffee.jpg", "20,190", extra);
         json_file(&out.join("material.json"))["diagnostics"]["uv"].clone()
     };
-    let turned = uv("turned", &[]);
+    let turned = uv(&[]);
     assert_eq!(turned["mode"], "plane", "{turned}");
     assert_eq!(turned["grain_applied"], true, "{turned}");
     let g = &turned["grain"];
     assert!(g["turn_deg"].as_f64().unwrap().abs() >= 3.0, "{g}");
     assert!(g["coherence"].as_f64().unwrap() >= 0.3, "{g}");
-    let kept = uv("kept", &["--no-grain"]);
+    let kept = uv(&["--no-grain"]);
     assert_eq!(kept["grain_applied"], false, "{kept}");
     assert!(kept["grain"].is_null(), "{kept}");
 }
