@@ -40,7 +40,9 @@ pub type Trace = Vec<(String, Tensor)>;
 /// in execution order, each the time since the previous stage ended (the
 /// first: since the pass began). The stages are the points a [`Trace`]
 /// records, so the times add up to the whole pass (less the input padding
-/// and output cropping).
+/// and output cropping), except that a decoder's `up.1` and `conv_out`,
+/// which run fused unless activations are traced, are one stage,
+/// `….up.1+conv_out`.
 pub type Timings = Vec<(String, std::time::Duration)>;
 
 enum Sink<'a> {
@@ -80,6 +82,10 @@ impl<'a> Tracer<'a> {
     /// runs its stages one after another, in a fixed order).
     pub(crate) fn is_recording(&self) -> bool {
         !matches!(self.sink, Sink::Off)
+    }
+    /// True when activations are being recorded.
+    pub(crate) fn records_activations(&self) -> bool {
+        matches!(self.sink, Sink::Activations(_))
     }
     /// Records a clone of `t` (or the time since the last record) as
     /// `prefix.name` (or `name` when `prefix` is empty).
@@ -251,6 +257,11 @@ impl ConvTBn {
     pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
         Ok(self.conv.forward(x)?)
     }
+    /// `conv.forward_reflect(&self.forward(x)?, pad, None)` in bands of rows
+    /// ([`ConvTranspose2d::then_reflect_conv`]).
+    pub fn then_reflect_conv(&self, x: &Tensor, conv: &Conv2d, pad: usize) -> Result<Tensor> {
+        Ok(self.conv.then_reflect_conv(x, conv, pad)?)
+    }
     /// Parameters after folding.
     pub fn param_count(&self) -> u64 {
         let s = self.conv.spec();
@@ -398,14 +409,19 @@ impl Encoder {
         tr: &mut Tracer<'_>,
         path: &str,
     ) -> Result<Tensor> {
-        let x = self.conv_in.forward_reflect(x, 3)?;
-        tr.record(path, "conv_in", &x);
-        let x = self.down[0].forward(&x)?;
-        tr.record(path, "down.0", &x);
-        let x = self.down[1].forward(&x)?;
-        tr.record(path, "down.1", &x);
-        tr.record(path, "", &x);
-        Ok(x)
+        // Each stage's input is dropped as soon as the next is made (a
+        // shadowed binding would live to the end of the function), so at
+        // most two stages' activations are held at a time.
+        let x0 = self.conv_in.forward_reflect(x, 3)?;
+        tr.record(path, "conv_in", &x0);
+        let x1 = self.down[0].forward(&x0)?;
+        drop(x0);
+        tr.record(path, "down.0", &x1);
+        let x2 = self.down[1].forward(&x1)?;
+        drop(x1);
+        tr.record(path, "down.1", &x2);
+        tr.record(path, "", &x2);
+        Ok(x2)
     }
     /// Parameters after folding.
     pub fn param_count(&self) -> u64 {
@@ -443,20 +459,35 @@ impl Decoder {
     }
     /// Runs the decoder: ×4 spatially, tanh outputs.
     pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
-        self.forward_traced(x, &mut Tracer::new(None), "")
+        self.forward_traced(x.clone(), &mut Tracer::new(None), "")
     }
+    /// As `forward`, taking the input by value: it is dropped once `up.0`
+    /// has read it. `up.1` and `conv_out` run fused in bands of rows
+    /// ([`ConvTranspose2d::then_reflect_conv`]), except when a trace records
+    /// `up.1`'s output: the full-size 64-channel activation would otherwise be
+    /// the largest a network holds (the IRN runs two decoders side by side).
     pub(crate) fn forward_traced(
         &self,
-        x: &Tensor,
+        x: Tensor,
         tr: &mut Tracer<'_>,
         path: &str,
     ) -> Result<Tensor> {
-        let x = self.up[0].forward(x)?;
-        tr.record(path, "up.0", &x);
-        let x = self.up[1].forward(&x)?;
-        tr.record(path, "up.1", &x);
-        let y = self.conv_out.forward_reflect(&x, 3, None)?;
-        tr.record(path, "conv_out", &y);
+        let u0 = self.up[0].forward(&x)?;
+        drop(x);
+        tr.record(path, "up.0", &u0);
+        if tr.records_activations() {
+            let u1 = self.up[1].forward(&u0)?;
+            drop(u0);
+            tr.record(path, "up.1", &u1);
+            let y = self.conv_out.forward_reflect(&u1, 3, None)?;
+            tr.record(path, "conv_out", &y);
+            return Ok(y);
+        }
+        // `up.1` and `conv_out` a band of rows at a time: the full-size
+        // `up.1` output is never held whole (the same values). Timed as one
+        // stage.
+        let y = self.up[1].then_reflect_conv(&u0, &self.conv_out, 3)?;
+        tr.record(path, "up.1+conv_out", &y);
         Ok(y)
     }
     /// Output channels.

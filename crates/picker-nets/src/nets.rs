@@ -93,7 +93,7 @@ impl Tower {
     }
     fn forward_traced(&self, x: &Tensor, tr: &mut Tracer<'_>, path: &str) -> Result<Tensor> {
         let y = self.blocks.forward_traced(x, tr, &join(path, "blocks"))?;
-        self.dec.forward_traced(&y, tr, &join(path, "dec"))
+        self.dec.forward_traced(y, tr, &join(path, "dec"))
     }
 }
 
@@ -291,7 +291,8 @@ impl Msn {
         let (xp, pads) = pad_input(NetKind::Msn, x, 3)?;
         let e = self.enc.forward_traced(&xp, tr, "enc")?;
         let b = self.blocks.forward_traced(&e, tr, "blocks")?;
-        let y = crop_back(self.dec.forward_traced(&b, tr, "dec")?, pads, x.h(), x.w())?;
+        drop(e);
+        let y = crop_back(self.dec.forward_traced(b, tr, "dec")?, pads, x.h(), x.w())?;
         if y.c() == 3 {
             return Ok(MsnOutput {
                 segmentation: y,
@@ -478,7 +479,8 @@ impl Inpaint {
         let (xp, pads) = pad_input(NetKind::Inpaint, x, self.config.channels + 1)?;
         let e = self.enc.forward_traced(&xp, tr, "enc")?;
         let b = self.blocks.forward_traced(&e, tr, "blocks")?;
-        let y = self.dec.forward_traced(&b, tr, "dec")?;
+        drop(e);
+        let y = self.dec.forward_traced(b, tr, "dec")?;
         Ok(InpaintOutput {
             inpainted: crop_back(y, pads, x.h(), x.w())?,
         })

@@ -1,6 +1,6 @@
 //! Times one layer shape of the thesis networks at 240×320, for quick tuning
 //! without criterion: `cargo run --release -p picker-tensor --example tune -- res`
-//! (`TUNE_RUNS` sets the number of timed runs, default 49; `res`, `resmany`, `envres`, `envresmany`, `decout`, `encin`, `down0`, `down1`, `envin`, `envdown0`, `envdown1`, `up0`, `up1`; `RAYON_NUM_THREADS`, `PICKER_ISA` apply).
+//! (`TUNE_RUNS` sets the number of timed runs, default 49; `res`, `resmany`, `envres`, `envresmany`, `decout`, `encin`, `down0`, `down1`, `envin`, `envdown0`, `envdown1`, `up0`, `up1`, `dectail` (`up1` and `decout` fused in bands), `dectail-unfused`; `RAYON_NUM_THREADS`, `PICKER_ISA` apply).
 
 use picker_tensor::{
     Activation, Conv2d, ConvAlgorithm, ConvSpec, ConvTranspose2d, ConvTransposeSpec, Isa, Rng,
@@ -64,6 +64,38 @@ fn main() {
             convs[i].forward(&x).expect("forward")
         });
     }
+    if which == "dectail" || which == "dectail-unfused" {
+        // A decoder's last two layers: `up1` then the 7×7 `decout` with
+        // reflection padding 3, fused in bands or one after the other.
+        let (h, w) = (120, 160);
+        let up = ConvTransposeSpec::square(128, 64, 3, 2, 1, 1);
+        let out = ConvSpec::square(64, 3, 7, 1, 0);
+        let upl = ConvTranspose2d::new(
+            up,
+            &rng.normal_vec(up.weight_len(), 0.05),
+            None,
+            Activation::Relu,
+        )
+        .expect("layer");
+        let outl = Conv2d::new(
+            out,
+            &rng.normal_vec(out.weight_len(), 0.05),
+            None,
+            Activation::Tanh,
+        )
+        .expect("layer");
+        let x = rng.tensor([1, up.c_in, h, w]);
+        let flops = up.flops(h, w) + out.flops(2 * h + 6, 2 * w + 6);
+        if which == "dectail" {
+            return time_it(&which, flops, || {
+                upl.then_reflect_conv(&x, &outl, 3).expect("forward")
+            });
+        }
+        return time_it(&which, flops, || {
+            outl.forward_reflect(&upl.forward(&x).expect("forward"), 3, None)
+                .expect("forward")
+        });
+    }
     if let Some((h, w, s)) = transposed {
         let wt = rng.normal_vec(s.weight_len(), 0.05);
         let conv = ConvTranspose2d::new(s, &wt, None, Activation::Relu).expect("layer");
@@ -81,7 +113,7 @@ fn main() {
         "envdown0" => (120, 160, ConvSpec::square(64, 128, 3, 2, 1)),
         "envdown1" => (60, 80, ConvSpec::square(128, 256, 3, 2, 1)),
         other => {
-            eprintln!("unknown layer {other:?}: use res, resmany, envres, decout, encin, down0, down1, envin, envdown0, envdown1, up0 or up1");
+            eprintln!("unknown layer {other:?}: use res, resmany, envres, decout, encin, down0, down1, envin, envdown0, envdown1, up0, up1, dectail or dectail-unfused");
             std::process::exit(2);
         }
     };

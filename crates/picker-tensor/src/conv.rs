@@ -9,12 +9,12 @@ use crate::isa::Isa;
 use rayon::prelude::*;
 
 use crate::microkernel::MicroKernel;
-use crate::pad::{reflect_pad, Fill};
+use crate::pad::{reflect_index, reflect_pad, Fill};
 use crate::params::{MAX_NR, SHIFTED_KC};
 use crate::pixtile::{self, PixelTiles};
 use crate::shifted::{
-    padded_copy, phase_copy, shifted_gemm, shifted_gemm_interleaved, OutMap, PhasePart,
-    RowPhaseMap, ShiftedB,
+    padded_copy, phase_copy, row_window_copy, shifted_gemm, shifted_gemm_interleaved, OutMap,
+    PhasePart, RowPhaseMap, ShiftedB,
 };
 use crate::tensor::Tensor;
 use crate::winograd::{Tile, Winograd};
@@ -1091,24 +1091,234 @@ impl ConvTranspose2d {
 
     /// `act(conv_transpose(x) + b)`.
     pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
+        check_input("conv_transpose2d", x, self.spec.c_in)?;
+        let (oh, _) = self.spec.out_hw(x.h(), x.w())?;
+        self.forward_rows(x, 0..oh)
+    }
+
+    /// Output rows `rows` of [`ConvTranspose2d::forward`]: `[N, c_out,
+    /// rows.len(), ow]`, the same values bit for bit, computed from the input
+    /// rows they need and no others (a decoder can run its full-size layers
+    /// a band of rows at a time).
+    pub fn forward_rows(&self, x: &Tensor, rows: std::ops::Range<usize>) -> Result<Tensor> {
         let sp = self.spec;
         check_input("conv_transpose2d", x, sp.c_in)?;
         let (oh, ow) = sp.out_hw(x.h(), x.w())?;
-        let (h, w) = (x.h(), x.w());
+        if rows.start > rows.end || rows.end > oh {
+            return Err(shape_err(
+                "conv_transpose2d",
+                "output rows",
+                format!("a range within 0..{oh}"),
+                format!("{rows:?}"),
+            ));
+        }
+        let nr = rows.len();
+        let mut out = Tensor::for_overwrite([x.n(), sp.c_out, nr, ow]);
+        let per_out = sp.c_out * nr * ow;
+        for b in 0..x.n() {
+            let dst = &mut out.data_mut()[b * per_out..(b + 1) * per_out];
+            let layout = RowsLayout {
+                cs: nr * ow,
+                rs: ow,
+                col0: 0,
+            };
+            self.rows_into(x.image(b), x.h(), x.w(), rows.clone(), dst, layout);
+        }
+        Ok(out)
+    }
+
+    /// `conv.forward_reflect(&self.forward(x)?, pad, None)`, the same values
+    /// bit for bit, without ever holding this layer's whole output: `conv`'s
+    /// output is made a band of rows at a time, from the rows of this layer's
+    /// output that the band reads (kept from one band to the next, so no row
+    /// is computed twice) and their reflection. A decoder's last upsampling
+    /// and output convolution run this way: their full-size activation (64
+    /// channels at the photo's size) is the largest a network holds.
+    pub fn then_reflect_conv(&self, x: &Tensor, conv: &Conv2d, pad: usize) -> Result<Tensor> {
+        let c = self.spec.c_out;
+        let (_, ow) = self.spec.out_hw(x.h().max(1), x.w().max(1))?;
+        let row_bytes = c * (ow + 2 * pad) * std::mem::size_of::<f32>();
+        let band = (THEN_CONV_BAND_BYTES / row_bytes.max(1)).max(THEN_CONV_MIN_BAND);
+        self.then_reflect_conv_bands(x, conv, pad, band)
+    }
+
+    /// As [`ConvTranspose2d::then_reflect_conv`] with bands of `band` rows of
+    /// `conv`'s output (at least 1; any band size gives the same values).
+    pub fn then_reflect_conv_bands(
+        &self,
+        x: &Tensor,
+        conv: &Conv2d,
+        pad: usize,
+        band: usize,
+    ) -> Result<Tensor> {
+        let sp = self.spec;
+        let cs = conv.spec();
+        check_input("conv_transpose2d", x, sp.c_in)?;
+        let (h, w) = sp.out_hw(x.h(), x.w())?;
+        if cs.c_in != sp.c_out {
+            return Err(shape_err(
+                "conv2d after conv_transpose2d",
+                "input channels",
+                sp.c_out,
+                cs.c_in,
+            ));
+        }
+        if cs.pad != 0 {
+            return Err(invalid(
+                "conv2d",
+                format!(
+                    "a reflection-padded convolution needs a layer without zero padding, this one has pad {}",
+                    cs.pad
+                ),
+            ));
+        }
+        if pad >= h || pad >= w {
+            return Err(shape_err(
+                "conv2d",
+                "reflection pad",
+                format!("smaller than the input {h}x{w}"),
+                pad,
+            ));
+        }
+        if band == 0 {
+            return Err(invalid("conv2d after conv_transpose2d", "a band of 0 rows"));
+        }
+        let (hp, wp) = (h + 2 * pad, w + 2 * pad);
+        let (oh, ow) = cs.out_hw(hp, wp)?;
+        let (c, st) = (sp.c_out, cs.stride);
+        let mut out = Tensor::for_overwrite([x.n(), cs.c_out, oh, ow]);
+        let per_out = cs.c_out * oh * ow;
+        // Bands of even height; each reads `span` padded rows.
+        let band = oh.div_ceil(oh.div_ceil(band.min(oh)));
+        let span = (band - 1) * st + cs.kh;
+        let plane = span * wp;
+        // The band's reflection-padded input: padded rows `[p0, p0 + span)`
+        // (rows past the padded image, read only by the rows past the output
+        // that the last band computes and drops, are zeros).
+        let mut pt = Tensor::for_overwrite([1, c, span, wp]);
+        let at_col = RowsLayout {
+            cs: plane,
+            rs: wp,
+            col0: pad,
+        };
+        // Padded row `p` is this layer's output row `src(p)`.
+        let src = |p: usize| reflect_index(p as isize - pad as isize, h);
+        let reflect_cols = |pt: &mut Tensor, r0: usize, r1: usize| {
+            for ch in pt.data_mut().chunks_exact_mut(plane) {
+                for row in ch[r0 * wp..r1 * wp].chunks_exact_mut(wp) {
+                    for j in (0..pad).chain(pad + w..wp) {
+                        row[j] = row[pad + reflect_index(j as isize - pad as isize, w)];
+                    }
+                }
+            }
+        };
+        for b in 0..x.n() {
+            let img = x.image(b);
+            // Padded rows `[k0, k1)` held at the top of `pt` from the last band.
+            let mut held: Option<(usize, usize)> = None;
+            for q0 in (0..oh).step_by(band) {
+                let q1 = (q0 + band).min(oh);
+                let p0 = q0 * st;
+                let end = (p0 + span).min(hp);
+                // Rows `[p0, filled)` are in place once the shared ones move up.
+                let mut filled = p0;
+                if let Some((k0, k1)) = held {
+                    if k0 <= p0 && p0 < k1 {
+                        for ch in pt.data_mut().chunks_exact_mut(plane) {
+                            ch.copy_within((p0 - k0) * wp..(k1 - k0) * wp, 0);
+                        }
+                        filled = k1;
+                    }
+                    debug_assert!(filled <= end);
+                }
+                // The rows inside the image, computed in place.
+                let (d0, d1) = (filled.max(pad), end.min(pad + h));
+                if d1 > d0 {
+                    let dst = &mut pt.data_mut()[(d0 - p0) * wp..];
+                    self.rows_into(img, x.h(), x.w(), d0 - pad..d1 - pad, dst, at_col);
+                    reflect_cols(&mut pt, d0 - p0, d1 - p0);
+                }
+                // The reflected rows: copies of rows in place, or computed.
+                for p in (filled..end).filter(|&p| p < pad || p >= pad + h) {
+                    let sp_row = pad + src(p);
+                    let ready = sp_row >= p0
+                        && sp_row < end
+                        && (sp_row < filled || (d0..d1).contains(&sp_row));
+                    if ready {
+                        for ch in pt.data_mut().chunks_exact_mut(plane) {
+                            ch.copy_within(
+                                (sp_row - p0) * wp..(sp_row - p0 + 1) * wp,
+                                (p - p0) * wp,
+                            );
+                        }
+                    } else {
+                        let dst = &mut pt.data_mut()[(p - p0) * wp..];
+                        self.rows_into(img, x.h(), x.w(), src(p)..src(p) + 1, dst, at_col);
+                        reflect_cols(&mut pt, p - p0, p - p0 + 1);
+                    }
+                }
+                for ch in pt.data_mut().chunks_exact_mut(plane) {
+                    ch[(end - p0) * wp..].fill(0.0);
+                }
+                held = Some((p0, end));
+                let y = conv.forward(&pt)?;
+                let dst = &mut out.data_mut()[b * per_out..(b + 1) * per_out];
+                for (co, yc) in y.data().chunks_exact(band * ow).enumerate() {
+                    let rows = (q1 - q0) * ow;
+                    dst[co * oh * ow + q0 * ow..][..rows].copy_from_slice(&yc[..rows]);
+                }
+            }
+        }
+        Ok(out)
+    }
+
+    /// Output rows `rows` (within the output height) of one image `img`
+    /// (`c_in × h × w`), written to `dst`: output `(co, o, j)` at
+    /// `dst[co·cs + (o − rows.start)·rs + col0 + j]`.
+    ///
+    /// Each row phase `ry` computes its grid rows `m` with `s·m + ry` in
+    /// `rows` from a zero-extended copy of the input rows they read, and
+    /// writes them interleaved with its column phases. A row's arithmetic
+    /// (the taps and their order, the depth blocks) does not depend on the
+    /// window, so any window gives the full output's values.
+    pub(crate) fn rows_into(
+        &self,
+        img: &[f32],
+        h: usize,
+        w: usize,
+        rows: std::ops::Range<usize>,
+        dst: &mut [f32],
+        layout: RowsLayout,
+    ) {
+        let sp = self.spec;
+        let (oh, ow) = sp
+            .out_hw(h, w)
+            .expect("rows_into: input checked by the caller");
+        debug_assert!(rows.end <= oh);
+        if rows.is_empty() {
+            return;
+        }
         let s = sp.stride;
-        let per_out = sp.c_out * oh * ow;
-        let mut out = Tensor::for_overwrite([x.n(), sp.c_out, oh, ow]);
-        // Each phase reads input (m + dy, n + dx) for its m < mh, n < mw: one
-        // zero-padded copy covers every phase's reach.
-        let mut pads = [0usize; 4];
+        // Grid rows `[m0, m1)` of row phase `ry` inside the window.
+        let grid = |ry: usize| {
+            let m0 = rows.start.saturating_sub(ry).div_ceil(s);
+            let m1 = rows.end.saturating_sub(ry).div_ceil(s);
+            (m0, m1.max(m0))
+        };
+        // The input rows (zero outside the image) the window reads, and the
+        // column pads every phase's taps reach.
+        let (mut i_lo, mut i_hi) = (isize::MAX, isize::MIN);
+        let (mut pl, mut pr) = (0usize, 0usize);
         for ph in &self.phases {
-            let mh = oh.saturating_sub(ph.ry).div_ceil(s);
+            let (m0, m1) = grid(ph.ry);
             let mw = ow.saturating_sub(ph.rx).div_ceil(s);
             for &(dy, dx) in &ph.taps {
-                pads[0] = pads[0].max((-dy).max(0) as usize);
-                pads[1] = pads[1].max((mh as isize + dy - h as isize).max(0) as usize);
-                pads[2] = pads[2].max((-dx).max(0) as usize);
-                pads[3] = pads[3].max((mw as isize + dx - w as isize).max(0) as usize);
+                if m1 > m0 {
+                    i_lo = i_lo.min(m0 as isize + dy);
+                    i_hi = i_hi.max(m1 as isize + dy);
+                }
+                pl = pl.max((-dx).max(0) as usize);
+                pr = pr.max((mw as isize + dx - w as isize).max(0) as usize);
             }
         }
         let epi = Epilogue {
@@ -1116,70 +1326,87 @@ impl ConvTranspose2d {
             act: self.act,
             residual: None,
         };
+        if i_lo > i_hi {
+            // No tap reaches any row of the window: every value is the bias.
+            (i_lo, i_hi) = (0, 0);
+        }
         // One padded row of slack covers every tap's column offset.
-        let slack = MAX_NR + w + pads[2] + pads[3];
-        for b in 0..x.n() {
-            let dst = &mut out.data_mut()[b * per_out..(b + 1) * per_out];
-            let (src, hp, wp) = padded_copy(x.image(b), sp.c_in, h, w, pads, Fill::Zero, slack);
-            // Per row phase, its column phases side by side, written as
-            // whole interleaved rows.
-            for row in self.phases.chunks(s) {
-                let ry = row[0].ry;
-                let mh = oh.saturating_sub(ry).div_ceil(s);
-                if mh == 0 {
-                    continue;
-                }
-                let offs: Vec<Option<Vec<usize>>> = row
-                    .iter()
-                    .map(|ph| {
-                        let nt = ph.taps.len();
-                        ph.packed.as_ref().map(|_| {
-                            (0..sp.c_in * nt)
-                                .map(|k| {
-                                    let (ci, (dy, dx)) = (k / nt, ph.taps[k % nt]);
-                                    let r = (dy + pads[0] as isize) as usize;
-                                    let c = (dx + pads[2] as isize) as usize;
-                                    ci * hp * wp + r * wp + c
-                                })
-                                .collect()
-                        })
+        let slack = MAX_NR + w + pl + pr;
+        let (src, hp, wp) = row_window_copy(img, sp.c_in, h, w, i_lo..i_hi, [pl, pr], slack);
+        // Per row phase, its column phases side by side, written as
+        // whole interleaved rows.
+        for row in self.phases.chunks(s) {
+            let ry = row[0].ry;
+            let (m0, m1) = grid(ry);
+            if m1 == m0 {
+                continue;
+            }
+            let mh = m1 - m0;
+            let offs: Vec<Option<Vec<usize>>> = row
+                .iter()
+                .map(|ph| {
+                    let nt = ph.taps.len();
+                    ph.packed.as_ref().map(|_| {
+                        (0..sp.c_in * nt)
+                            .map(|k| {
+                                let (ci, (dy, dx)) = (k / nt, ph.taps[k % nt]);
+                                let r = (m0 as isize + dy - i_lo) as usize;
+                                let c = (dx + pl as isize) as usize;
+                                ci * hp * wp + r * wp + c
+                            })
+                            .collect()
                     })
-                    .collect();
-                let parts: Vec<Option<PhasePart<'_>>> = row
-                    .iter()
-                    .zip(&offs)
-                    .map(|(ph, o)| {
-                        Some(PhasePart {
-                            a: ph.packed.as_ref()?,
-                            offs: o.as_deref()?,
-                        })
+                })
+                .collect();
+            let parts: Vec<Option<PhasePart<'_>>> = row
+                .iter()
+                .zip(&offs)
+                .map(|(ph, o)| {
+                    Some(PhasePart {
+                        a: ph.packed.as_ref()?,
+                        offs: o.as_deref()?,
                     })
-                    .collect();
-                let map = RowPhaseMap {
-                    base: ry * ow,
-                    cs: oh * ow,
-                    rs: s * ow,
-                    oh: mh,
-                    ow,
-                    s,
-                };
-                if parts.iter().any(Option::is_some) {
-                    shifted_gemm_interleaved(&parts, &src, wp, &map, dst, &epi);
-                } else {
-                    // No tap reaches this row phase: every value is the bias.
-                    for co in 0..sp.c_out {
-                        let v = self
-                            .act
-                            .apply_one(self.bias.as_ref().map_or(0.0, |bb| bb[co]));
-                        for m in 0..mh {
-                            let i0 = map.base + co * map.cs + m * map.rs;
-                            dst[i0..i0 + ow].fill(v);
-                        }
+                })
+                .collect();
+            let map = RowPhaseMap {
+                base: (s * m0 + ry - rows.start) * layout.rs + layout.col0,
+                cs: layout.cs,
+                rs: s * layout.rs,
+                oh: mh,
+                ow,
+                s,
+            };
+            if parts.iter().any(Option::is_some) {
+                shifted_gemm_interleaved(&parts, &src, wp, &map, dst, &epi);
+            } else {
+                // No tap reaches this row phase: every value is the bias.
+                for co in 0..sp.c_out {
+                    let v = self
+                        .act
+                        .apply_one(self.bias.as_ref().map_or(0.0, |bb| bb[co]));
+                    for m in 0..mh {
+                        let i0 = map.base + co * map.cs + m * map.rs;
+                        dst[i0..i0 + ow].fill(v);
                     }
                 }
             }
-            crate::pool::give(src);
         }
-        Ok(out)
+        crate::pool::give(src);
     }
+}
+
+/// Bytes of one band of a decoder's reflection-padded full-size activation
+/// in [`ConvTranspose2d::then_reflect_conv`] (the only buffer it holds
+/// besides its input and output).
+const THEN_CONV_BAND_BYTES: usize = 4 << 20;
+/// Fewest output rows a band of [`ConvTranspose2d::then_reflect_conv`] has.
+const THEN_CONV_MIN_BAND: usize = 8;
+
+/// Where [`ConvTranspose2d::rows_into`] writes: channel stride `cs`, row
+/// stride `rs`, first column `col0`.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct RowsLayout {
+    pub(crate) cs: usize,
+    pub(crate) rs: usize,
+    pub(crate) col0: usize,
 }

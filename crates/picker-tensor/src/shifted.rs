@@ -570,6 +570,43 @@ pub(crate) fn padded_copy(
     (buf, hp, wp)
 }
 
+/// Rows `rows` (which may reach outside `0..h`: zeros there) of one image
+/// (`c` planes of `h × w`), each row zero-extended by `[left, right]`
+/// columns, plus `slack` zero floats at the end, from the pool. Returns the
+/// buffer and its `(rows.len(), w + left + right)` plane size.
+pub(crate) fn row_window_copy(
+    x: &[f32],
+    c: usize,
+    h: usize,
+    w: usize,
+    rows: std::ops::Range<isize>,
+    [l, r]: [usize; 2],
+    slack: usize,
+) -> (Vec<f32>, usize, usize) {
+    let (hp, wp) = (rows.len(), w + l + r);
+    let plane = hp * wp;
+    let mut buf = crate::pool::take(c * plane + slack);
+    let (body, tail) = buf.split_at_mut(c * plane);
+    tail.fill(0.0);
+    body.par_chunks_mut(plane.max(1))
+        .enumerate()
+        .for_each(|(ci, dst)| {
+            let src = &x[ci * h * w..(ci + 1) * h * w];
+            for (py, drow) in dst.chunks_exact_mut(wp).enumerate() {
+                let sy = rows.start + py as isize;
+                if !(0..h as isize).contains(&sy) {
+                    drow.fill(0.0);
+                    continue;
+                }
+                let sy = sy as usize;
+                drow[..l].fill(0.0);
+                drow[l..l + w].copy_from_slice(&src[sy * w..(sy + 1) * w]);
+                drow[l + w..].fill(0.0);
+            }
+        });
+    (buf, hp, wp)
+}
+
 /// The `s × s` phase planes of one padded image, for a stride-`s` convolution
 /// as a stride-1 product: plane `(a, b, ci)` holds `padded[ci][s·i + a][s·j + b]`
 /// (`hq × wq`, zero past the padded image), planes ordered `(a·s + b)·c + ci`,

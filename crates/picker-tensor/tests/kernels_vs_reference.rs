@@ -339,13 +339,212 @@ impl ConvTProblem {
             &reference::conv_transpose2d(&x, &wt, b.as_deref(), s).unwrap(),
             self.act,
         );
+        let full = conv.forward(&x).unwrap();
         check(
             &format!("{isa} {self:?}"),
-            &conv.forward(&x).unwrap(),
+            &full,
             &expected,
             Tolerance::KERNEL_F32,
         );
+        // Any window of output rows: the full output's rows, bit for bit.
+        let (oh, ow) = (full.h(), full.w());
+        let windows: Vec<(usize, usize)> = if oh <= 10 {
+            (0..=oh)
+                .flat_map(|a| (a..=oh).map(move |b| (a, b)))
+                .collect()
+        } else {
+            (0..12)
+                .map(|_| {
+                    let a = rng.range(0, oh);
+                    (a, rng.range(a, oh))
+                })
+                .chain([(0, oh), (0, 1), (oh - 1, oh)])
+                .collect()
+        };
+        for (a, b) in windows {
+            let part = conv.forward_rows(&x, a..b).unwrap();
+            assert_eq!(
+                part.shape(),
+                [self.n, s.c_out, b - a, ow],
+                "{isa} {self:?} rows {a}..{b}"
+            );
+            if b > a {
+                let want = full.crop(a, 0, b - a, ow).unwrap();
+                assert!(
+                    part.data() == want.data(),
+                    "{isa} {self:?}: rows {a}..{b} differ from the full output's"
+                );
+            }
+        }
+        assert!(
+            conv.forward_rows(&x, 0..oh + 1).is_err(),
+            "rows past the output"
+        );
     }
+}
+
+/// A transposed convolution followed by a reflection-padded convolution,
+/// fused in bands ([`ConvTranspose2d::then_reflect_conv_bands`]), against the
+/// two layers run one after the other: the same values bit for bit, at any
+/// band size.
+#[test]
+fn conv_transpose_then_reflect_conv_in_bands() {
+    let mut rng = Rng::new(91);
+    let mut cases = vec![
+        // The decoder's tail, scaled down: 3x3 stride-2 upsampling, 7x7 output conv.
+        (
+            1,
+            6,
+            8,
+            ConvTransposeSpec::square(12, 16, 3, 2, 1, 1),
+            ConvSpec::square(16, 3, 7, 1, 0),
+            3,
+        ),
+        (
+            2,
+            5,
+            7,
+            ConvTransposeSpec::square(5, 9, 3, 2, 1, 1),
+            ConvSpec::square(9, 4, 7, 1, 0),
+            3,
+        ),
+        // Smallest output that a pad of 3 can reflect: 4 rows.
+        (
+            1,
+            2,
+            2,
+            ConvTransposeSpec::square(3, 8, 3, 2, 1, 1),
+            ConvSpec::square(8, 2, 7, 1, 0),
+            3,
+        ),
+        // A pad wider than the kernel's reach (rows far from the band), stride 2.
+        (
+            1,
+            5,
+            4,
+            ConvTransposeSpec::square(4, 6, 3, 2, 1, 1),
+            ConvSpec::square(6, 5, 1, 2, 0),
+            3,
+        ),
+        // Stride 1 upsampling, 3x3 output conv.
+        (
+            1,
+            9,
+            5,
+            ConvTransposeSpec::square(7, 5, 3, 1, 1, 0),
+            ConvSpec::square(5, 3, 3, 1, 0),
+            1,
+        ),
+    ];
+    for _ in 0..30 {
+        let k = rng.range(1, 4);
+        let s = rng.range(1, 3);
+        let up = ConvTransposeSpec::square(
+            rng.range(1, 12),
+            rng.range(1, 20),
+            k,
+            s,
+            rng.range(0, k - 1),
+            rng.range(0, s - 1),
+        );
+        let (h, w) = (rng.range(1, 9), rng.range(1, 9));
+        let Ok((oh, ow)) = up.out_hw(h, w) else {
+            continue;
+        };
+        let pad = rng.range(0, oh.min(ow) - 1);
+        let kk = rng.range(1, 7);
+        let conv = ConvSpec {
+            c_in: up.c_out,
+            c_out: rng.range(1, 6),
+            kh: kk,
+            kw: rng.range(1, 7),
+            stride: rng.range(1, 2),
+            pad: 0,
+        };
+        if conv.out_hw(oh + 2 * pad, ow + 2 * pad).is_err() {
+            continue;
+        }
+        cases.push((rng.range(1, 2), h, w, up, conv, pad));
+    }
+    assert!(cases.len() >= 25, "only {} cases", cases.len());
+    for isa in isas() {
+        for (i, &(n, h, w, up, cs, pad)) in cases.iter().enumerate() {
+            let x = rng.tensor([n, up.c_in, h, w]);
+            let uw = rng.normal_vec(up.weight_len(), 0.4);
+            let ub = rng.normal_vec(up.c_out, 0.3);
+            let cw = rng.normal_vec(cs.weight_len(), 0.2);
+            let cb = rng.normal_vec(cs.c_out, 0.3);
+            let upl = ConvTranspose2d::with_isa(isa, up, &uw, Some(&ub), Activation::Relu).unwrap();
+            let conv = Conv2d::with_isa(isa, cs, &cw, Some(&cb), Activation::Tanh).unwrap();
+            let want = conv
+                .forward_reflect(&upl.forward(&x).unwrap(), pad, None)
+                .unwrap();
+            let oh = want.h();
+            let mut bands = vec![1, 2, 3, oh, oh + 5, rng.range(1, oh)];
+            bands.dedup();
+            for band in bands {
+                let got = upl.then_reflect_conv_bands(&x, &conv, pad, band).unwrap();
+                assert_eq!(got.shape(), want.shape(), "case {i} {isa} band {band}");
+                assert!(
+                    got.data() == want.data(),
+                    "case {i} {isa} band {band}: {up:?} then {cs:?} pad {pad}: differs"
+                );
+            }
+            let got = upl.then_reflect_conv(&x, &conv, pad).unwrap();
+            assert!(
+                got.data() == want.data(),
+                "case {i} {isa}: default bands differ"
+            );
+        }
+    }
+}
+
+#[test]
+fn conv_transpose_then_reflect_conv_refuses_bad_shapes() {
+    let mut rng = Rng::new(5);
+    let up = ConvTransposeSpec::square(3, 4, 3, 2, 1, 1);
+    let upl = ConvTranspose2d::new(
+        up,
+        &rng.normal_vec(up.weight_len(), 0.3),
+        None,
+        Activation::Relu,
+    )
+    .unwrap();
+    let x = rng.tensor([1, 3, 2, 3]); // output 4x6
+    let mut conv = |c_in, pad| {
+        let s = ConvSpec::square(c_in, 2, 3, 1, pad);
+        Conv2d::new(
+            s,
+            &rng.normal_vec(s.weight_len(), 0.3),
+            None,
+            Activation::None,
+        )
+        .unwrap()
+    };
+    let ok = conv(4, 0);
+    assert!(upl.then_reflect_conv_bands(&x, &ok, 1, 2).is_ok());
+    let e = upl
+        .then_reflect_conv_bands(&x, &ok, 1, 0)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("band"), "{e}");
+    let e = upl.then_reflect_conv(&x, &ok, 4).unwrap_err().to_string();
+    assert!(e.contains("reflection pad"), "{e}");
+    let e = upl
+        .then_reflect_conv(&x, &conv(5, 0), 1)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("input channels"), "{e}");
+    let e = upl
+        .then_reflect_conv(&x, &conv(4, 1), 1)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("zero padding"), "{e}");
+    let e = upl
+        .then_reflect_conv(&rng.tensor([1, 2, 2, 3]), &ok, 1)
+        .unwrap_err()
+        .to_string();
+    assert!(!e.is_empty());
 }
 
 #[test]
