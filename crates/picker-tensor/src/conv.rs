@@ -1138,12 +1138,17 @@ impl ConvTranspose2d {
         let c = self.spec.c_out;
         let (_, ow) = self.spec.out_hw(x.h().max(1), x.w().max(1))?;
         let row_bytes = c * (ow + 2 * pad) * std::mem::size_of::<f32>();
-        let band = (THEN_CONV_BAND_BYTES / row_bytes.max(1)).max(THEN_CONV_MIN_BAND);
+        // The bands' buffers together take about `THEN_CONV_BAND_BYTES`:
+        // one band per thread at a time (see `then_reflect_conv_bands`).
+        let per_band = THEN_CONV_BAND_BYTES / rayon::current_num_threads().max(1);
+        let band = (per_band / row_bytes.max(1)).max(THEN_CONV_MIN_BAND);
         self.then_reflect_conv_bands(x, conv, pad, band)
     }
 
     /// As [`ConvTranspose2d::then_reflect_conv`] with bands of `band` rows of
-    /// `conv`'s output (at least 1; any band size gives the same values).
+    /// `conv`'s output (at least 1; any band size gives the same values). The
+    /// bands are split into one contiguous run per thread of the pool, the
+    /// runs side by side, each with its own band buffer.
     pub fn then_reflect_conv_bands(
         &self,
         x: &Tensor,
@@ -1192,10 +1197,6 @@ impl ConvTranspose2d {
         let band = oh.div_ceil(oh.div_ceil(band.min(oh)));
         let span = (band - 1) * st + cs.kh;
         let plane = span * wp;
-        // The band's reflection-padded input: padded rows `[p0, p0 + span)`
-        // (rows past the padded image, read only by the rows past the output
-        // that the last band computes and drops, are zeros).
-        let mut pt = Tensor::for_overwrite([1, c, span, wp]);
         let at_col = RowsLayout {
             cs: plane,
             rs: wp,
@@ -1212,12 +1213,17 @@ impl ConvTranspose2d {
                 }
             }
         };
-        for b in 0..x.n() {
-            let img = x.image(b);
+        // Bands `[b0, b1)` of image `img`, one after another: `conv`'s
+        // output for each band, with its first row.
+        let run_bands = |img: &[f32], b0: usize, b1: usize| -> Result<Vec<(usize, Tensor)>> {
+            // The band's reflection-padded input: padded rows `[p0, p0 +
+            // span)` (rows past the padded image, read only by the rows past
+            // the output that the last band computes and drops, are zeros).
+            let mut pt = Tensor::for_overwrite([1, c, span, wp]);
             // Padded rows `[k0, k1)` held at the top of `pt` from the last band.
             let mut held: Option<(usize, usize)> = None;
-            for q0 in (0..oh).step_by(band) {
-                let q1 = (q0 + band).min(oh);
+            let mut ys = Vec::with_capacity(b1 - b0);
+            for q0 in (b0..b1).map(|i| i * band) {
                 let p0 = q0 * st;
                 let end = (p0 + span).min(hp);
                 // Rows `[p0, filled)` are in place once the shared ones move up.
@@ -1261,11 +1267,37 @@ impl ConvTranspose2d {
                     ch[(end - p0) * wp..].fill(0.0);
                 }
                 held = Some((p0, end));
-                let y = conv.forward(&pt)?;
-                let dst = &mut out.data_mut()[b * per_out..(b + 1) * per_out];
-                for (co, yc) in y.data().chunks_exact(band * ow).enumerate() {
-                    let rows = (q1 - q0) * ow;
-                    dst[co * oh * ow + q0 * ow..][..rows].copy_from_slice(&yc[..rows]);
+                ys.push((q0, conv.forward(&pt)?));
+            }
+            Ok(ys)
+        };
+        // The bands in one contiguous run per thread, side by side (each run
+        // computes the rows it shares with the run before it once more): the
+        // kernels inside a band are small, and a band's steps would otherwise
+        // wait for each other on every thread.
+        let n_bands = oh.div_ceil(band);
+        let runs = rayon::current_num_threads().clamp(1, n_bands);
+        let run_range = |r: usize| (r * n_bands / runs, (r + 1) * n_bands / runs);
+        for b in 0..x.n() {
+            let img = x.image(b);
+            let parts: Vec<Result<Vec<(usize, Tensor)>>> = if runs == 1 {
+                vec![run_bands(img, 0, n_bands)]
+            } else {
+                (0..runs)
+                    .into_par_iter()
+                    .map(|r| {
+                        let (b0, b1) = run_range(r);
+                        run_bands(img, b0, b1)
+                    })
+                    .collect()
+            };
+            let dst = &mut out.data_mut()[b * per_out..(b + 1) * per_out];
+            for part in parts {
+                for (q0, y) in part? {
+                    let rows = (band.min(oh - q0)) * ow;
+                    for (co, yc) in y.data().chunks_exact(band * ow).enumerate() {
+                        dst[co * oh * ow + q0 * ow..][..rows].copy_from_slice(&yc[..rows]);
+                    }
                 }
             }
         }
@@ -1395,9 +1427,9 @@ impl ConvTranspose2d {
     }
 }
 
-/// Bytes of one band of a decoder's reflection-padded full-size activation
-/// in [`ConvTranspose2d::then_reflect_conv`] (the only buffer it holds
-/// besides its input and output).
+/// Bytes of the bands of a decoder's reflection-padded full-size activation
+/// that [`ConvTranspose2d::then_reflect_conv`] holds at a time, one band per
+/// thread (the only buffers it holds besides its input and output).
 const THEN_CONV_BAND_BYTES: usize = 4 << 20;
 /// Fewest output rows a band of [`ConvTranspose2d::then_reflect_conv`] has.
 const THEN_CONV_MIN_BAND: usize = 8;

@@ -482,13 +482,22 @@ fn conv_transpose_then_reflect_conv_in_bands() {
             let oh = want.h();
             let mut bands = vec![1, 2, 3, oh, oh + 5, rng.range(1, oh)];
             bands.dedup();
-            for band in bands {
-                let got = upl.then_reflect_conv_bands(&x, &conv, pad, band).unwrap();
-                assert_eq!(got.shape(), want.shape(), "case {i} {isa} band {band}");
-                assert!(
-                    got.data() == want.data(),
-                    "case {i} {isa} band {band}: {up:?} then {cs:?} pad {pad}: differs"
-                );
+            // The bands run in one contiguous run per thread: 1, 2 and 3 runs.
+            for threads in [1, 2, 3] {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap();
+                for &band in &bands {
+                    let got = pool
+                        .install(|| upl.then_reflect_conv_bands(&x, &conv, pad, band))
+                        .unwrap();
+                    assert_eq!(got.shape(), want.shape(), "case {i} {isa} band {band}");
+                    assert!(
+                        got.data() == want.data(),
+                        "case {i} {isa} band {band}, {threads} threads: {up:?} then {cs:?} pad {pad}: differs"
+                    );
+                }
             }
             let got = upl.then_reflect_conv(&x, &conv, pad).unwrap();
             assert!(
