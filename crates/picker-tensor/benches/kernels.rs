@@ -99,6 +99,45 @@ fn bench(c: &mut Criterion) {
         });
     }
     g.finish();
+    // A decoder's tail as the networks run it: `dec_up1` and the 7×7
+    // `dec_out` with reflection padding 3, fused in bands of rows, and the
+    // two layers one after the other beside it.
+    let mut g = c.benchmark_group("decoder_tail/f32");
+    g.sample_size(10);
+    let (h, w) = (120, 160);
+    let up = ConvTransposeSpec::square(128, 64, 3, 2, 1, 1);
+    let out = ConvSpec::square(64, 3, 7, 1, 0);
+    let upl = ConvTranspose2d::new(
+        up,
+        &rng.normal_vec(up.weight_len(), 0.05),
+        None,
+        Activation::Relu,
+    )
+    .unwrap();
+    let outl = Conv2d::new(
+        out,
+        &rng.normal_vec(out.weight_len(), 0.05),
+        None,
+        Activation::Tanh,
+    )
+    .unwrap();
+    let x = rng.tensor([1, up.c_in, h, w]);
+    g.throughput(Throughput::Elements(
+        up.flops(h, w) + out.flops(2 * h + 6, 2 * w + 6),
+    ));
+    g.bench_function(BenchmarkId::from_parameter("up1_out/fused_bands"), |b| {
+        b.iter(|| upl.then_reflect_conv(&x, &outl, 3).unwrap())
+    });
+    g.bench_function(
+        BenchmarkId::from_parameter("up1_out/one_after_the_other"),
+        |b| {
+            b.iter(|| {
+                outl.forward_reflect(&upl.forward(&x).unwrap(), 3, None)
+                    .unwrap()
+            })
+        },
+    );
+    g.finish();
 }
 
 criterion_group!(benches, bench);
