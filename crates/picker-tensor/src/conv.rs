@@ -1364,7 +1364,8 @@ impl ConvTranspose2d {
         }
         // One padded row of slack covers every tap's column offset.
         let slack = MAX_NR + w + pl + pr;
-        let (src, hp, wp) = row_window_copy(img, sp.c_in, h, w, i_lo..i_hi, [pl, pr], slack);
+        let (src, hp, wp) =
+            row_window_copy(img, sp.c_in, h, w, i_lo..i_hi, [pl, pr], Fill::Zero, slack);
         // Per row phase, its column phases side by side, written as
         // whole interleaved rows.
         for row in self.phases.chunks(s) {

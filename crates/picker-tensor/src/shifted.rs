@@ -18,7 +18,7 @@ use rayon::prelude::*;
 
 use crate::activation::Activation;
 use crate::gemm::{Epilogue, PackedA};
-use crate::pad::{padded_source, Fill};
+use crate::pad::{padded_source, reflect_index, Fill};
 use crate::params::{MAX_NR, MAX_PANELS_PER_TASK, TASKS_PER_THREAD};
 
 /// The B operand: row `k` is `src[offs[k] ..]`, column `n` is output pixel
@@ -541,22 +541,49 @@ pub(crate) fn padded_copy(
     c: usize,
     h: usize,
     w: usize,
-    pads: [usize; 4],
+    [t, bo, l, r]: [usize; 4],
     fill: Fill,
     slack: usize,
 ) -> (Vec<f32>, usize, usize) {
-    let [t, bo, l, r] = pads;
-    let (hp, wp) = (h + t + bo, w + l + r);
+    let rows = -(t as isize)..(h + bo) as isize;
+    row_window_copy(x, c, h, w, rows, [l, r], fill, slack)
+}
+
+/// Rows `rows` of one image (`c` planes of `h × w`; rows outside `0..h` are
+/// the `fill`'s: zeros or the reflection), each extended by `[left, right]`
+/// columns of the same fill, plus `slack` zero floats at the end, from the
+/// pool. Returns the buffer and its `(rows.len(), w + left + right)` plane
+/// size.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn row_window_copy(
+    x: &[f32],
+    c: usize,
+    h: usize,
+    w: usize,
+    rows: std::ops::Range<isize>,
+    [l, r]: [usize; 2],
+    fill: Fill,
+    slack: usize,
+) -> (Vec<f32>, usize, usize) {
+    let (hp, wp) = (rows.len(), w + l + r);
     let plane = hp * wp;
     let mut buf = crate::pool::take(c * plane + slack);
     let (body, tail) = buf.split_at_mut(c * plane);
     tail.fill(0.0);
+    let source_row = |py: usize| {
+        let v = rows.start + py as isize;
+        if (0..h as isize).contains(&v) {
+            Some(v as usize)
+        } else {
+            (fill == Fill::Reflect).then(|| reflect_index(v, h))
+        }
+    };
     body.par_chunks_mut(plane.max(1))
         .enumerate()
         .for_each(|(ci, dst)| {
             let src = &x[ci * h * w..(ci + 1) * h * w];
             for (py, drow) in dst.chunks_exact_mut(wp).enumerate() {
-                let Some(sy) = padded_source(py, t, h, hp, fill) else {
+                let Some(sy) = source_row(py) else {
                     drow.fill(0.0);
                     continue;
                 };
@@ -565,43 +592,6 @@ pub(crate) fn padded_copy(
                 for j in (0..l).chain(l + w..wp) {
                     drow[j] = padded_source(j, l, w, wp, fill).map_or(0.0, |c| srow[c]);
                 }
-            }
-        });
-    (buf, hp, wp)
-}
-
-/// Rows `rows` (which may reach outside `0..h`: zeros there) of one image
-/// (`c` planes of `h × w`), each row zero-extended by `[left, right]`
-/// columns, plus `slack` zero floats at the end, from the pool. Returns the
-/// buffer and its `(rows.len(), w + left + right)` plane size.
-pub(crate) fn row_window_copy(
-    x: &[f32],
-    c: usize,
-    h: usize,
-    w: usize,
-    rows: std::ops::Range<isize>,
-    [l, r]: [usize; 2],
-    slack: usize,
-) -> (Vec<f32>, usize, usize) {
-    let (hp, wp) = (rows.len(), w + l + r);
-    let plane = hp * wp;
-    let mut buf = crate::pool::take(c * plane + slack);
-    let (body, tail) = buf.split_at_mut(c * plane);
-    tail.fill(0.0);
-    body.par_chunks_mut(plane.max(1))
-        .enumerate()
-        .for_each(|(ci, dst)| {
-            let src = &x[ci * h * w..(ci + 1) * h * w];
-            for (py, drow) in dst.chunks_exact_mut(wp).enumerate() {
-                let sy = rows.start + py as isize;
-                if !(0..h as isize).contains(&sy) {
-                    drow.fill(0.0);
-                    continue;
-                }
-                let sy = sy as usize;
-                drow[..l].fill(0.0);
-                drow[l..l + w].copy_from_slice(&src[sy * w..(sy + 1) * w]);
-                drow[l + w..].fill(0.0);
             }
         });
     (buf, hp, wp)
