@@ -40,9 +40,9 @@ pub type Trace = Vec<(String, Tensor)>;
 /// in execution order, each the time since the previous stage ended (the
 /// first: since the pass began). The stages are the points a [`Trace`]
 /// records, so the times add up to the whole pass (less the input padding
-/// and output cropping), except that a decoder's `up.1` and `conv_out`,
-/// which run fused unless activations are traced, are one stage,
-/// `….up.1+conv_out`.
+/// and output cropping), except that the layers that run fused unless
+/// activations are traced are one stage each: the encoder's
+/// `enc.conv_in+down.0` and a decoder's `….up.1+conv_out`.
 pub type Timings = Vec<(String, std::time::Duration)>;
 
 enum Sink<'a> {
@@ -409,14 +409,25 @@ impl Encoder {
         tr: &mut Tracer<'_>,
         path: &str,
     ) -> Result<Tensor> {
-        // Each stage's input is dropped as soon as the next is made (a
-        // shadowed binding would live to the end of the function), so at
-        // most two stages' activations are held at a time.
-        let x0 = self.conv_in.forward_reflect(x, 3)?;
-        tr.record(path, "conv_in", &x0);
-        let x1 = self.down[0].forward(&x0)?;
-        drop(x0);
-        tr.record(path, "down.0", &x1);
+        let x1 = if tr.records_activations() {
+            let x0 = self.conv_in.forward_reflect(x, 3)?;
+            tr.record(path, "conv_in", &x0);
+            self.down[0].forward(&x0)?
+        } else {
+            // `conv_in` and `down.0` a band of rows at a time: the full-size
+            // `conv_in` output is never held whole (the same values). Timed
+            // as one stage.
+            let x1 = self
+                .conv_in
+                .conv()
+                .reflect_then(x, 3, self.down[0].conv())?;
+            tr.record(path, "conv_in+down.0", &x1);
+            x1
+        };
+        if tr.records_activations() {
+            tr.record(path, "down.0", &x1);
+        }
+        // The input of each stage is dropped once the next is made.
         let x2 = self.down[1].forward(&x1)?;
         drop(x1);
         tr.record(path, "down.1", &x2);

@@ -62,13 +62,17 @@ fn timed_run_gives_the_same_outputs_and_one_time_per_traced_stage() {
         assert_eq!(a.data(), b.data(), "{na}");
     }
     // Every traced activation has a stage time, except `enc` (the encoder's
-    // output repeats its last stage, `enc.down.1`) and a decoder's `up.1`
-    // and `conv_out`, which run fused, timed as one stage.
+    // output repeats its last stage, `enc.down.1`), and the encoder's
+    // `conv_in` and `down.0` and a decoder's `up.1` and `conv_out`, which run
+    // fused, each pair timed as one stage.
     let traced_names: Vec<String> = trace
         .iter()
         .map(|(n, _)| n.as_str())
-        .filter(|n| *n != "enc" && !n.ends_with(".dec.up.1"))
-        .map(|n| n.replace(".dec.conv_out", ".dec.up.1+conv_out"))
+        .filter(|n| *n != "enc" && *n != "enc.conv_in" && !n.ends_with(".dec.up.1"))
+        .map(|n| {
+            n.replace(".dec.conv_out", ".dec.up.1+conv_out")
+                .replace("enc.down.0", "enc.conv_in+down.0")
+        })
         .collect();
     let timed_names: Vec<String> = timings.iter().map(|(n, _)| n.clone()).collect();
     assert_eq!(timed_names, traced_names);

@@ -719,6 +719,113 @@ impl Conv2d {
         self.run(x, 0, Some(residual))
     }
 
+    /// `next.forward(&self.forward_reflect(x, pad, None)?)`, the same values
+    /// bit for bit, without ever holding this layer's whole output: `next`'s
+    /// output is made a band of rows at a time, each from the rows of this
+    /// layer's output it reads (computed from the reflection-padded input rows
+    /// they read), `next` run on them with its own zero padding, and the rows
+    /// that padding touches at a band's inner edges dropped. An encoder's first
+    /// two layers run this way: the first one's output (64 channels at the
+    /// input's full size) is the largest activation it makes.
+    pub fn reflect_then(&self, x: &Tensor, pad: usize, next: &Conv2d) -> Result<Tensor> {
+        let s = self.spec;
+        let (_, w1) = s.out_hw(x.h() + 2 * pad, x.w() + 2 * pad)?;
+        let row_bytes = s.c_out * w1 * std::mem::size_of::<f32>();
+        // This layer's rows for one band of `next`'s: about `stride` each.
+        let per_band = THEN_CONV_BAND_BYTES / rayon::current_num_threads().max(1);
+        let band = (per_band / row_bytes.max(1) / next.spec.stride.max(1)).max(THEN_CONV_MIN_BAND);
+        self.reflect_then_bands(x, pad, next, band)
+    }
+
+    /// As [`Conv2d::reflect_then`] with bands of `band` rows of `next`'s output
+    /// (at least 1; any band size gives the same values), in one contiguous
+    /// run of bands per thread of the pool, side by side.
+    pub fn reflect_then_bands(
+        &self,
+        x: &Tensor,
+        pad: usize,
+        next: &Conv2d,
+        band: usize,
+    ) -> Result<Tensor> {
+        let (s, ns) = (self.spec, next.spec);
+        check_input("conv2d", x, s.c_in)?;
+        if s.pad != 0 {
+            return Err(invalid(
+                "conv2d",
+                format!(
+                    "forward_reflect needs a layer without zero padding, this one has pad {}",
+                    s.pad
+                ),
+            ));
+        }
+        let (h, w) = (x.h(), x.w());
+        if pad >= h || pad >= w {
+            return Err(shape_err(
+                "conv2d",
+                "reflection pad",
+                format!("smaller than the input {h}x{w}"),
+                pad,
+            ));
+        }
+        if ns.c_in != s.c_out {
+            return Err(shape_err(
+                "conv2d after conv2d",
+                "input channels",
+                s.c_out,
+                ns.c_in,
+            ));
+        }
+        if band == 0 {
+            return Err(invalid("conv2d after conv2d", "a band of 0 rows"));
+        }
+        let (h1, w1) = s.out_hw(h + 2 * pad, w + 2 * pad)?;
+        let (oh, ow) = ns.out_hw(h1, w1)?;
+        let band = oh.div_ceil(oh.div_ceil(band.min(oh)));
+        let mut out = Tensor::for_overwrite([x.n(), ns.c_out, oh, ow]);
+        let per_out = ns.c_out * oh * ow;
+        for b in 0..x.n() {
+            let img = x.image(b);
+            let run = |b0: usize, b1: usize, emit: &dyn Fn(BandOut)| -> Result<()> {
+                for q0 in (b0..b1).map(|i| i * band) {
+                    let q1 = (q0 + band).min(oh);
+                    // This layer's rows `[g0, g1)` that rows `[q0, q1)` of
+                    // `next` read, `g0` on `next`'s stride grid so that row
+                    // `j` of `next` over them is row `k + j` of the whole.
+                    // (Rows that read only `next`'s padding below the image
+                    // take `g0` on the image's last grid row.)
+                    let k = ((q0 * ns.stride).saturating_sub(ns.pad) / ns.stride)
+                        .min((h1 - 1) / ns.stride);
+                    let g0 = k * ns.stride;
+                    // (At least one row: a band whose rows read only `next`'s
+                    // zero padding still needs an input to run on.)
+                    let g1 = ((q1 - 1) * ns.stride + ns.kh)
+                        .saturating_sub(ns.pad)
+                        .clamp(g0 + 1, h1);
+                    // The reflection-padded input rows they read.
+                    let r0 = (g0 * s.stride) as isize - pad as isize;
+                    let r1 = ((g1 - 1) * s.stride + s.kh) as isize - pad as isize;
+                    let (buf, hp, wp) =
+                        row_window_copy(img, s.c_in, h, w, r0..r1, [pad, pad], Fill::Reflect, 0);
+                    let xb = Tensor::new([1, s.c_in, hp, wp], buf)?;
+                    let mid = self.forward(&xb)?;
+                    drop(xb);
+                    let y = next.forward(&mid)?;
+                    drop(mid);
+                    emit(BandOut {
+                        q0,
+                        q1,
+                        off: q0 - k,
+                        y,
+                    });
+                }
+                Ok(())
+            };
+            let dst = &mut out.data_mut()[b * per_out..(b + 1) * per_out];
+            in_bands(oh, ow, band, dst, run)?;
+        }
+        Ok(out)
+    }
+
     /// `act(conv(reflect_pad(x, pad)) + b) [+ residual]`: the convolution of
     /// the input extended by PyTorch `ReflectionPad2d(pad)`, which needs `pad`
     /// smaller than the input's height and width. The layer itself must have
@@ -1215,14 +1322,13 @@ impl ConvTranspose2d {
         };
         // Bands `[b0, b1)` of image `img`, one after another: `conv`'s
         // output for each band, with its first row.
-        let run_bands = |img: &[f32], b0: usize, b1: usize| -> Result<Vec<(usize, Tensor)>> {
+        let run_bands = |img: &[f32], b0: usize, b1: usize, emit: &dyn Fn(BandOut)| -> Result<()> {
             // The band's reflection-padded input: padded rows `[p0, p0 +
             // span)` (rows past the padded image, read only by the rows past
             // the output that the last band computes and drops, are zeros).
             let mut pt = Tensor::for_overwrite([1, c, span, wp]);
             // Padded rows `[k0, k1)` held at the top of `pt` from the last band.
             let mut held: Option<(usize, usize)> = None;
-            let mut ys = Vec::with_capacity(b1 - b0);
             for q0 in (b0..b1).map(|i| i * band) {
                 let p0 = q0 * st;
                 let end = (p0 + span).min(hp);
@@ -1267,39 +1373,21 @@ impl ConvTranspose2d {
                     ch[(end - p0) * wp..].fill(0.0);
                 }
                 held = Some((p0, end));
-                ys.push((q0, conv.forward(&pt)?));
+                emit(BandOut {
+                    q0,
+                    q1: (q0 + band).min(oh),
+                    off: 0,
+                    y: conv.forward(&pt)?,
+                });
             }
-            Ok(ys)
+            Ok(())
         };
-        // The bands in one contiguous run per thread, side by side (each run
-        // computes the rows it shares with the run before it once more): the
-        // kernels inside a band are small, and a band's steps would otherwise
-        // wait for each other on every thread.
-        let n_bands = oh.div_ceil(band);
-        let runs = rayon::current_num_threads().clamp(1, n_bands);
-        let run_range = |r: usize| (r * n_bands / runs, (r + 1) * n_bands / runs);
         for b in 0..x.n() {
             let img = x.image(b);
-            let parts: Vec<Result<Vec<(usize, Tensor)>>> = if runs == 1 {
-                vec![run_bands(img, 0, n_bands)]
-            } else {
-                (0..runs)
-                    .into_par_iter()
-                    .map(|r| {
-                        let (b0, b1) = run_range(r);
-                        run_bands(img, b0, b1)
-                    })
-                    .collect()
-            };
             let dst = &mut out.data_mut()[b * per_out..(b + 1) * per_out];
-            for part in parts {
-                for (q0, y) in part? {
-                    let rows = (band.min(oh - q0)) * ow;
-                    for (co, yc) in y.data().chunks_exact(band * ow).enumerate() {
-                        dst[co * oh * ow + q0 * ow..][..rows].copy_from_slice(&yc[..rows]);
-                    }
-                }
-            }
+            in_bands(oh, ow, band, dst, |b0, b1, emit| {
+                run_bands(img, b0, b1, emit)
+            })?;
         }
         Ok(out)
     }
@@ -1426,6 +1514,50 @@ impl ConvTranspose2d {
         }
         crate::pool::give(src);
     }
+}
+
+/// Output rows `[q0, q1)` of one band: rows `[off, off + q1 − q0)` of `y`
+/// (`[1, c, rows, ow]`).
+struct BandOut {
+    q0: usize,
+    q1: usize,
+    off: usize,
+    y: Tensor,
+}
+
+/// Fills one output image `dst` (`c` planes of `oh × ow`) band by band:
+/// `run(b0, b1, emit)` computes bands `b0..b1` (band `i`: rows `[i·band,
+/// (i + 1)·band)`) one after another and hands each to `emit`, which copies
+/// it into `dst` at once (so no band outlives its copy). The bands are split
+/// into one contiguous run per thread of the pool, the runs side by side: the
+/// kernels inside a band are small, and a band's steps would otherwise wait
+/// for each other on every thread (each run recomputes what it shares with
+/// the run before it).
+fn in_bands(
+    oh: usize,
+    ow: usize,
+    band: usize,
+    dst: &mut [f32],
+    run: impl Fn(usize, usize, &dyn Fn(BandOut)) -> Result<()> + Sync,
+) -> Result<()> {
+    let n_bands = oh.div_ceil(band.max(1));
+    let runs = rayon::current_num_threads().clamp(1, n_bands.max(1));
+    let plane = oh * ow;
+    let dst = std::sync::Mutex::new(dst);
+    let emit = |BandOut { q0, q1, off, y }: BandOut| {
+        let (rows, yplane) = ((q1 - q0) * ow, y.h() * y.w());
+        debug_assert!(y.w() == ow && off + q1 - q0 <= y.h());
+        let mut dst = dst.lock().unwrap_or_else(|e| e.into_inner());
+        for (co, yc) in y.data().chunks_exact(yplane).enumerate() {
+            dst[co * plane + q0 * ow..][..rows].copy_from_slice(&yc[off * ow..][..rows]);
+        }
+    };
+    if runs == 1 {
+        return run(0, n_bands, &emit);
+    }
+    (0..runs)
+        .into_par_iter()
+        .try_for_each(|r| run(r * n_bands / runs, (r + 1) * n_bands / runs, &emit))
 }
 
 /// Bytes of the bands of a decoder's reflection-padded full-size activation

@@ -508,6 +508,124 @@ fn conv_transpose_then_reflect_conv_in_bands() {
     }
 }
 
+/// A reflection-padded convolution followed by a zero-padded one, fused in
+/// bands ([`Conv2d::reflect_then_bands`]), against the two layers run one
+/// after the other: the same values bit for bit, at any band size and in
+/// pools of 1, 2 and 3 threads.
+#[test]
+fn reflect_conv_then_conv_in_bands() {
+    let mut rng = Rng::new(93);
+    let sq = ConvSpec::square;
+    let mut cases = vec![
+        // The IRN/MSN encoder's first two layers, scaled down.
+        (1, 9, 12, sq(3, 16, 7, 1, 0), sq(16, 12, 3, 2, 1), 3),
+        (2, 8, 7, sq(3, 8, 7, 1, 0), sq(8, 5, 3, 2, 1), 3),
+        // The EnvMap's: a stride-2 first layer.
+        (1, 11, 10, sq(3, 8, 7, 2, 0), sq(8, 6, 3, 2, 1), 3),
+        // A second layer whose padding exceeds its kernel (rows of padding only).
+        (1, 6, 5, sq(2, 4, 3, 1, 0), sq(4, 3, 1, 1, 2), 1),
+        // Stride 3 with a wide kernel.
+        (1, 12, 9, sq(4, 5, 3, 1, 0), sq(5, 4, 5, 3, 2), 2),
+    ];
+    for _ in 0..30 {
+        let (h, w) = (rng.range(2, 12), rng.range(2, 12));
+        let pad = rng.range(0, h.min(w) - 1);
+        let first = ConvSpec {
+            c_in: rng.range(1, 5),
+            c_out: rng.range(1, 12),
+            kh: rng.range(1, 7),
+            kw: rng.range(1, 7),
+            stride: rng.range(1, 2),
+            pad: 0,
+        };
+        let Ok((h1, w1)) = first.out_hw(h + 2 * pad, w + 2 * pad) else {
+            continue;
+        };
+        let second = ConvSpec {
+            c_in: first.c_out,
+            c_out: rng.range(1, 8),
+            kh: rng.range(1, 5),
+            kw: rng.range(1, 5),
+            stride: rng.range(1, 3),
+            pad: rng.range(0, 3),
+        };
+        if second.out_hw(h1, w1).is_err() {
+            continue;
+        }
+        cases.push((rng.range(1, 2), h, w, first, second, pad));
+    }
+    assert!(cases.len() >= 20, "only {} cases", cases.len());
+    for isa in isas() {
+        for (i, &(n, h, w, fs, ss, pad)) in cases.iter().enumerate() {
+            let x = rng.tensor([n, fs.c_in, h, w]);
+            let fw = rng.normal_vec(fs.weight_len(), 0.3);
+            let fb = rng.normal_vec(fs.c_out, 0.2);
+            let sw = rng.normal_vec(ss.weight_len(), 0.3);
+            let first = Conv2d::with_isa(isa, fs, &fw, Some(&fb), Activation::Relu).unwrap();
+            let second = Conv2d::with_isa(isa, ss, &sw, None, Activation::Relu).unwrap();
+            let want = second
+                .forward(&first.forward_reflect(&x, pad, None).unwrap())
+                .unwrap();
+            let oh = want.h();
+            let mut bands = vec![1, 2, 3, oh, oh + 5, rng.range(1, oh)];
+            bands.dedup();
+            for threads in [1, 2, 3] {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap();
+                for &band in &bands {
+                    let got = pool
+                        .install(|| first.reflect_then_bands(&x, pad, &second, band))
+                        .unwrap();
+                    assert_eq!(got.shape(), want.shape(), "case {i} {isa} band {band}");
+                    assert!(
+                        got.data() == want.data(),
+                        "case {i} {isa} band {band}, {threads} threads: {fs:?} then {ss:?} pad {pad}: differs"
+                    );
+                }
+            }
+            let got = first.reflect_then(&x, pad, &second).unwrap();
+            assert!(
+                got.data() == want.data(),
+                "case {i} {isa}: default bands differ"
+            );
+        }
+    }
+    // Refused: a first layer with zero padding, a reflection as large as
+    // the input, mismatched channels, a band of 0 rows.
+    let mk = |rng: &mut Rng, s: ConvSpec| {
+        Conv2d::new(
+            s,
+            &rng.normal_vec(s.weight_len(), 0.3),
+            None,
+            Activation::None,
+        )
+        .unwrap()
+    };
+    let x = rng.tensor([1, 3, 4, 5]);
+    let first = mk(&mut rng, sq(3, 4, 3, 1, 0));
+    let second = mk(&mut rng, sq(4, 2, 3, 2, 1));
+    assert!(first.reflect_then_bands(&x, 1, &second, 2).is_ok());
+    let e = first
+        .reflect_then_bands(&x, 1, &second, 0)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("band"), "{e}");
+    let e = first.reflect_then(&x, 4, &second).unwrap_err().to_string();
+    assert!(e.contains("reflection pad"), "{e}");
+    let e = first
+        .reflect_then(&x, 1, &mk(&mut rng, sq(5, 2, 3, 2, 1)))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("input channels"), "{e}");
+    let e = mk(&mut rng, sq(3, 4, 3, 1, 1))
+        .reflect_then(&x, 1, &second)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("zero padding"), "{e}");
+}
+
 #[test]
 fn conv_transpose_then_reflect_conv_refuses_bad_shapes() {
     let mut rng = Rng::new(5);
