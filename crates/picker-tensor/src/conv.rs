@@ -749,24 +749,8 @@ impl Conv2d {
     ) -> Result<Tensor> {
         let (s, ns) = (self.spec, next.spec);
         check_input("conv2d", x, s.c_in)?;
-        if s.pad != 0 {
-            return Err(invalid(
-                "conv2d",
-                format!(
-                    "forward_reflect needs a layer without zero padding, this one has pad {}",
-                    s.pad
-                ),
-            ));
-        }
         let (h, w) = (x.h(), x.w());
-        if pad >= h || pad >= w {
-            return Err(shape_err(
-                "conv2d",
-                "reflection pad",
-                format!("smaller than the input {h}x{w}"),
-                pad,
-            ));
-        }
+        check_reflect(&s, pad, h, w)?;
         if ns.c_in != s.c_out {
             return Err(shape_err(
                 "conv2d after conv2d",
@@ -837,23 +821,7 @@ impl Conv2d {
         pad: usize,
         residual: Option<&Tensor>,
     ) -> Result<Tensor> {
-        if self.spec.pad != 0 {
-            return Err(invalid(
-                "conv2d",
-                format!(
-                    "forward_reflect needs a layer without zero padding, this one has pad {}",
-                    self.spec.pad
-                ),
-            ));
-        }
-        if pad >= x.h() || pad >= x.w() {
-            return Err(shape_err(
-                "conv2d",
-                "reflection pad",
-                format!("smaller than the input {}x{}", x.h(), x.w()),
-                pad,
-            ));
-        }
+        check_reflect(&self.spec, pad, x.h(), x.w())?;
         self.run(x, pad, residual)
     }
 
@@ -1275,23 +1243,7 @@ impl ConvTranspose2d {
                 cs.c_in,
             ));
         }
-        if cs.pad != 0 {
-            return Err(invalid(
-                "conv2d",
-                format!(
-                    "a reflection-padded convolution needs a layer without zero padding, this one has pad {}",
-                    cs.pad
-                ),
-            ));
-        }
-        if pad >= h || pad >= w {
-            return Err(shape_err(
-                "conv2d",
-                "reflection pad",
-                format!("smaller than the input {h}x{w}"),
-                pad,
-            ));
-        }
+        check_reflect(&cs, pad, h, w)?;
         if band == 0 {
             return Err(invalid("conv2d after conv_transpose2d", "a band of 0 rows"));
         }
@@ -1514,6 +1466,30 @@ impl ConvTranspose2d {
         }
         crate::pool::give(src);
     }
+}
+
+/// What a reflection-padded convolution needs: a layer without zero padding
+/// of its own, and a pad smaller than its `h × w` input (PyTorch's
+/// `ReflectionPad2d`).
+fn check_reflect(spec: &ConvSpec, pad: usize, h: usize, w: usize) -> Result<()> {
+    if spec.pad != 0 {
+        return Err(invalid(
+            "conv2d",
+            format!(
+                "forward_reflect needs a layer without zero padding, this one has pad {}",
+                spec.pad
+            ),
+        ));
+    }
+    if pad >= h || pad >= w {
+        return Err(shape_err(
+            "conv2d",
+            "reflection pad",
+            format!("smaller than the input {h}x{w}"),
+            pad,
+        ));
+    }
+    Ok(())
 }
 
 /// Output rows `[q0, q1)` of one band: rows `[off, off + q1 − q0)` of `y`

@@ -383,6 +383,34 @@ impl ConvTProblem {
     }
 }
 
+/// `got(band)` equals `want` bit for bit at band sizes 1, 2, 3, a random
+/// one, the whole output and past it, in rayon pools of 1, 2 and 3 threads
+/// (the bands run in one contiguous run per thread).
+fn same_in_bands(
+    what: &str,
+    want: &Tensor,
+    rng: &mut Rng,
+    got: impl Fn(usize) -> picker_tensor::Result<Tensor> + Sync,
+) {
+    let oh = want.h();
+    let mut bands = vec![1, 2, 3, oh, oh + 5, rng.range(1, oh)];
+    bands.dedup();
+    for threads in [1, 2, 3] {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        for &band in &bands {
+            let got = pool.install(|| got(band)).unwrap();
+            assert_eq!(got.shape(), want.shape(), "{what} band {band}");
+            assert!(
+                got.data() == want.data(),
+                "{what} band {band}, {threads} threads: differs"
+            );
+        }
+    }
+}
+
 /// A transposed convolution followed by a reflection-padded convolution,
 /// fused in bands ([`ConvTranspose2d::then_reflect_conv_bands`]), against the
 /// two layers run one after the other: the same values bit for bit, at any
@@ -479,26 +507,10 @@ fn conv_transpose_then_reflect_conv_in_bands() {
             let want = conv
                 .forward_reflect(&upl.forward(&x).unwrap(), pad, None)
                 .unwrap();
-            let oh = want.h();
-            let mut bands = vec![1, 2, 3, oh, oh + 5, rng.range(1, oh)];
-            bands.dedup();
-            // The bands run in one contiguous run per thread: 1, 2 and 3 runs.
-            for threads in [1, 2, 3] {
-                let pool = rayon::ThreadPoolBuilder::new()
-                    .num_threads(threads)
-                    .build()
-                    .unwrap();
-                for &band in &bands {
-                    let got = pool
-                        .install(|| upl.then_reflect_conv_bands(&x, &conv, pad, band))
-                        .unwrap();
-                    assert_eq!(got.shape(), want.shape(), "case {i} {isa} band {band}");
-                    assert!(
-                        got.data() == want.data(),
-                        "case {i} {isa} band {band}, {threads} threads: {up:?} then {cs:?} pad {pad}: differs"
-                    );
-                }
-            }
+            let what = format!("case {i} {isa}: {up:?} then {cs:?} pad {pad}");
+            same_in_bands(&what, &want, &mut rng, |band| {
+                upl.then_reflect_conv_bands(&x, &conv, pad, band)
+            });
             let got = upl.then_reflect_conv(&x, &conv, pad).unwrap();
             assert!(
                 got.data() == want.data(),
@@ -566,25 +578,10 @@ fn reflect_conv_then_conv_in_bands() {
             let want = second
                 .forward(&first.forward_reflect(&x, pad, None).unwrap())
                 .unwrap();
-            let oh = want.h();
-            let mut bands = vec![1, 2, 3, oh, oh + 5, rng.range(1, oh)];
-            bands.dedup();
-            for threads in [1, 2, 3] {
-                let pool = rayon::ThreadPoolBuilder::new()
-                    .num_threads(threads)
-                    .build()
-                    .unwrap();
-                for &band in &bands {
-                    let got = pool
-                        .install(|| first.reflect_then_bands(&x, pad, &second, band))
-                        .unwrap();
-                    assert_eq!(got.shape(), want.shape(), "case {i} {isa} band {band}");
-                    assert!(
-                        got.data() == want.data(),
-                        "case {i} {isa} band {band}, {threads} threads: {fs:?} then {ss:?} pad {pad}: differs"
-                    );
-                }
-            }
+            let what = format!("case {i} {isa}: {fs:?} then {ss:?} pad {pad}");
+            same_in_bands(&what, &want, &mut rng, |band| {
+                first.reflect_then_bands(&x, pad, &second, band)
+            });
             let got = first.reflect_then(&x, pad, &second).unwrap();
             assert!(
                 got.data() == want.data(),
