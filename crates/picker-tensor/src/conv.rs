@@ -261,8 +261,8 @@ pub enum ConvAlgorithm {
     /// [`ConvAlgorithm::WinogradLowMemory`] does.
     Winograd6LowMemory,
     /// Winograd keeping only the 3×3 weights, with the tile chosen per
-    /// image: F(4×4, 3×3) where its tiles fit in a few panels (small maps,
-    /// whose weights are then made in L2), else F(6×6, 3×3). What
+    /// image: F(4×4, 3×3) where its tiles fit in a few panels (small maps),
+    /// else F(6×6, 3×3). What
     /// [`ConvAlgorithm::AutoLowMemory`] takes for f32 3×3 layers (measured
     /// on an Intel Xeon, 2 threads: IRN 4–7% and the EnvMap at 480×640 ~9%
     /// faster than with F(4×4) alone).

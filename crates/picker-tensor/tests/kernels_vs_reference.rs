@@ -1049,15 +1049,15 @@ fn conv2d_reflect_forward() {
 }
 
 /// Winograd weights made per pass (`WinogradLowMemory`: one transform row at
-/// a time over few tile panels, or the chunk's whole `U` per block of tiles
-/// over many) give the same bits as the weights packed once, and both match
-/// the reference, with either tile size.
+/// a time, for blocks of at most four tile panels) give the same bits as the
+/// weights packed once, and both match the reference, with either tile size.
 #[test]
 fn winograd_lazy_weights_match_packed_bit_for_bit() {
     // (h, w, c_in, c_out): one panel; three panels and two depth blocks; five
-    // and more panels (the whole-U path on AVX-512) with a partial depth
-    // block and a partial row panel; a single channel. In F(6×6) tiles: one,
-    // two, three, four (row blocks) and seven panels (whole U).
+    // panels (two blocks, 3 + 2, on AVX-512) with a partial depth block and a
+    // partial row panel; more panels (blocks of 4, 4, 4, 3 for 100×110 in
+    // F(4×4)); a single channel. In F(6×6) tiles: one, two, three, four and
+    // seven panels (4 + 3).
     let cases = [
         (14, 18, 20, 13),
         (34, 49, 136, 24),

@@ -30,10 +30,10 @@
 //!    most [`WINO_PANELS_PER_GROUP`]: each `U` panel is read once per group,
 //!    and each depth block's B panel stays in L1 for all the chunk's row
 //!    panels); the output transform then turns them into output pixels at
-//!    once, fused with bias, activation and residual add. With weights made
-//!    per pass (lazy `U`) over few panels, the chunk makes `T` `U[ξ]` of one
-//!    depth block at a time and runs them over every panel of the block
-//!    ([`WINO_ROW_BLOCK_PANELS`]).
+//!    once, fused with bias, activation and residual add. With f32 weights
+//!    made per pass (lazy `U`), blocks hold at most [`WINO_ROW_BLOCK_PANELS`]
+//!    panels and the chunk makes `T` `U[ξ]` of one depth block at a time and
+//!    runs them over every panel of the block.
 //!
 //! The tile transforms work on a panel of tiles at a time, with the tiles in
 //! the SIMD lanes; they are compiled once per ISA (`#[target_feature]`) and
@@ -164,10 +164,13 @@ impl Tile {
     }
 
     /// The tile for an `oh × ow` output in panels of `nr` tiles, with lazy
-    /// `U`: F4 where its tiles fit in [`WINO_ROW_BLOCK_PANELS`] panels (its
-    /// `U` is then made in L2 row by row, and F6's emptier panels and larger
-    /// weight transform lose: the EnvMap's 30×40 blocks), or where F6 would
-    /// not run fewer product columns; else F6.
+    /// `U`: F4 where its tiles fit in one block of [`WINO_ROW_BLOCK_PANELS`]
+    /// panels (F6's emptier panels and larger weight transform lose there:
+    /// the EnvMap's 30×40 blocks), or where F6 would not run fewer product
+    /// columns; else F6. (Re-measured after larger maps moved to row blocks
+    /// too, IRN 480×640 / 240×320 and EnvMap 480×640 with this rule, F4 and
+    /// F6 forced: 5565 / 5802 / 5574 ms, 1480 / 1584 / 1491 ms, 100.9 /
+    /// 108.5 / 99.6 ms.)
     ///
     /// Measured on an Intel Xeon with AMX, 2 threads, interleaved
     /// `picker bench` (PICKER_WINOGRAD_TILE=4 / 6), in ms: EnvMap 240×320
@@ -586,13 +589,15 @@ enum UStore {
     /// Only the 3×3 weights are kept (as `[m_panels][9][c_in][mr]`); each
     /// output-channel chunk makes its part of `U` in its own task, once per
     /// block of tiles (blocks of up to [`WINO_LAZY_V_BYTES`] of `V`), so a
-    /// network holds its weights once. Over at most
-    /// [`WINO_ROW_BLOCK_PANELS`] tile panels (small images: the EnvMap's
-    /// 30×40 blocks) the chunk's `U` is made one transform row and depth
-    /// block at a time, into L2, and used at once by every panel: there the
-    /// whole chunk's `U` (4.7 MB at 128 × 256 channels) cost more to write to
-    /// L3 and read back than the products' own work (a 256-channel 30×40
-    /// layer, 2 threads, Zen 4: 4.4–4.6 ms, now 2.8–3.2 ms, as with packed U).
+    /// network holds its weights once. In f32 a block holds at most
+    /// [`WINO_ROW_BLOCK_PANELS`] tile panels and the chunk's `U` is made one
+    /// transform row and depth block at a time, into L2, and used at once by
+    /// every panel of the block: the whole chunk's `U` (4.7 MB at 128 × 256
+    /// channels in F(4×4), 8.4 MB in F(6×6)) cost more to write to L3 and
+    /// read back than the products' own work (a 256-channel 30×40 layer, 2
+    /// threads, Zen 4: 4.4–4.6 ms, now 2.8–3.2 ms, as with packed U; the IRN
+    /// at 480×640 on an Intel Xeon: 5.8 s, now 5.2–5.4 s). The bf16 products
+    /// still make the chunk's whole `U` per block.
     Lazy(Vec<f32>),
 }
 
@@ -1096,6 +1101,18 @@ impl Winograd {
         } else {
             WINO_PANELS_PER_BLOCK
         };
+        // Lazy f32 U: the products are run one U row block at a time (see
+        // below) for all of a block's panels, whose products are kept
+        // together, so a block holds at most WINO_ROW_BLOCK_PANELS panels,
+        // the tiles split evenly over the blocks.
+        let row_blocks = lazy && !self.bf16 && !self.amx;
+        let panels_per_block = if row_blocks {
+            let total = tiles.div_ceil(nr);
+            let cap = panels_per_block.min(WINO_ROW_BLOCK_PANELS);
+            total.div_ceil(total.div_ceil(cap))
+        } else {
+            panels_per_block
+        };
         let tpb = nr * panels_per_block;
         // The first rows of each depth block, for the products.
         let block_rows: Vec<VRows> = self
@@ -1133,19 +1150,7 @@ impl Winograd {
         let group = (crate::isa::l2_cache_bytes() / m_panel_bytes)
             .clamp(1, WINO_PANELS_PER_GROUP)
             .min(panels_per_block);
-        // Lazy f32 U over few tile panels: the products are run one U row
-        // block at a time (see below), for all of a block's panels, whose
-        // products are kept together.
-        let row_blocks = lazy
-            && !self.bf16
-            && !self.amx
-            && tiles.div_ceil(nr) <= WINO_ROW_BLOCK_PANELS
-            && tiles.div_ceil(nr) <= panels_per_block;
-        let group = if row_blocks {
-            tiles.div_ceil(nr)
-        } else {
-            group
-        };
+        let group = if row_blocks { panels_per_block } else { group };
         let u_chunk_len = if row_blocks {
             let kc_max = self.kblocks.iter().map(|b| b.1).max().unwrap_or(0);
             T * chunk_per_xi(chunk_rows * kc_max)
