@@ -23,6 +23,7 @@
 use rayon::prelude::*;
 
 use crate::activation::Activation;
+use crate::aligned::AlignedBuf;
 use crate::gemm::Epilogue;
 use crate::pad::{padded_source, Fill};
 
@@ -45,7 +46,9 @@ pub(crate) struct PixelTiles {
     kh: usize,
     kw: usize,
     stride: usize,
-    w: Vec<f32>,
+    /// Aligned to a cache line: each tap's `CO` weights are whole lines
+    /// (misaligned, every load of a block streamed from L2 split in two).
+    w: AlignedBuf,
 }
 
 struct SharedPtr(*mut f32);
@@ -68,11 +71,12 @@ impl PixelTiles {
         let k = c_in * kh * kw;
         assert_eq!(weight.len(), c_out * k, "weight length");
         let panels = c_out.div_ceil(CO);
-        let mut w = vec![0.0f32; panels * k * CO];
+        let mut w = AlignedBuf::zeroed(panels * k * CO);
+        let wm = w.as_mut_slice();
         for co in 0..c_out {
             let (p, j) = (co / CO, co % CO);
             for kk in 0..k {
-                w[(p * k + kk) * CO + j] = weight[co * k + kk];
+                wm[(p * k + kk) * CO + j] = weight[co * k + kk];
             }
         }
         Self {
@@ -168,32 +172,39 @@ impl PixelTiles {
                     );
                 }
                 for p in 0..panels {
-                    let wp_ = &self.w[p * k * CO..(p + 1) * k * CO];
+                    let wp_ = &self.w.as_slice()[p * k * CO..(p + 1) * k * CO];
                     // Depth blocks outside, tiles inside: a block's weights
                     // (`PIXTILE_KC × CO` floats) stay in L1 over the row's tiles.
-                    let mut k0 = 0;
-                    while k0 < k {
-                        let kc = kc_block.min(k - k0);
-                        let mut e = 0;
-                        for tx in 0..tiles_x {
-                            let acc = accs[tx * PX * CO..(tx + 1) * PX * CO].as_mut_ptr();
-                            let wk = wp_[k0 * CO..].as_ptr();
-                            // SAFETY: the CPU has AVX-512F (checked when the layer
-                            // was built); every tap offset plus (PX − 1)·s lies
-                            // inside the image (inside tiles) or the tile's window
-                            // copy, `wk` holds kc·CO weights and `acc` PX·CO floats.
-                            unsafe {
-                                if edge.get(e) == Some(&tx) {
-                                    let win = windows[e * win_len..].as_ptr();
-                                    kernel(kc, wk, win, in_window[k0..].as_ptr(), acc, k0 > 0);
-                                    e += 1;
-                                } else {
-                                    let base = x.as_ptr().add((qy - pad) * w + (tx * PX * s - pad));
-                                    kernel(kc, wk, base, in_image[k0..].as_ptr(), acc, k0 > 0);
+                    let tg_n: usize = std::env::var("TMP_TG")
+                        .ok()
+                        .and_then(|v| v.parse().ok())
+                        .unwrap_or(tiles_x);
+                    for tg in (0..tiles_x).step_by(tg_n) {
+                        let mut k0 = 0;
+                        while k0 < k {
+                            let kc = kc_block.min(k - k0);
+                            let mut e = edge.iter().position(|&t| t >= tg).unwrap_or(edge.len());
+                            for tx in tg..(tg + tg_n).min(tiles_x) {
+                                let acc = accs[tx * PX * CO..(tx + 1) * PX * CO].as_mut_ptr();
+                                let wk = wp_[k0 * CO..].as_ptr();
+                                // SAFETY: the CPU has AVX-512F (checked when the layer
+                                // was built); every tap offset plus (PX − 1)·s lies
+                                // inside the image (inside tiles) or the tile's window
+                                // copy, `wk` holds kc·CO weights and `acc` PX·CO floats.
+                                unsafe {
+                                    if edge.get(e) == Some(&tx) {
+                                        let win = windows[e * win_len..].as_ptr();
+                                        kernel(kc, wk, win, in_window[k0..].as_ptr(), acc, k0 > 0);
+                                        e += 1;
+                                    } else {
+                                        let base =
+                                            x.as_ptr().add((qy - pad) * w + (tx * PX * s - pad));
+                                        kernel(kc, wk, base, in_image[k0..].as_ptr(), acc, k0 > 0);
+                                    }
                                 }
                             }
+                            k0 += kc;
                         }
-                        k0 += kc;
                     }
                     let rows = CO.min(self.c_out - p * CO);
                     if residual.is_none() && matches!(act, Activation::None | Activation::Relu) {

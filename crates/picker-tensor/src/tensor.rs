@@ -1,18 +1,37 @@
 //! The dense f32 NCHW tensor every kernel works on.
 
+use crate::aligned::{aligned_offset, ALIGN_FLOATS};
 use crate::error::{Error, Result};
 
 /// A dense, contiguous, row-major f32 tensor of rank 4 in NCHW order
 /// (batch, channels, height, width).
-#[derive(Clone, PartialEq)]
+///
+/// The elements are `buf[off..off + len]`: tensors the crate makes start on a
+/// cache line (the kernels load 16 floats at a time, and a misaligned load
+/// spans two lines), a wrapped `Vec` where it starts (`off = 0`).
 pub struct Tensor {
     shape: [usize; 4],
-    data: Vec<f32>,
+    buf: Vec<f32>,
+    off: usize,
 }
 
 impl Drop for Tensor {
     fn drop(&mut self) {
-        crate::pool::give(std::mem::take(&mut self.data));
+        crate::pool::give(std::mem::take(&mut self.buf));
+    }
+}
+
+impl Clone for Tensor {
+    fn clone(&self) -> Self {
+        let mut t = Self::for_overwrite(self.shape);
+        t.data_mut().copy_from_slice(self.data());
+        t
+    }
+}
+
+impl PartialEq for Tensor {
+    fn eq(&self, other: &Self) -> bool {
+        self.shape == other.shape && self.data() == other.data()
     }
 }
 
@@ -33,23 +52,28 @@ impl Tensor {
                 found: data.len(),
             });
         }
-        Ok(Self { shape, data })
+        Ok(Self {
+            shape,
+            buf: data,
+            off: 0,
+        })
     }
 
     /// A tensor of zeros.
     pub fn zeros(shape: [usize; 4]) -> Self {
-        let mut data = crate::pool::take(shape.iter().product());
-        data.fill(0.0);
-        Self { shape, data }
+        let mut t = Self::for_overwrite(shape);
+        t.data_mut().fill(0.0);
+        t
     }
 
     /// A tensor whose every element the caller overwrites before reading:
-    /// its contents are unspecified (stale values of a reused buffer).
+    /// its contents are unspecified (stale values of a reused buffer). Its
+    /// elements start on a cache line.
     pub(crate) fn for_overwrite(shape: [usize; 4]) -> Self {
-        Self {
-            shape,
-            data: crate::pool::take(shape.iter().product()),
-        }
+        let len: usize = shape.iter().product();
+        let buf = crate::pool::take(len + ALIGN_FLOATS);
+        let off = aligned_offset(&buf);
+        Self { shape, buf, off }
     }
 
     /// A tensor filled by `f(n, c, y, x)`.
@@ -67,7 +91,11 @@ impl Tensor {
                 }
             }
         }
-        Self { shape, data }
+        Self {
+            shape,
+            buf: data,
+            off: 0,
+        }
     }
 
     /// The shape `[n, c, h, w]`.
@@ -92,27 +120,32 @@ impl Tensor {
     }
     /// Number of elements.
     pub fn len(&self) -> usize {
-        self.data.len()
+        self.shape.iter().product()
     }
     /// True when the tensor has no elements.
     pub fn is_empty(&self) -> bool {
-        self.data.is_empty()
+        self.len() == 0
     }
     /// The elements in NCHW order.
     pub fn data(&self) -> &[f32] {
-        &self.data
+        &self.buf[self.off..self.off + self.len()]
     }
     /// The elements in NCHW order, mutable.
     pub fn data_mut(&mut self) -> &mut [f32] {
-        &mut self.data
+        let (off, len) = (self.off, self.len());
+        &mut self.buf[off..off + len]
     }
     /// Consumes the tensor, giving back its elements.
     pub fn into_data(mut self) -> Vec<f32> {
-        std::mem::take(&mut self.data)
+        let len = self.len();
+        let mut v = std::mem::take(&mut self.buf);
+        v.drain(..self.off);
+        v.truncate(len);
+        v
     }
     /// Element at `(n, c, y, x)`; panics when out of range (indexing, like slices).
     pub fn at(&self, n: usize, c: usize, y: usize, x: usize) -> f32 {
-        self.data[self.index(n, c, y, x)]
+        self.data()[self.index(n, c, y, x)]
     }
     /// Flat index of `(n, c, y, x)`.
     pub fn index(&self, n: usize, c: usize, y: usize, x: usize) -> usize {
@@ -124,12 +157,12 @@ impl Tensor {
     pub fn plane(&self, n: usize, c: usize) -> &[f32] {
         let hw = self.shape[2] * self.shape[3];
         let o = (n * self.shape[1] + c) * hw;
-        &self.data[o..o + hw]
+        &self.data()[o..o + hw]
     }
     /// The `c × h × w` block of image `n`.
     pub fn image(&self, n: usize) -> &[f32] {
         let chw = self.shape[1] * self.shape[2] * self.shape[3];
-        &self.data[n * chw..(n + 1) * chw]
+        &self.data()[n * chw..(n + 1) * chw]
     }
 
     /// The window `[y0, y0+h) × [x0, x0+w)` of every plane.
@@ -145,7 +178,7 @@ impl Tensor {
         }
         let mut out = Vec::with_capacity(n * c * h * w);
         for p in 0..n * c {
-            let plane = &self.data[p * hh * ww..(p + 1) * hh * ww];
+            let plane = &self.data()[p * hh * ww..(p + 1) * hh * ww];
             for y in y0..y0 + h {
                 out.extend_from_slice(&plane[y * ww + x0..y * ww + x0 + w]);
             }
@@ -168,24 +201,24 @@ impl Tensor {
         let mut out = Vec::with_capacity(n * len * hw);
         for b in 0..n {
             let o = (b * c + c0) * hw;
-            out.extend_from_slice(&self.data[o..o + len * hw]);
+            out.extend_from_slice(&self.data()[o..o + len * hw]);
         }
         Tensor::new([n, len, h, w], out)
     }
 
     /// A copy as an `ndarray` array.
     pub fn to_ndarray(&self) -> ndarray::Array4<f32> {
-        ndarray::Array4::from_shape_vec(self.shape, self.data.clone())
+        ndarray::Array4::from_shape_vec(self.shape, self.data().to_vec())
             .expect("shape and length agree by construction")
     }
 
     /// A tensor from any `ndarray` array of rank 4 (copied into NCHW order).
     pub fn from_ndarray(a: ndarray::ArrayView4<'_, f32>) -> Self {
         let d = a.dim();
-        let data = a.iter().copied().collect();
         Self {
             shape: [d.0, d.1, d.2, d.3],
-            data,
+            buf: a.iter().copied().collect(),
+            off: 0,
         }
     }
 
@@ -200,10 +233,67 @@ impl Tensor {
             ));
         }
         Ok(self
-            .data
+            .data()
             .iter()
-            .zip(&other.data)
+            .zip(other.data())
             .map(|(a, b)| (a - b).abs())
             .fold(0.0, f32::max))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::params::ALIGN;
+
+    fn aligned(t: &Tensor) -> bool {
+        t.data().as_ptr() as usize % ALIGN == 0
+    }
+
+    /// Tensors the crate makes start on a cache line, at every size (small
+    /// ones from the allocator, large ones from the pool, reused or not);
+    /// clones too; equality, `into_data` and indexing see only the elements.
+    #[test]
+    fn made_tensors_start_on_a_cache_line() {
+        let mut rng = crate::Rng::new(5);
+        for &shape in &[
+            [1, 1, 1, 1],
+            [1, 3, 5, 7],
+            [2, 64, 60, 80],
+            [1, 256, 60, 80],
+            [1, 1, 1 << 9, 1 << 9],
+        ] {
+            for _ in 0..3 {
+                let mut t = Tensor::zeros(shape);
+                assert!(aligned(&t), "zeros {shape:?}");
+                assert_eq!(t.len(), shape.iter().product::<usize>());
+                assert!(t.data().iter().all(|&v| v == 0.0));
+                let values = rng.normal_vec(t.len(), 1.0);
+                t.data_mut().copy_from_slice(&values);
+                let u = Tensor::for_overwrite(shape);
+                assert!(aligned(&u), "for_overwrite {shape:?}");
+                let c = t.clone();
+                assert!(aligned(&c), "clone {shape:?}");
+                assert!(c == t, "clone equals");
+                let [_, ch, h, w] = shape;
+                assert_eq!(t.at(0, ch - 1, h - 1, w - 1), values[ch * h * w - 1]);
+                assert_eq!(t.plane(0, ch - 1), &values[(ch - 1) * h * w..ch * h * w]);
+                assert_eq!(c.into_data(), values, "into_data {shape:?}");
+                drop(u);
+            }
+        }
+        // A wrapped Vec stays where it is, and compares by its elements.
+        let v: Vec<f32> = (0..24).map(|i| i as f32).collect();
+        let a = Tensor::new([1, 2, 3, 4], v.clone()).unwrap();
+        let mut b = Tensor::zeros([1, 2, 3, 4]);
+        b.data_mut().copy_from_slice(&v);
+        assert!(a == b);
+        b.data_mut()[23] = 0.5;
+        assert!(a != b);
+        assert!(
+            a != Tensor::new([1, 2, 4, 3], v.clone()).unwrap(),
+            "shape counts"
+        );
+        assert_eq!(a.into_data(), v);
     }
 }

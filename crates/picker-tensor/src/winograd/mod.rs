@@ -46,7 +46,7 @@ use std::cell::RefCell;
 use rayon::prelude::*;
 
 use crate::activation::Activation;
-use crate::aligned::AlignedBuf;
+use crate::aligned::{aligned_offset, AlignedBuf, ALIGN_FLOATS};
 use crate::amx;
 use crate::gemm::Epilogue;
 use crate::isa::Isa;
@@ -598,7 +598,7 @@ enum UStore {
     /// threads, Zen 4: 4.4–4.6 ms, now 2.8–3.2 ms, as with packed U; the IRN
     /// at 480×640 on an Intel Xeon: 5.8 s, now 5.2–5.4 s). The bf16 products
     /// still make the chunk's whole `U` per block.
-    Lazy(Vec<f32>),
+    Lazy(AlignedBuf),
 }
 
 impl Winograd {
@@ -646,12 +646,13 @@ impl Winograd {
         // [c_out, c_in, 9] → [m_panels][9][c_in][mr] (output channels past
         // c_out zero): one tap of one row panel is contiguous over (ci, r),
         // the lanes of the transform and the order of the A panel.
-        let mut taps = vec![0.0f32; m_panels * 9 * c_in * mr];
+        let mut taps = AlignedBuf::zeroed(m_panels * 9 * c_in * mr);
+        let tm = taps.as_mut_slice();
         for co in 0..c_out {
             let (mp, r) = (co / mr, co % mr);
             for ci in 0..c_in {
                 for k in 0..9 {
-                    taps[((mp * 9 + k) * c_in + ci) * mr + r] = weight[(co * c_in + ci) * 9 + k];
+                    tm[((mp * 9 + k) * c_in + ci) * mr + r] = weight[(co * c_in + ci) * 9 + k];
                 }
             }
         }
@@ -677,8 +678,8 @@ impl Winograd {
             let mut buf = AlignedBuf::zeroed(tile.points() * w.per_xi());
             if let UStore::Lazy(taps) = &w.u {
                 match tile {
-                    Tile::F4 => w.pack_u::<6, 4, F4>(taps, buf.as_mut_slice()),
-                    Tile::F6 => w.pack_u::<8, 6, F6>(taps, buf.as_mut_slice()),
+                    Tile::F4 => w.pack_u::<6, 4, F4>(taps.as_slice(), buf.as_mut_slice()),
+                    Tile::F6 => w.pack_u::<8, 6, F6>(taps.as_slice(), buf.as_mut_slice()),
                 }
             }
             w.u = UStore::Packed(buf);
@@ -1121,7 +1122,12 @@ impl Winograd {
             .map(|&(k0, ..)| self.v_rows(k0, tpb))
             .collect();
         let block_rows = &block_rows;
-        let mut v = crate::pool::take(points * self.depth * tpb);
+        // V from the pool, its start aligned to a cache line: the products
+        // load its B panels 16 floats at a time.
+        let v_len = points * self.depth * tpb;
+        let mut v_buf = crate::pool::take(v_len + ALIGN_FLOATS);
+        let v_off = aligned_offset(&v_buf);
+        let v = &mut v_buf[v_off..v_off + v_len];
         let m_panels = self.m_panels;
         // Output-channel chunks: one per thread, within bounds (a larger
         // chunk reads each B panel for more rows; the products' buffer is
@@ -1185,7 +1191,7 @@ impl Winograd {
 
             // 2. Products and output transform, parallel over output-channel
             // chunks, a group of tile panels at a time.
-            let v_ref = &v;
+            let v_ref = &*v;
             let g_ref = &g;
             out.par_chunks_mut(chunk_rows * plane_len)
                 .enumerate()
@@ -1234,7 +1240,7 @@ impl Winograd {
                                 let per_xi = chunk_per_xi(n * mr * kc);
                                 for row in 0..T {
                                     self.pack_row_block::<T, M, W>(
-                                        taps,
+                                        taps.as_slice(),
                                         mp0..mp1,
                                         k0,
                                         kc,
@@ -1284,7 +1290,7 @@ impl Winograd {
                             UStore::Lazy(taps) => {
                                 PACK_SCRATCH.with(|ps| {
                                     self.pack_u_chunk::<T, M, W>(
-                                        taps,
+                                        taps.as_slice(),
                                         mp0,
                                         mp1,
                                         u_chunk,
@@ -1378,7 +1384,7 @@ impl Winograd {
             t0 = t1;
         }
         debug_assert_eq!(out.len(), self.c_out * plane_len);
-        crate::pool::give(v);
+        crate::pool::give(v_buf);
     }
 }
 
