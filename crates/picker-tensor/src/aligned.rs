@@ -81,7 +81,7 @@ mod tests {
     /// what they should.
     #[test]
     fn buffers_stay_aligned() {
-        let at_line = |b: &AlignedBuf| b.as_slice().as_ptr() as usize % ALIGN == 0;
+        let at_line = |b: &AlignedBuf| (b.as_slice().as_ptr() as usize).is_multiple_of(ALIGN);
         for len in [0usize, 1, 15, 16, 17, 1000, 1 << 18, (1 << 20) + 3] {
             let mut b = AlignedBuf::zeroed(len);
             assert!(at_line(&b) && b.as_slice().len() == len, "zeroed {len}");

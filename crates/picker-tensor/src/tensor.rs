@@ -247,7 +247,7 @@ mod tests {
     use crate::params::ALIGN;
 
     fn aligned(t: &Tensor) -> bool {
-        t.data().as_ptr() as usize % ALIGN == 0
+        (t.data().as_ptr() as usize).is_multiple_of(ALIGN)
     }
 
     /// Tensors the crate makes start on a cache line, at every size (small
