@@ -14,7 +14,7 @@
 //! spills registers and its column phases take gathers, and its packed `U`
 //! (7.1× the 3×3 weights) streams from memory, so packed `U` stays F(4×4).
 //! With lazy `U` (every network's default) F(6×6) wins on maps too large for
-//! F(4×4)'s row blocks: [`Tile::for_output`] chooses per image, and
+//! one block of F(4×4)'s panels: [`Tile::for_output`] chooses per image, and
 //! `PICKER_WINOGRAD_TILE=4|6` overrides ([`crate::ConvAlgorithm::Auto`]).
 //!
 //! A forward pass walks the output tiles in blocks of `NR`-wide panels
