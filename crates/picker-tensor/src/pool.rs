@@ -54,6 +54,31 @@ pub(crate) fn take(len: usize) -> Vec<f32> {
     vec![0.0; len]
 }
 
+/// A buffer of at least `len` floats, all of them initialised, contents
+/// unspecified: a pooled buffer whose length (not only capacity) covers
+/// `len` is handed out whole, so none of it is zero-filled, where [`take`]
+/// would fill the part between a shorter earlier use and `len`. For
+/// callers that keep their own length (tensors, the Winograd `V` buffer);
+/// give the buffer back whole so its length stays known.
+pub(crate) fn take_at_least(len: usize) -> Vec<f32> {
+    if len >= MIN_POOLED {
+        let mut pool = POOL.lock().unwrap_or_else(|e| e.into_inner());
+        let best = pool
+            .free
+            .iter()
+            .enumerate()
+            .filter(|(_, v)| v.len() >= len && v.len() <= 2 * len)
+            .min_by_key(|(_, v)| v.len())
+            .map(|(i, _)| i);
+        if let Some(i) = best {
+            let v = pool.free.swap_remove(i);
+            pool.bytes -= bytes_of(&v);
+            return v;
+        }
+    }
+    take(len)
+}
+
 /// Hands a buffer back (kept if large and the pool has room, else freed).
 pub(crate) fn give(v: Vec<f32>) {
     if v.capacity() < MIN_POOLED {
@@ -64,5 +89,40 @@ pub(crate) fn give(v: Vec<f32>) {
     if pool.bytes + b <= MAX_POOLED_BYTES {
         pool.bytes += b;
         pool.free.push(v);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `take` gives exactly the length asked for; `take_at_least` at least
+    /// that and at most twice it (a pooled buffer handed out whole), and a
+    /// buffer given back whole is handed out again without losing length.
+    #[test]
+    fn lengths_of_taken_buffers() {
+        let n = MIN_POOLED + 123;
+        for len in [n, n + 1, 2 * n, 3 * n / 2] {
+            let v = take(len);
+            assert_eq!(v.len(), len);
+            give(v);
+            let w = take_at_least(len);
+            assert!(
+                w.len() >= len && w.len() <= 2 * len,
+                "{} for {len}",
+                w.len()
+            );
+            give(w);
+            // Smaller requests than what was given back.
+            let u = take_at_least(len - 100);
+            assert!(u.len() >= len - 100 && u.len() <= 2 * (len - 100));
+            let t = take(len - 100);
+            assert_eq!(t.len(), len - 100);
+            give(u);
+            give(t);
+        }
+        // Below the pooled size: plain allocations of the exact length.
+        assert_eq!(take_at_least(10).len(), 10);
+        assert_eq!(take(10).len(), 10);
     }
 }

@@ -8,7 +8,9 @@ use crate::error::{Error, Result};
 ///
 /// The elements are `buf[off..off + len]`: tensors the crate makes start on a
 /// cache line (the kernels load 16 floats at a time, and a misaligned load
-/// spans two lines), a wrapped `Vec` where it starts (`off = 0`).
+/// spans two lines), a wrapped `Vec` where it starts (`off = 0`). `buf` may
+/// be longer than that (a reused buffer is kept whole, see
+/// `pool::take_at_least`).
 pub struct Tensor {
     shape: [usize; 4],
     buf: Vec<f32>,
@@ -71,7 +73,7 @@ impl Tensor {
     /// elements start on a cache line.
     pub(crate) fn for_overwrite(shape: [usize; 4]) -> Self {
         let len: usize = shape.iter().product();
-        let buf = crate::pool::take(len + ALIGN_FLOATS);
+        let buf = crate::pool::take_at_least(len + ALIGN_FLOATS);
         let off = aligned_offset(&buf);
         Self { shape, buf, off }
     }

@@ -1125,7 +1125,7 @@ impl Winograd {
         // V from the pool, its start aligned to a cache line: the products
         // load its B panels 16 floats at a time.
         let v_len = points * self.depth * tpb;
-        let mut v_buf = crate::pool::take(v_len + ALIGN_FLOATS);
+        let mut v_buf = crate::pool::take_at_least(v_len + ALIGN_FLOATS);
         let v_off = aligned_offset(&v_buf);
         let v = &mut v_buf[v_off..v_off + v_len];
         let m_panels = self.m_panels;
