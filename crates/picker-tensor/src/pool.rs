@@ -27,31 +27,39 @@ fn bytes_of(v: &Vec<f32>) -> usize {
     v.capacity() * std::mem::size_of::<f32>()
 }
 
+/// Takes out of the pool the free buffer with the smallest `size` (its
+/// capacity or its length) in `len..=2·len`, if any: the smallest that
+/// fits, if it is not wastefully large.
+fn pop_best(len: usize, size: fn(&Vec<f32>) -> usize) -> Option<Vec<f32>> {
+    if len < MIN_POOLED {
+        return None;
+    }
+    let mut pool = POOL.lock().unwrap_or_else(|e| e.into_inner());
+    let best = pool
+        .free
+        .iter()
+        .enumerate()
+        .filter(|(_, v)| (len..=2 * len).contains(&size(v)))
+        .min_by_key(|(_, v)| size(v))
+        .map(|(i, _)| i)?;
+    let v = pool.free.swap_remove(best);
+    pool.bytes -= bytes_of(&v);
+    Some(v)
+}
+
 /// A buffer of exactly `len` floats whose contents are unspecified (but initialised).
 pub(crate) fn take(len: usize) -> Vec<f32> {
-    if len >= MIN_POOLED {
-        let mut pool = POOL.lock().unwrap_or_else(|e| e.into_inner());
-        // The smallest free buffer that fits, if it is not wastefully large.
-        let best = pool
-            .free
-            .iter()
-            .enumerate()
-            .filter(|(_, v)| v.capacity() >= len && v.capacity() <= 2 * len)
-            .min_by_key(|(_, v)| v.capacity())
-            .map(|(i, _)| i);
-        if let Some(i) = best {
-            let mut v = pool.free.swap_remove(i);
-            pool.bytes -= bytes_of(&v);
-            drop(pool);
+    match pop_best(len, Vec::capacity) {
+        Some(mut v) => {
             if v.len() >= len {
                 v.truncate(len);
             } else {
                 v.resize(len, 0.0);
             }
-            return v;
+            v
         }
+        None => vec![0.0; len],
     }
-    vec![0.0; len]
 }
 
 /// A buffer of at least `len` floats, all of them initialised, contents
@@ -61,22 +69,7 @@ pub(crate) fn take(len: usize) -> Vec<f32> {
 /// callers that keep their own length (tensors, the Winograd `V` buffer);
 /// give the buffer back whole so its length stays known.
 pub(crate) fn take_at_least(len: usize) -> Vec<f32> {
-    if len >= MIN_POOLED {
-        let mut pool = POOL.lock().unwrap_or_else(|e| e.into_inner());
-        let best = pool
-            .free
-            .iter()
-            .enumerate()
-            .filter(|(_, v)| v.len() >= len && v.len() <= 2 * len)
-            .min_by_key(|(_, v)| v.len())
-            .map(|(i, _)| i);
-        if let Some(i) = best {
-            let v = pool.free.swap_remove(i);
-            pool.bytes -= bytes_of(&v);
-            return v;
-        }
-    }
-    take(len)
+    pop_best(len, Vec::len).unwrap_or_else(|| take(len))
 }
 
 /// Hands a buffer back (kept if large and the pool has room, else freed).
