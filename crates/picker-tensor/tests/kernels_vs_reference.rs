@@ -1056,8 +1056,9 @@ fn winograd_lazy_weights_match_packed_bit_for_bit() {
     // (h, w, c_in, c_out): one panel; three panels and two depth blocks; five
     // panels (two blocks, 3 + 2, on AVX-512) with a partial depth block and a
     // partial row panel; more panels (blocks of 4, 4, 4, 3 for 100×110 in
-    // F(4×4)); a single channel. In F(6×6) tiles: one, two, three, four and
-    // seven panels (4 + 3).
+    // F(4×4)); a single channel; 1100 input channels, whose `V` allows only
+    // two F(4×4) panels (one F(6×6) panel) per block, in nine depth blocks.
+    // In F(6×6) tiles: one, two, three, four and seven panels (4 + 3).
     let cases = [
         (14, 18, 20, 13),
         (34, 49, 136, 24),
@@ -1065,6 +1066,7 @@ fn winograd_lazy_weights_match_packed_bit_for_bit() {
         (90, 70, 24, 72),
         (9, 9, 1, 1),
         (100, 110, 24, 40),
+        (40, 44, 1100, 12),
     ];
     let pairs = [
         (ConvAlgorithm::Winograd, ConvAlgorithm::WinogradLowMemory),
