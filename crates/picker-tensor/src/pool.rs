@@ -72,6 +72,14 @@ pub(crate) fn take_at_least(len: usize) -> Vec<f32> {
     pop_best(len, Vec::len).unwrap_or_else(|| take(len))
 }
 
+/// [`take_at_least`] `len` floats from a cache line on: the buffer (give it
+/// back whole) and the index where the aligned `len` floats start.
+pub(crate) fn take_aligned(len: usize) -> (Vec<f32>, usize) {
+    let buf = take_at_least(len + crate::aligned::ALIGN_FLOATS);
+    let off = crate::aligned::aligned_offset(&buf);
+    (buf, off)
+}
+
 /// Hands a buffer back (kept if large and the pool has room, else freed).
 pub(crate) fn give(v: Vec<f32>) {
     if v.capacity() < MIN_POOLED {

@@ -1,6 +1,5 @@
 //! The dense f32 NCHW tensor every kernel works on.
 
-use crate::aligned::{aligned_offset, ALIGN_FLOATS};
 use crate::error::{Error, Result};
 
 /// A dense, contiguous, row-major f32 tensor of rank 4 in NCHW order
@@ -73,8 +72,7 @@ impl Tensor {
     /// elements start on a cache line.
     pub(crate) fn for_overwrite(shape: [usize; 4]) -> Self {
         let len: usize = shape.iter().product();
-        let buf = crate::pool::take_at_least(len + ALIGN_FLOATS);
-        let off = aligned_offset(&buf);
+        let (buf, off) = crate::pool::take_aligned(len);
         Self { shape, buf, off }
     }
 

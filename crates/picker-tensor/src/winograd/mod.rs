@@ -46,7 +46,7 @@ use std::cell::RefCell;
 use rayon::prelude::*;
 
 use crate::activation::Activation;
-use crate::aligned::{aligned_offset, AlignedBuf, ALIGN_FLOATS};
+use crate::aligned::AlignedBuf;
 use crate::amx;
 use crate::gemm::Epilogue;
 use crate::isa::Isa;
@@ -1125,8 +1125,7 @@ impl Winograd {
         // V from the pool, its start aligned to a cache line: the products
         // load its B panels 16 floats at a time.
         let v_len = points * self.depth * tpb;
-        let mut v_buf = crate::pool::take_at_least(v_len + ALIGN_FLOATS);
-        let v_off = aligned_offset(&v_buf);
+        let (mut v_buf, v_off) = crate::pool::take_aligned(v_len);
         let v = &mut v_buf[v_off..v_off + v_len];
         let m_panels = self.m_panels;
         // Output-channel chunks: one per thread, within bounds (a larger
