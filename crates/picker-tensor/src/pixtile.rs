@@ -175,36 +175,29 @@ impl PixelTiles {
                     let wp_ = &self.w.as_slice()[p * k * CO..(p + 1) * k * CO];
                     // Depth blocks outside, tiles inside: a block's weights
                     // (`PIXTILE_KC × CO` floats) stay in L1 over the row's tiles.
-                    let tg_n: usize = std::env::var("TMP_TG")
-                        .ok()
-                        .and_then(|v| v.parse().ok())
-                        .unwrap_or(tiles_x);
-                    for tg in (0..tiles_x).step_by(tg_n) {
-                        let mut k0 = 0;
-                        while k0 < k {
-                            let kc = kc_block.min(k - k0);
-                            let mut e = edge.iter().position(|&t| t >= tg).unwrap_or(edge.len());
-                            for tx in tg..(tg + tg_n).min(tiles_x) {
-                                let acc = accs[tx * PX * CO..(tx + 1) * PX * CO].as_mut_ptr();
-                                let wk = wp_[k0 * CO..].as_ptr();
-                                // SAFETY: the CPU has AVX-512F (checked when the layer
-                                // was built); every tap offset plus (PX − 1)·s lies
-                                // inside the image (inside tiles) or the tile's window
-                                // copy, `wk` holds kc·CO weights and `acc` PX·CO floats.
-                                unsafe {
-                                    if edge.get(e) == Some(&tx) {
-                                        let win = windows[e * win_len..].as_ptr();
-                                        kernel(kc, wk, win, in_window[k0..].as_ptr(), acc, k0 > 0);
-                                        e += 1;
-                                    } else {
-                                        let base =
-                                            x.as_ptr().add((qy - pad) * w + (tx * PX * s - pad));
-                                        kernel(kc, wk, base, in_image[k0..].as_ptr(), acc, k0 > 0);
-                                    }
+                    let mut k0 = 0;
+                    while k0 < k {
+                        let kc = kc_block.min(k - k0);
+                        let mut e = 0;
+                        for tx in 0..tiles_x {
+                            let acc = accs[tx * PX * CO..(tx + 1) * PX * CO].as_mut_ptr();
+                            let wk = wp_[k0 * CO..].as_ptr();
+                            // SAFETY: the CPU has AVX-512F (checked when the layer
+                            // was built); every tap offset plus (PX − 1)·s lies
+                            // inside the image (inside tiles) or the tile's window
+                            // copy, `wk` holds kc·CO weights and `acc` PX·CO floats.
+                            unsafe {
+                                if edge.get(e) == Some(&tx) {
+                                    let win = windows[e * win_len..].as_ptr();
+                                    kernel(kc, wk, win, in_window[k0..].as_ptr(), acc, k0 > 0);
+                                    e += 1;
+                                } else {
+                                    let base = x.as_ptr().add((qy - pad) * w + (tx * PX * s - pad));
+                                    kernel(kc, wk, base, in_image[k0..].as_ptr(), acc, k0 > 0);
                                 }
                             }
-                            k0 += kc;
                         }
+                        k0 += kc;
                     }
                     let rows = CO.min(self.c_out - p * CO);
                     if residual.is_none() && matches!(act, Activation::None | Activation::Relu) {
