@@ -17,6 +17,8 @@
 //! # Ok::<(), picker_synth::Error>(())
 //! ```
 
+#![warn(missing_docs)]
+
 pub mod assets;
 pub mod contact;
 pub mod geometry;

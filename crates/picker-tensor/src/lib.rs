@@ -25,6 +25,8 @@
 //! assert_eq!(y.shape(), [1, 8, 5, 7]);
 //! ```
 
+#![warn(missing_docs)]
+
 mod activation;
 mod aligned;
 mod amx;

@@ -11,6 +11,8 @@
 //! This crate only holds bytes: parsing and validation are `picker-nets`'
 //! (`Weights::from_static`), exactly as for a file given with `--weights`.
 
+#![warn(missing_docs)]
+
 /// One embedded weights file.
 #[derive(Clone, Copy, Debug)]
 pub struct EmbeddedFile {
