@@ -61,6 +61,24 @@ pub fn parse_size(s: &str) -> Result<(usize, usize), String> {
     Ok((h, w))
 }
 
+/// Most pixels one synthetic scene (`picker synth --size`) or one benchmark
+/// input (`picker bench`, batch × height × width) may have, in megapixels: a
+/// scene takes ~150 bytes a pixel while it is made (2.4 GB at this cap, per
+/// thread), and the thesis IRN ~2.5 kB a pixel of activations; larger sizes
+/// are refused up front instead of failing an allocation half-way.
+pub const MAX_MEGAPIXELS: f64 = 16.0;
+
+/// Refuses `pixels` above [`MAX_MEGAPIXELS`], naming `what` (an option).
+pub fn check_megapixels(what: &str, pixels: u64) -> anyhow::Result<()> {
+    let mp = pixels as f64 / 1e6;
+    if mp > MAX_MEGAPIXELS {
+        anyhow::bail!(
+            "{what}: {mp:.1} megapixels is more than the {MAX_MEGAPIXELS} this command accepts"
+        );
+    }
+    Ok(())
+}
+
 /// `1234567` → `"1,234,567"`.
 pub fn thousands(n: u64) -> String {
     let s = n.to_string();

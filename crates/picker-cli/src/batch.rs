@@ -3,7 +3,11 @@
 //!
 //! - **Discovery**: every file under `IN_DIR` (recursively, hidden entries
 //!   and `OUT_DIR` skipped, symlinked folders not followed) whose extension is
-//!   a supported image format, in byte order of the relative path.
+//!   a supported image format, in byte order of the relative path. Earlier
+//!   results inside `IN_DIR` are skipped too (their images are not photos):
+//!   a folder holding a batch report, and a `*.material` folder holding a
+//!   `manifest.json` or `summary.json` (`picker batch` / `picker extract`
+//!   output).
 //! - **Work**: `--picks picks.csv` (`file,x,y[,name]`, file relative to
 //!   `IN_DIR`) and/or `--all`. The networks are loaded once.
 //! - **Outputs**: `OUT_DIR/<relative path>.material/` per photo, one folder
@@ -156,6 +160,9 @@ fn discover(root: &Path, skip: Option<&Path>) -> Result<(Vec<Photo>, usize)> {
                         continue;
                     }
                 }
+                if is_result_folder(&path) {
+                    continue;
+                }
                 stack.push((path, rel));
             } else if ft.is_file() || (ft.is_symlink() && path.is_file()) {
                 if is_supported_extension(&path) {
@@ -168,6 +175,24 @@ fn discover(root: &Path, skip: Option<&Path>) -> Result<(Vec<Photo>, usize)> {
     }
     found.sort_by(|a, b| a.rel.as_bytes().cmp(b.rel.as_bytes()));
     Ok((found, ignored))
+}
+
+/// An earlier `picker batch` or `picker extract` result (see the module
+/// docs): an output root with a batch report, or a photo's `*.material`
+/// folder with its manifest or summary.
+fn is_result_folder(dir: &Path) -> bool {
+    let report = std::fs::read_dir(dir).is_ok_and(|entries| {
+        entries.flatten().any(|e| {
+            let n = e.file_name();
+            let n = n.to_string_lossy();
+            n.starts_with("batch-report") && n.ends_with(".json")
+        })
+    });
+    let material = dir
+        .file_name()
+        .is_some_and(|n| n.to_string_lossy().ends_with(".material"))
+        && (dir.join(MANIFEST).is_file() || dir.join("summary.json").is_file());
+    report || material
 }
 
 fn same_file(a: &Path, b: &Path) -> bool {
@@ -218,7 +243,11 @@ fn read_picks(path: &Path) -> Result<Picks> {
         let (x, y) = (coord(x, &rec[1])?, coord(y, &rec[2])?);
         let file = rec[0].replace('\\', "/");
         let file = file.trim_start_matches("./").to_string();
-        if file.is_empty() || file.split('/').any(|c| c == "..") {
+        if file.is_empty()
+            || file.starts_with('/')
+            || Path::new(&file).is_absolute()
+            || file.split('/').any(|c| c == "..")
+        {
             return Err(at(format!(
                 "{:?} must be a path inside IN_DIR (relative, no `..`)",
                 &rec[0]
@@ -422,7 +451,7 @@ fn process(s: &Shared<'_>, photo: &Photo, req: &Request) -> Result<Outcome> {
         let layout = Layout {
             always_subdirs: true,
             timings: false,
-            absolute_paths: false,
+            shown_root: None,
         };
         let summary =
             extract::write_materials(&loaded, req, s.flags, s.inpainter, &partial, layout)?;
@@ -605,6 +634,16 @@ pub fn run(a: Args) -> Result<ExitCode> {
         Some(p) => read_picks(p)?,
         None => BTreeMap::new(),
     };
+    // The report is written last: refuse a path it cannot go to now, not
+    // after every photo.
+    if let Some(r) = &a.report {
+        if r.is_dir() {
+            return Err(usage(format!(
+                "--report {}: is a folder; give the report's file name",
+                r.display()
+            )));
+        }
+    }
     std::fs::create_dir_all(&a.out)
         .with_context(|| format!("creating output folder {}", a.out.display()))?;
     let (all_photos, ignored) = discover(&a.in_dir, Some(&a.out))?;
@@ -638,11 +677,22 @@ pub fn run(a: Args) -> Result<ExitCode> {
         })
         .collect();
 
-    let total_threads = a
-        .threads
-        .filter(|&t| t > 0)
-        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
-    let (jobs, per_job) = split_threads(total_threads, a.jobs);
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    // At most MAX_PER_CORE threads (and jobs) per logical core, as elsewhere.
+    let (threads, warning) = crate::threads::capped(a.threads, cores);
+    if let Some(w) = warning {
+        eprintln!("{w}");
+    }
+    let total_threads = threads.unwrap_or(cores);
+    let max_jobs = crate::threads::MAX_PER_CORE * cores;
+    if a.jobs.is_some_and(|j| j as usize > max_jobs) {
+        eprintln!(
+            "warning: --jobs {} is more than {} per logical core ({cores} here); using {max_jobs}",
+            a.jobs.unwrap_or_default(),
+            crate::threads::MAX_PER_CORE
+        );
+    }
+    let (jobs, per_job) = split_threads(total_threads, a.jobs.map(|j| j.min(max_jobs as u32)));
     let jobs = jobs.min(photos.len().max(1));
 
     let models = Models::load(&a.flags.weights)?;
@@ -823,6 +873,31 @@ pub fn run(a: Args) -> Result<ExitCode> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn earlier_results_inside_the_input_are_not_photos() {
+        let tmp = tempfile::tempdir().unwrap();
+        let root = tmp.path();
+        let touch = |p: &str| {
+            let p = root.join(p);
+            std::fs::create_dir_all(p.parent().unwrap()).unwrap();
+            std::fs::write(p, b"x").unwrap();
+        };
+        touch("a.png");
+        touch("sub/b.jpg");
+        // An earlier batch's output root, and photos' result folders.
+        touch("old/batch-report.json");
+        touch("old/a.png.material/material_0/texture.png");
+        touch("c.material/summary.json");
+        touch("c.material/texture.png");
+        touch("d.material/manifest.json");
+        touch("d.material/preview.png");
+        // A folder merely named like one, without a result in it.
+        touch("e.material/photo.png");
+        let (found, _) = discover(root, None).unwrap();
+        let rel: Vec<&str> = found.iter().map(|p| p.rel.as_str()).collect();
+        assert_eq!(rel, ["a.png", "e.material/photo.png", "sub/b.jpg"]);
+    }
 
     #[test]
     fn shard_parsing() {

@@ -53,8 +53,12 @@ pub struct Args {
 
 /// Runs `picker bench`.
 pub fn run(a: Args) -> Result<()> {
-    let threads = crate::threads::init(a.threads)?;
     let (h, w) = a.size;
+    args::check_megapixels(
+        &format!("--batch {} --size {h}x{w}", a.batch),
+        a.batch as u64 * h as u64 * w as u64,
+    )?;
+    let threads = crate::threads::init(a.threads)?;
 
     // Weights: the given file, or random ones of the preset via a temporary file
     // (removed when `_tmp` drops) so loading goes the same mmap path as a real run.

@@ -28,6 +28,7 @@ use picker_tensor::Tensor;
 use serde_json::{json, Value};
 
 use crate::photo;
+use crate::staging::Staging;
 
 /// `--uv` values.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -148,17 +149,20 @@ impl Flags {
             bail!("--min-area {} must be in [0, 1)", self.min_area);
         }
         if let Some(t) = self.tolerance {
-            if !(t.is_finite() && t > 0.0) {
-                bail!("--tolerance {t} must be a positive number");
+            if !(t > 0.0 && t <= 1.0) {
+                bail!("--tolerance {t} must be in (0, 1]");
             }
         }
         if let Some(f) = self.fov {
-            if !(f > 0.0 && f < 180.0) {
-                bail!("--fov {f} must be in (0, 180) degrees");
+            if !(1.0..=179.0).contains(&f) {
+                bail!("--fov {f} must be between 1 and 179 degrees");
             }
         }
         if !(self.max_megapixels.is_finite() && self.max_megapixels > 0.0) {
-            bail!("--max-megapixels {} must be positive", self.max_megapixels);
+            bail!(
+                "--max-megapixels {} must be a positive, finite number",
+                self.max_megapixels
+            );
         }
         if let Some(s) = self.even_out {
             check_even_out(s)?;
@@ -238,7 +242,7 @@ pub struct Args {
     pub photo: Option<PathBuf>,
     /// A point on the material, `X,Y` in photo pixels (x right, y down, after EXIF
     /// orientation). May be repeated.
-    #[arg(long, value_name = "X,Y", value_parser = parse_pick)]
+    #[arg(long, value_name = "X,Y", value_parser = parse_pick, allow_hyphen_values = true)]
     pub pick: Vec<[u32; 2]>,
     /// Extract every material covering at least --min-area of the image (a palette).
     #[arg(long)]
@@ -556,9 +560,13 @@ fn read_elements(dir: &Path, photo: Image) -> Result<(Inputs, Value)> {
     let seg_path = dir.join(format!("{}.exr", conv::SEGMENTATION));
     let segmentation =
         rio::read_exr(&seg_path).with_context(|| format!("reading {}", seg_path.display()))?;
+    check_finite(&seg_path, &segmentation)?;
     let emb_path = dir.join(format!("{}.exr", conv::EMBEDDING));
     let embedding = if emb_path.exists() {
-        Some(rio::read_exr(&emb_path).with_context(|| format!("reading {}", emb_path.display()))?)
+        let e =
+            rio::read_exr(&emb_path).with_context(|| format!("reading {}", emb_path.display()))?;
+        check_finite(&emb_path, &e)?;
+        Some(e)
     } else {
         None
     };
@@ -582,6 +590,20 @@ fn read_elements(dir: &Path, photo: Image) -> Result<(Inputs, Value)> {
         },
         json!({"source": "elements", "elements": dir.display().to_string()}),
     ))
+}
+
+/// Refuses a colour image (segmentation, embedding) holding NaN or infinite
+/// values: the masks compare colours, and such a value matches nothing.
+fn check_finite(path: &Path, img: &Image) -> Result<()> {
+    let bad = img.data.iter().filter(|v| !v.is_finite()).count();
+    if bad > 0 {
+        bail!(
+            "{}: {bad} of its {} values are NaN or infinite",
+            path.display(),
+            img.data.len()
+        );
+    }
+    Ok(())
 }
 
 /// Whether an elements folder's segmentation is a network's estimate: the
@@ -756,14 +778,15 @@ pub struct Request {
 
 /// How [`write_materials`] lays out and annotates its files.
 #[derive(Clone, Copy, Debug)]
-pub struct Layout {
+pub struct Layout<'a> {
     /// A folder per material even when there is only one.
     pub always_subdirs: bool,
     /// Put timings and the thread count into material.json / summary.json.
     pub timings: bool,
-    /// Write absolute paths (`out`, `dir`) into the summaries; batch writes
-    /// paths relative to the photo's output folder instead.
-    pub absolute_paths: bool,
+    /// The output folder as the summaries name it (`out`, each `dir`
+    /// under it), when it is not where the files are written (a staging
+    /// folder); `None`: paths relative to the output folder (batch).
+    pub shown_root: Option<&'a Path>,
 }
 
 /// Extracts the requested materials from a loaded photo into `out_dir`
@@ -774,7 +797,7 @@ pub fn write_materials(
     flags: &Flags,
     inpainter: &dyn Inpainter,
     out_dir: &Path,
-    layout: Layout,
+    layout: Layout<'_>,
 ) -> Result<Value> {
     let t_total = Instant::now();
     let prepared = &loaded.prepared;
@@ -890,8 +913,14 @@ pub fn write_materials(
         );
         let mut s = export::material_json(&m, &Value::Null, &export_opts)?;
         if let Some(o) = s.as_object_mut() {
-            let shown = if layout.absolute_paths {
-                dir.display().to_string()
+            let shown = if let Some(root) = layout.shown_root {
+                if single {
+                    root.to_path_buf()
+                } else {
+                    root.join(name)
+                }
+                .display()
+                .to_string()
             } else if single {
                 ".".into()
             } else {
@@ -925,7 +954,7 @@ pub fn write_materials(
         "photo": loaded.photo_info,
         "inputs": loaded.source,
         "settings": flags.output_settings(),
-        "out": if layout.absolute_paths { out_dir.display().to_string() } else { ".".into() },
+        "out": layout.shown_root.map_or_else(|| ".".into(), |r| r.display().to_string()),
         "materials": summaries,
         "envmap": env.as_ref().map(|_| "envmap.exr"),
         "palette_ids": palette_ids.as_ref().map(|_| "palette_ids.png (16-bit: 0 = none, k = material_{k-1})"),
@@ -1006,16 +1035,20 @@ pub fn run(a: Args) -> Result<()> {
     let layout = Layout {
         always_subdirs: false,
         timings: !a.no_timings,
-        absolute_paths: true,
+        shown_root: Some(&out_dir),
     };
+    // Every file of the run, or none (see `staging`).
+    let staging = Staging::begin(&out_dir, true)?;
     let summary = write_materials(
         &loaded,
         &req,
         &a.flags,
         inpainter.as_ref(),
-        &out_dir,
+        staging.path(),
         layout,
-    )?;
+    )
+    .map_err(|e| staging.in_out(e))?;
+    staging.commit()?;
     if a.json {
         let text = serde_json::to_string_pretty(&summary).context("serialising the summary")?;
         println!("{text}");

@@ -36,6 +36,7 @@ mod infer;
 mod output;
 mod photo;
 mod render;
+mod staging;
 mod synth;
 mod threads;
 mod weights_cmd;

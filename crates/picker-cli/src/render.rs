@@ -153,13 +153,26 @@ fn read_linear(path: &Path) -> Result<Image> {
     })
 }
 
+/// Creates the output folder, once every input has been read (a run
+/// refused for its inputs leaves no empty folder).
+fn make_out(out: &Path) -> Result<()> {
+    std::fs::create_dir_all(out)
+        .with_context(|| format!("creating output directory {}", out.display()))
+}
+
 /// Runs `picker render`.
 pub fn run(a: Args) -> Result<()> {
     let t_total = Instant::now();
     crate::threads::init(a.threads)?;
     let env = EnvMap::read(&a.envmap).context("reading the environment map")?;
-    std::fs::create_dir_all(&a.out)
-        .with_context(|| format!("creating output directory {}", a.out.display()))?;
+    // Real HDRIs hold a few slightly negative pixels (kept, as everywhere);
+    // a map without any positive radiance lights nothing.
+    if !env.data().iter().any(|v| v.max_element() > 0.0) {
+        bail!(
+            "{}: holds no light (no pixel has positive radiance)",
+            a.envmap.display()
+        );
+    }
     if a.preview {
         return preview(&a, &env, t_total);
     }
@@ -196,6 +209,7 @@ pub fn run(a: Args) -> Result<()> {
     let render = picker_render::rerender_with(&elements, &shader);
     let render_ms = ms(t);
 
+    make_out(&a.out)?;
     io::write_exr(&a.out.join("render.exr"), &render)?;
     io::write_png(&a.out.join("render.png"), &picker_render::to_srgb(&render))?;
     let mut summary = json!({
@@ -271,6 +285,7 @@ fn preview(a: &Args, env: &EnvMap, t_total: Instant) -> Result<()> {
         data: conv::expose_rgb(&img.data, exposure),
         ..img.clone()
     };
+    make_out(&a.out)?;
     io::write_png(&a.out.join("preview_sphere.png"), &shown(&sphere))?;
     io::write_png(&a.out.join("preview_tile.png"), &shown(&tile))?;
     println!(

@@ -61,6 +61,8 @@ pub enum ViewsArg {
 /// Runs `picker synth`.
 pub fn run(a: Args) -> Result<()> {
     let t0 = Instant::now();
+    let (h, w) = a.size;
+    crate::args::check_megapixels(&format!("--size {h}x{w}"), h as u64 * w as u64)?;
     let threads = crate::threads::init(a.threads)?;
     let assets = match &a.assets {
         Some(dir) => Some(
@@ -71,7 +73,6 @@ pub fn run(a: Args) -> Result<()> {
     };
     std::fs::create_dir_all(&a.out)
         .with_context(|| format!("creating output directory {}", a.out.display()))?;
-    let (h, w) = a.size;
     let config = SceneConfig {
         views: match a.views {
             ViewsArg::Room => Views::Room,

@@ -521,6 +521,35 @@ fn usage_errors_exit_2() {
     let err = String::from_utf8_lossy(&r.stderr);
     assert_eq!(r.status.code(), Some(2), "{err}");
     assert!(err.contains("bad.csv line 1"), "{err}");
+    // An absolute path in the picks is refused as one (not as an unknown
+    // image), and a report path that is a folder before any photo is made.
+    std::fs::write(&csv, "/tmp/a.png,1,2\n").unwrap();
+    let mut args = vec!["batch", i, "--out", o, "--weights", &w, "--picks"];
+    args.push(csv.to_str().unwrap());
+    let r = picker().args(&args).output().unwrap();
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert_eq!(r.status.code(), Some(2), "{err}");
+    assert!(err.contains("must be a path inside IN_DIR"), "{err}");
+    let r = picker()
+        .args([
+            "batch",
+            i,
+            "--out",
+            o,
+            "--weights",
+            &w,
+            "--all",
+            "--report",
+            i,
+        ])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert_eq!(r.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("--report") && err.contains("is a folder"),
+        "{err}"
+    );
 }
 
 #[test]

@@ -825,3 +825,293 @@ fn error_unwritable_out_dir() {
     let o = infer(&example_photo(), &out, &["--work-size", "32"]);
     assert_error_names(&o, "a-file");
 }
+
+/// Bad values that once ran (or aborted) are refused up front with one
+/// clear line, and nothing is written (issue 4's bad-input rules).
+#[test]
+fn out_of_range_values_are_refused_before_anything_is_written() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("o");
+    let w = tiny_weights();
+    let photo = example_photo();
+    let extract = |extra: &[&str]| {
+        let mut args = vec![
+            "extract",
+            photo.to_str().unwrap(),
+            "--weights",
+            w.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        picker(args)
+    };
+    for (extra, needle) in [
+        (
+            &["--pick", "10,10", "--tolerance", "2"][..],
+            "--tolerance 2",
+        ),
+        (&["--pick", "10,10", "--fov", "1e-30"][..], "--fov"),
+        (&["--pick", "10,10", "--fov", "180"][..], "--fov 180"),
+        (
+            &["--pick", "10,10", "--max-megapixels", "inf"][..],
+            "finite",
+        ),
+    ] {
+        let o = extract(extra);
+        assert_error_names(&o, needle);
+        assert!(!out.exists(), "{extra:?} wrote {}", out.display());
+    }
+    // A negative coordinate reaches the pick's own parser (clap would
+    // otherwise take it for an unknown flag).
+    let o = extract(&["--pick", "-1,5"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("\"-1\" in \"-1,5\""), "{}", stderr(&o));
+    // Sizes whose buffers could not be allocated are refused, not aborted on.
+    let o = picker([
+        "synth",
+        "--out",
+        out.to_str().unwrap(),
+        "--size",
+        "100000x100000",
+    ]);
+    assert_error_names(&o, "megapixels");
+    assert!(!out.exists());
+    let o = picker([
+        "bench", "--net", "irn", "--preset", "tiny", "--runs", "1", "--batch", "100000",
+    ]);
+    assert_error_names(&o, "--batch 100000");
+    // Far more threads than cores: lowered, with a warning, and the run works.
+    let o = extract(&["--pick", "10,10", "--threads", "100000", "--no-timings"]);
+    assert_ok(&o);
+    assert!(
+        stderr(&o).contains("warning: --threads 100000"),
+        "{}",
+        stderr(&o)
+    );
+}
+
+fn write_rgb_exr(path: &Path, w: usize, h: usize, f: impl Fn(usize, usize) -> [f32; 3] + Sync) {
+    use exr::prelude::*;
+    write_rgb_file(path, w, h, |x, y| {
+        let p = f(x, y);
+        (p[0], p[1], p[2])
+    })
+    .unwrap();
+}
+
+/// Float images with no finite value, segmentations with NaN and
+/// environment maps without any light are refused, naming the file; nothing is written.
+#[test]
+fn non_finite_and_lightless_float_inputs_are_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("o");
+    let nan = tmp.path().join("allnan.exr");
+    write_rgb_exr(&nan, 16, 12, |_, _| [f32::NAN; 3]);
+    let w = tiny_weights();
+    let o = picker([
+        "extract",
+        nan.to_str().unwrap(),
+        "--weights",
+        w.to_str().unwrap(),
+        "--pick",
+        "1,1",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_error_names(&o, "allnan.exr");
+    assert!(stderr(&o).contains("NaN or infinite"), "{}", stderr(&o));
+    assert!(!out.exists());
+    // A photo with a few NaN pixels still runs (they become 0, as documented).
+    let some = tmp.path().join("some.exr");
+    write_rgb_exr(&some, 16, 12, |x, y| {
+        if x == y {
+            [f32::NAN; 3]
+        } else {
+            [0.2 + 0.01 * x as f32, 0.3, 0.4]
+        }
+    });
+    assert_ok(&picker([
+        "extract",
+        some.to_str().unwrap(),
+        "--weights",
+        w.to_str().unwrap(),
+        "--pick",
+        "3,1",
+        "--out",
+        out.to_str().unwrap(),
+    ]));
+    // Ground-truth elements whose segmentation is NaN.
+    let el = tmp.path().join("el");
+    let scene = root().join("fixtures/synth/scene_000000");
+    std::fs::create_dir_all(&el).unwrap();
+    for e in std::fs::read_dir(&scene).unwrap().flatten() {
+        if e.path().is_file() {
+            std::fs::copy(e.path(), el.join(e.file_name())).unwrap();
+        }
+    }
+    let (sw, sh) = png_size(&el.join("image.png"));
+    write_rgb_exr(
+        &el.join("segmentation.exr"),
+        sw as usize,
+        sh as usize,
+        |_, _| [f32::NAN; 3],
+    );
+    let out2 = tmp.path().join("o2");
+    let o = picker([
+        "extract",
+        "--elements",
+        el.to_str().unwrap(),
+        "--pick",
+        "5,5",
+        "--out",
+        out2.to_str().unwrap(),
+    ]);
+    assert_error_names(&o, "segmentation.exr");
+    assert!(!out2.exists());
+    // A negative environment map for `render`: refused, no output folder.
+    let env = tmp.path().join("neg.exr");
+    write_rgb_exr(&env, 8, 4, |x, _| [-1.0 - x as f32, 0.0, -0.5]);
+    let out3 = tmp.path().join("o3");
+    let o = picker([
+        "render",
+        "--preview",
+        "--envmap",
+        env.to_str().unwrap(),
+        "--diffuse",
+        "0.5,0.5,0.5",
+        "--specular",
+        "0,0,0",
+        "--exponent",
+        "10",
+        "--out",
+        out3.to_str().unwrap(),
+    ]);
+    assert_error_names(&o, "neg.exr");
+    assert!(stderr(&o).contains("holds no light"), "{}", stderr(&o));
+    assert!(!out3.exists());
+}
+
+/// A run that fails after writing some files, or is interrupted, leaves
+/// nothing new: the files are staged and moved into place together.
+#[test]
+fn failed_and_interrupted_extractions_leave_no_partial_result() {
+    let tmp = tempfile::tempdir().unwrap();
+    let w = tiny_weights();
+    let photo = example_photo();
+    let run_into = |out: &Path, extra: &[&str]| {
+        let mut args = vec![
+            "extract",
+            photo.to_str().unwrap(),
+            "--weights",
+            w.to_str().unwrap(),
+            "--pick",
+            "10,10",
+            "--no-timings",
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        picker(args)
+    };
+    let entries = |d: &Path| -> Vec<String> {
+        let mut v: Vec<String> = std::fs::read_dir(d)
+            .unwrap()
+            .flatten()
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .collect();
+        v.sort();
+        v
+    };
+    // A folder where a file goes: refused before anything moves; the
+    // folder's other contents are untouched.
+    let out = tmp.path().join("clash");
+    std::fs::create_dir_all(out.join("material.json")).unwrap();
+    std::fs::write(out.join("texture.png"), b"older").unwrap();
+    let o = run_into(&out, &[]);
+    assert_error_names(&o, "material.json");
+    assert_eq!(entries(&out), ["material.json", "texture.png"]);
+    assert_eq!(std::fs::read(out.join("texture.png")).unwrap(), b"older");
+    // A good run replaces the older files and leaves no hidden entry.
+    let good = tmp.path().join("good");
+    std::fs::create_dir_all(&good).unwrap();
+    std::fs::write(good.join("preview.png"), b"older").unwrap();
+    assert_ok(&run_into(&good, &[]));
+    assert!(
+        entries(&good).iter().all(|n| !n.starts_with('.')),
+        "{:?}",
+        entries(&good)
+    );
+    assert!(entries(&good).contains(&"summary.json".to_string()));
+    assert_ne!(std::fs::read(good.join("preview.png")).unwrap(), b"older");
+
+    #[cfg(unix)]
+    {
+        use std::time::{Duration, Instant};
+        // Interrupted once its staging folder exists: SIGTERM removes it
+        // (and the output folder the run made); SIGKILL cannot, and the
+        // next run into the folder removes what it left.
+        for (signal, out) in [
+            ("TERM", tmp.path().join("term")),
+            ("KILL", tmp.path().join("kill")),
+        ] {
+            // A textured wall of a ground-truth scene at a 1024-texel size:
+            // about 2 s of inpainting after the staging folder appears.
+            let scene = root().join("fixtures/synth/scene_000000");
+            let mut child = Command::new(env!("CARGO_BIN_EXE_picker"))
+                .args([
+                    "extract",
+                    "--elements",
+                    scene.to_str().unwrap(),
+                    "--pick",
+                    "16,20",
+                    "--size",
+                    "1024",
+                    "--out",
+                    out.to_str().unwrap(),
+                ])
+                .env("RAYON_NUM_THREADS", "2")
+                .stdout(std::process::Stdio::null())
+                .stderr(std::process::Stdio::null())
+                .spawn()
+                .unwrap();
+            let staged = || {
+                out.is_dir()
+                    && std::fs::read_dir(&out).unwrap().flatten().any(|e| {
+                        e.file_name()
+                            .to_string_lossy()
+                            .starts_with(".picker-partial-")
+                    })
+            };
+            let t0 = Instant::now();
+            while !staged() && t0.elapsed() < Duration::from_secs(60) {
+                if child.try_wait().unwrap().is_some() {
+                    break;
+                }
+                std::thread::sleep(Duration::from_millis(2));
+            }
+            let early = child.try_wait().unwrap().is_some();
+            let killed = Command::new("kill")
+                .args([format!("-{signal}"), child.id().to_string()])
+                .status()
+                .unwrap();
+            let status = child.wait().unwrap();
+            assert!(
+                !early && killed.success(),
+                "the run ended before the signal"
+            );
+            if signal == "TERM" {
+                assert_eq!(status.code(), Some(130));
+                assert!(!out.exists(), "{:?}", entries(&out));
+            } else {
+                assert!(staged(), "SIGKILL leaves the staging folder");
+                assert_ok(&run_into(&out, &[]));
+                assert!(
+                    entries(&out).iter().all(|n| !n.starts_with('.')),
+                    "{:?}",
+                    entries(&out)
+                );
+            }
+        }
+    }
+}

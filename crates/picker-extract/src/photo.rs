@@ -221,6 +221,13 @@ pub enum PhotoError {
         /// Height from the header.
         height: u32,
     },
+    /// Every value of a floating-point image is NaN or infinite: there is
+    /// no picture to read (a few such values become 0; see [`expose_linear`]).
+    #[error("{}: every pixel is NaN or infinite; the file holds no picture", path.display())]
+    NoFiniteValues {
+        /// The file.
+        path: PathBuf,
+    },
     /// The decoder refused the content.
     #[error("{}: cannot decode the {format} data: {reason}", path.display())]
     Decode {
@@ -246,6 +253,7 @@ impl PhotoError {
             | Self::TooMuchMemory { path, .. }
             | Self::FileTooLarge { path, .. }
             | Self::NoPixels { path, .. }
+            | Self::NoFiniteValues { path }
             | Self::Decode { path, .. } => path,
         }
     }
@@ -482,6 +490,9 @@ pub fn decode(bytes: &[u8], label: &Path, limits: &PhotoLimits) -> Result<Photo,
     // Native buffer + 12 B/px here; the native buffer is freed right after.
     let eight_bit_rgb = matches!(img, DynamicImage::ImageRgb8(_));
     let mut rgb = rgb32f(img);
+    if !eight_bit_rgb && !rgb.is_empty() && rgb.iter().all(|v| !v.is_finite()) {
+        return Err(PhotoError::NoFiniteValues { path: path() });
+    }
     if kind.linear {
         expose_linear(&mut rgb);
     } else if !eight_bit_rgb {

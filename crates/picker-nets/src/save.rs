@@ -268,7 +268,12 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
         f.write_all(bytes).map_err(|e| io("write", e))?;
         f.sync_all().map_err(|e| io("flush to disk", e))?;
         drop(f);
-        std::fs::rename(&tmp, path).map_err(|e| io("rename the temporary file to", e))?;
+        std::fs::rename(&tmp, path).map_err(|e| {
+            io(
+                "put the written file in place (renaming its temporary file)",
+                e,
+            )
+        })?;
         // Make the rename durable where the platform allows syncing a directory.
         if let Ok(d) = std::fs::File::open(&dir) {
             let _ = d.sync_all();

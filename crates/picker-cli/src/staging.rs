@@ -1,0 +1,308 @@
+//! All of a `picker extract` run's files, or none of them.
+//!
+//! Every file is written atomically (temporary file + rename), but a run
+//! writes a dozen of them: a run that fails half-way (a full disk, a
+//! material that cannot be extracted after another one was) or is
+//! interrupted would leave some of the new files beside older ones. So a run
+//! writes into a hidden staging folder inside `--out` (the same file system,
+//! so moving is a rename), and only when everything is written moves the
+//! entries into place, `summary.json` last (an older `summary.json` is
+//! removed first, so a set without one is never taken for a finished run).
+//! On an error, or on Ctrl-C / SIGTERM, the staging folder is removed, and
+//! so is `--out` itself when this run created it and it is empty. Staging
+//! folders of killed runs (`SIGKILL`) are removed by the next run into the
+//! same folder (Linux: when their process no longer exists).
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+
+/// Prefix of a staging folder's name; the process id follows.
+const PREFIX: &str = ".picker-partial-";
+
+/// The file moved into place last.
+const LAST: &str = "summary.json";
+
+/// A staging folder inside the output folder (see the module docs).
+#[derive(Debug)]
+pub struct Staging {
+    out: PathBuf,
+    dir: PathBuf,
+    created_out: bool,
+    done: bool,
+}
+
+impl Staging {
+    /// Creates `out` if needed (refusing a path that exists and is not a
+    /// folder), removes stale staging folders of dead processes, and makes
+    /// this run's staging folder. With `on_signal`, an interrupt removes the
+    /// staging folder (and `out`, if it was made here and is empty) and
+    /// exits with status 130.
+    pub fn begin(out: &Path, on_signal: bool) -> Result<Staging> {
+        if out.exists() && !out.is_dir() {
+            bail!("{}: --out exists and is not a folder", out.display());
+        }
+        let created_out = !out.exists();
+        std::fs::create_dir_all(out)
+            .with_context(|| format!("creating output folder {}", out.display()))?;
+        remove_stale(out);
+        let dir = out.join(format!("{PREFIX}{}", std::process::id()));
+        if dir.exists() {
+            std::fs::remove_dir_all(&dir)
+                .with_context(|| format!("{}: removing an old staging folder", dir.display()))?;
+        }
+        if let Err(e) = std::fs::create_dir(&dir) {
+            if created_out {
+                let _ = std::fs::remove_dir(out);
+            }
+            return Err(e).with_context(|| format!("{}: creating a staging folder", dir.display()));
+        }
+        if on_signal {
+            let (d, o) = (dir.clone(), out.to_path_buf());
+            // Installing fails only when a handler exists already (a second
+            // run in one process, as in tests): then an interrupt just stops.
+            let _ = ctrlc::set_handler(move || {
+                let _ = std::fs::remove_dir_all(&d);
+                if created_out {
+                    let _ = std::fs::remove_dir(&o);
+                }
+                eprintln!("\ninterrupted: no result written");
+                std::process::exit(130);
+            });
+        }
+        Ok(Staging {
+            out: out.to_path_buf(),
+            dir,
+            created_out,
+            done: false,
+        })
+    }
+
+    /// Where the run writes its files.
+    pub fn path(&self) -> &Path {
+        &self.dir
+    }
+
+    /// `e` with the staging folder's path in its message replaced by the
+    /// output folder's, so that a failure names the file the user asked for
+    /// (`OUT/report.png: cannot write: No space left on device`).
+    pub fn in_out(&self, e: anyhow::Error) -> anyhow::Error {
+        let (from, to) = (
+            self.dir.display().to_string(),
+            self.out.display().to_string(),
+        );
+        let text = crate::one_line(&e);
+        if text.contains(&from) {
+            anyhow::Error::msg(text.replace(&from, &to))
+        } else {
+            e
+        }
+    }
+
+    /// Moves every staged entry into the output folder, replacing entries of
+    /// the same name and kind, `summary.json` last. Refuses, before moving
+    /// anything, when an entry would replace one of the other kind (a file
+    /// where a folder is, or the reverse).
+    pub fn commit(mut self) -> Result<()> {
+        let mut names: Vec<std::ffi::OsString> = std::fs::read_dir(&self.dir)
+            .with_context(|| format!("{}: reading the staging folder", self.dir.display()))?
+            .map(|e| e.map(|e| e.file_name()))
+            .collect::<std::io::Result<_>>()
+            .with_context(|| format!("{}: reading the staging folder", self.dir.display()))?;
+        // `summary.json` last, the rest in a fixed order.
+        names.sort_by_key(|n| (n == LAST, n.clone()));
+        for n in &names {
+            let (src, dst) = (self.dir.join(n), self.out.join(n));
+            let Ok(meta) = std::fs::symlink_metadata(&dst) else {
+                continue;
+            };
+            if meta.is_dir() != src.is_dir() {
+                bail!(
+                    "{}: is a {}, where this run writes a {}; nothing was written (move it away or choose another --out)",
+                    dst.display(),
+                    kind(meta.is_dir()),
+                    kind(src.is_dir()),
+                );
+            }
+        }
+        let last = self.out.join(LAST);
+        if last.is_file() {
+            std::fs::remove_file(&last)
+                .with_context(|| format!("{}: removing the older summary", last.display()))?;
+        }
+        for n in &names {
+            let (src, dst) = (self.dir.join(n), self.out.join(n));
+            if src.is_dir() && dst.is_dir() {
+                std::fs::remove_dir_all(&dst)
+                    .with_context(|| format!("{}: removing the older folder", dst.display()))?;
+            }
+            std::fs::rename(&src, &dst)
+                .with_context(|| format!("{}: moving the result into place", dst.display()))?;
+        }
+        std::fs::remove_dir(&self.dir)
+            .with_context(|| format!("{}: removing the staging folder", self.dir.display()))?;
+        if let Ok(d) = std::fs::File::open(&self.out) {
+            let _ = d.sync_all();
+        }
+        self.done = true;
+        Ok(())
+    }
+}
+
+impl Drop for Staging {
+    /// A run that did not commit leaves nothing: the staging folder goes,
+    /// and so does `--out` when this run made it and it is empty.
+    fn drop(&mut self) {
+        if !self.done {
+            let _ = std::fs::remove_dir_all(&self.dir);
+            if self.created_out {
+                let _ = std::fs::remove_dir(&self.out);
+            }
+        }
+    }
+}
+
+fn kind(dir: bool) -> &'static str {
+    if dir {
+        "folder"
+    } else {
+        "file"
+    }
+}
+
+/// Removes the staging folders in `out` whose process is gone (Linux, where
+/// `/proc/PID` tells; elsewhere none is removed).
+fn remove_stale(out: &Path) {
+    let Ok(entries) = std::fs::read_dir(out) else {
+        return;
+    };
+    for e in entries.flatten() {
+        let name = e.file_name();
+        let Some(pid) = name
+            .to_str()
+            .and_then(|n| n.strip_prefix(PREFIX))
+            .and_then(|p| p.parse::<u32>().ok())
+        else {
+            continue;
+        };
+        if pid != std::process::id() && process_gone(pid) {
+            let _ = std::fs::remove_dir_all(e.path());
+        }
+    }
+}
+
+/// True when process `pid` surely no longer exists.
+fn process_gone(pid: u32) -> bool {
+    let proc = Path::new("/proc");
+    proc.join("self").exists() && !proc.join(pid.to_string()).exists()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tmp(name: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("picker-staging-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        d
+    }
+
+    #[test]
+    fn commit_moves_everything_summary_last_and_replaces_older_files() {
+        let out = tmp("commit");
+        std::fs::create_dir_all(out.join("material_0")).unwrap();
+        std::fs::write(out.join("material_0/old.png"), b"old").unwrap();
+        std::fs::write(out.join("texture.png"), b"old").unwrap();
+        std::fs::write(out.join("keep.txt"), b"mine").unwrap();
+        let s = Staging::begin(&out, false).unwrap();
+        std::fs::write(s.path().join("texture.png"), b"new").unwrap();
+        std::fs::write(s.path().join(LAST), b"{}").unwrap();
+        std::fs::create_dir(s.path().join("material_0")).unwrap();
+        std::fs::write(s.path().join("material_0/new.png"), b"new").unwrap();
+        s.commit().unwrap();
+        assert_eq!(std::fs::read(out.join("texture.png")).unwrap(), b"new");
+        assert_eq!(std::fs::read(out.join(LAST)).unwrap(), b"{}");
+        assert!(out.join("material_0/new.png").is_file());
+        assert!(!out.join("material_0/old.png").exists());
+        assert_eq!(std::fs::read(out.join("keep.txt")).unwrap(), b"mine");
+        let left: Vec<_> = std::fs::read_dir(&out)
+            .unwrap()
+            .flatten()
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .filter(|n| n.starts_with('.'))
+            .collect();
+        assert!(left.is_empty(), "hidden entries left: {left:?}");
+        std::fs::remove_dir_all(&out).unwrap();
+    }
+
+    #[test]
+    fn a_run_that_does_not_commit_leaves_nothing() {
+        let out = tmp("drop");
+        {
+            let s = Staging::begin(&out, false).unwrap();
+            std::fs::write(s.path().join("texture.png"), b"new").unwrap();
+        }
+        assert!(!out.exists(), "the folder this run made is gone");
+        {
+            let s = Staging::begin(&out, false).unwrap();
+            let e = anyhow::anyhow!("{}: cannot write", s.path().join("report.png").display());
+            let shown = s.in_out(e).to_string();
+            assert_eq!(
+                shown,
+                format!("{}: cannot write", out.join("report.png").display())
+            );
+        }
+        // A folder that was there stays, with what it held.
+        std::fs::create_dir_all(&out).unwrap();
+        std::fs::write(out.join("texture.png"), b"old").unwrap();
+        {
+            let s = Staging::begin(&out, false).unwrap();
+            std::fs::write(s.path().join("texture.png"), b"new").unwrap();
+        }
+        assert_eq!(std::fs::read(out.join("texture.png")).unwrap(), b"old");
+        assert_eq!(std::fs::read_dir(&out).unwrap().count(), 1);
+        std::fs::remove_dir_all(&out).unwrap();
+    }
+
+    #[test]
+    fn a_kind_clash_is_refused_before_anything_moves() {
+        let out = tmp("clash");
+        std::fs::create_dir_all(out.join(LAST)).unwrap();
+        let s = Staging::begin(&out, false).unwrap();
+        std::fs::write(s.path().join("texture.png"), b"new").unwrap();
+        std::fs::write(s.path().join(LAST), b"{}").unwrap();
+        let e = format!("{:#}", s.commit().unwrap_err());
+        assert!(!e.contains(PREFIX), "{e}");
+        assert!(
+            e.contains("summary.json") && e.contains("is a folder"),
+            "{e}"
+        );
+        assert!(!out.join("texture.png").exists(), "nothing moved");
+        assert!(out.join(LAST).is_dir());
+        assert_eq!(
+            std::fs::read_dir(&out).unwrap().count(),
+            1,
+            "staging removed"
+        );
+        std::fs::remove_dir_all(&out).unwrap();
+    }
+
+    #[test]
+    fn stale_staging_of_a_dead_process_is_removed_and_a_file_out_refused() {
+        let out = tmp("stale");
+        // A pid far above any live one (Linux caps pids at 2^22).
+        let stale = out.join(format!("{PREFIX}{}", 9_999_999));
+        std::fs::create_dir_all(stale.join("x")).unwrap();
+        let s = Staging::begin(&out, false).unwrap();
+        if Path::new("/proc/self").exists() {
+            assert!(!stale.exists());
+        }
+        drop(s);
+        let _ = std::fs::remove_dir_all(&out);
+        let file = tmp("file");
+        std::fs::write(&file, b"x").unwrap();
+        let e = format!("{:#}", Staging::begin(&file, false).unwrap_err());
+        assert!(e.contains("not a folder"), "{e}");
+        std::fs::remove_file(&file).unwrap();
+    }
+}
