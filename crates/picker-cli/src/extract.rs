@@ -1038,7 +1038,7 @@ pub fn run(a: Args) -> Result<()> {
         shown_root: Some(&out_dir),
     };
     // Every file of the run, or none (see `staging`).
-    let staging = Staging::begin(&out_dir, true)?;
+    let staging = Staging::begin(&out_dir, crate::staging::SUMMARY, true)?;
     let summary = write_materials(
         &loaded,
         &req,

@@ -9,7 +9,7 @@
 //! timings. Every file is written atomically.
 
 use std::collections::BTreeSet;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{anyhow, bail, Context, Result};
@@ -339,7 +339,7 @@ fn run_net(net: &Net, x: &Tensor) -> Result<Vec<Decoded>> {
 
 /// Writes `bytes` as `out/name` and records it in the manifest list.
 fn write_file(
-    out: &Path,
+    out: &crate::staging::Staging,
     name: &str,
     bytes: &[u8],
     entry: serde_json::Value,
@@ -349,7 +349,7 @@ fn write_file(
     if !names.insert(name.to_string()) {
         bail!("two outputs would both be written as {name}; rename a network head");
     }
-    output::write_atomic(&out.join(name), bytes)?;
+    output::write_atomic(&out.path().join(name), bytes).map_err(|e| out.in_out(e.into()))?;
     files.push(entry);
     Ok(())
 }
@@ -368,8 +368,8 @@ pub fn run(a: Args) -> Result<()> {
     let photo = photo::load(&a.photo)?;
     let read_ms = ms(t);
     let chosen = resolve_weights(&a.weights)?;
-    std::fs::create_dir_all(&a.out)
-        .with_context(|| format!("creating output directory {}", a.out.display()))?;
+    // Every file of the run, or none (see `staging`).
+    let staging = crate::staging::Staging::begin(&a.out, "manifest.json", true)?;
 
     let t = Instant::now();
     let (pw, ph) = photo.rgb.dimensions();
@@ -385,7 +385,7 @@ pub fn run(a: Args) -> Result<()> {
     let mut names = BTreeSet::new();
     let input_png = output::encode_png(&photo::to_planar(&work), 3, w, h)?;
     write_file(
-        &a.out,
+        &staging,
         "input.png",
         &input_png,
         json!({"file": "input.png", "output": "input", "net": null, "format": "png",
@@ -420,7 +420,7 @@ pub fn run(a: Args) -> Result<()> {
             let bytes = output::encode_exr(&d.exr, d.c, d.w, d.h)
                 .with_context(|| format!("encoding {exr_name}"))?;
             write_file(
-                &a.out,
+                &staging,
                 &exr_name,
                 &bytes,
                 json!({"file": exr_name, "output": d.name, "net": d.net.as_str(), "format": "exr",
@@ -439,7 +439,7 @@ pub fn run(a: Args) -> Result<()> {
                     vec!["R", "G", "B"]
                 };
                 write_file(
-                    &a.out,
+                    &staging,
                     &png_name,
                     &bytes,
                     json!({"file": png_name, "output": d.name, "net": d.net.as_str(),
@@ -486,7 +486,12 @@ pub fn run(a: Args) -> Result<()> {
         "timings_ms": {"read_photo": read_ms, "resize": resize_ms, "total": ms(t_total)},
     });
     let text = serde_json::to_string_pretty(&manifest).context("serialising manifest.json")?;
-    output::write_atomic(&a.out.join("manifest.json"), format!("{text}\n").as_bytes())?;
+    output::write_atomic(
+        &staging.path().join("manifest.json"),
+        format!("{text}\n").as_bytes(),
+    )
+    .map_err(|e| staging.in_out(e.into()))?;
+    staging.commit()?;
 
     println!(
         "wrote {} files and manifest.json to {} ({} at {w}x{h}) in {:.2} s",

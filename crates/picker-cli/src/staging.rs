@@ -20,14 +20,15 @@ use anyhow::{bail, Context, Result};
 /// Prefix of a staging folder's name; the process id follows.
 const PREFIX: &str = ".picker-partial-";
 
-/// The file moved into place last.
-const LAST: &str = "summary.json";
+/// `picker extract`'s file moved into place last.
+pub const SUMMARY: &str = "summary.json";
 
 /// A staging folder inside the output folder (see the module docs).
 #[derive(Debug)]
 pub struct Staging {
     out: PathBuf,
     dir: PathBuf,
+    last: &'static str,
     created_out: bool,
     done: bool,
 }
@@ -35,10 +36,11 @@ pub struct Staging {
 impl Staging {
     /// Creates `out` if needed (refusing a path that exists and is not a
     /// folder), removes stale staging folders of dead processes, and makes
-    /// this run's staging folder. With `on_signal`, an interrupt removes the
-    /// staging folder (and `out`, if it was made here and is empty) and
-    /// exits with status 130.
-    pub fn begin(out: &Path, on_signal: bool) -> Result<Staging> {
+    /// this run's staging folder; `last` is the file that marks a finished
+    /// set (moved last, an older one removed first). With `on_signal`, an
+    /// interrupt removes the staging folder (and `out`, if it was made here
+    /// and is empty) and exits with status 130.
+    pub fn begin(out: &Path, last: &'static str, on_signal: bool) -> Result<Staging> {
         if out.exists() && !out.is_dir() {
             bail!("{}: --out exists and is not a folder", out.display());
         }
@@ -73,6 +75,7 @@ impl Staging {
         Ok(Staging {
             out: out.to_path_buf(),
             dir,
+            last,
             created_out,
             done: false,
         })
@@ -109,8 +112,8 @@ impl Staging {
             .map(|e| e.map(|e| e.file_name()))
             .collect::<std::io::Result<_>>()
             .with_context(|| format!("{}: reading the staging folder", self.dir.display()))?;
-        // `summary.json` last, the rest in a fixed order.
-        names.sort_by_key(|n| (n == LAST, n.clone()));
+        // The `last` file last, the rest in a fixed order.
+        names.sort_by_key(|n| (n == self.last, n.clone()));
         for n in &names {
             let (src, dst) = (self.dir.join(n), self.out.join(n));
             let Ok(meta) = std::fs::symlink_metadata(&dst) else {
@@ -125,7 +128,7 @@ impl Staging {
                 );
             }
         }
-        let last = self.out.join(LAST);
+        let last = self.out.join(self.last);
         if last.is_file() {
             std::fs::remove_file(&last)
                 .with_context(|| format!("{}: removing the older summary", last.display()))?;
@@ -214,14 +217,14 @@ mod tests {
         std::fs::write(out.join("material_0/old.png"), b"old").unwrap();
         std::fs::write(out.join("texture.png"), b"old").unwrap();
         std::fs::write(out.join("keep.txt"), b"mine").unwrap();
-        let s = Staging::begin(&out, false).unwrap();
+        let s = Staging::begin(&out, SUMMARY, false).unwrap();
         std::fs::write(s.path().join("texture.png"), b"new").unwrap();
-        std::fs::write(s.path().join(LAST), b"{}").unwrap();
+        std::fs::write(s.path().join(SUMMARY), b"{}").unwrap();
         std::fs::create_dir(s.path().join("material_0")).unwrap();
         std::fs::write(s.path().join("material_0/new.png"), b"new").unwrap();
         s.commit().unwrap();
         assert_eq!(std::fs::read(out.join("texture.png")).unwrap(), b"new");
-        assert_eq!(std::fs::read(out.join(LAST)).unwrap(), b"{}");
+        assert_eq!(std::fs::read(out.join(SUMMARY)).unwrap(), b"{}");
         assert!(out.join("material_0/new.png").is_file());
         assert!(!out.join("material_0/old.png").exists());
         assert_eq!(std::fs::read(out.join("keep.txt")).unwrap(), b"mine");
@@ -239,12 +242,12 @@ mod tests {
     fn a_run_that_does_not_commit_leaves_nothing() {
         let out = tmp("drop");
         {
-            let s = Staging::begin(&out, false).unwrap();
+            let s = Staging::begin(&out, SUMMARY, false).unwrap();
             std::fs::write(s.path().join("texture.png"), b"new").unwrap();
         }
         assert!(!out.exists(), "the folder this run made is gone");
         {
-            let s = Staging::begin(&out, false).unwrap();
+            let s = Staging::begin(&out, SUMMARY, false).unwrap();
             let e = anyhow::anyhow!("{}: cannot write", s.path().join("report.png").display());
             let shown = s.in_out(e).to_string();
             assert_eq!(
@@ -256,7 +259,7 @@ mod tests {
         std::fs::create_dir_all(&out).unwrap();
         std::fs::write(out.join("texture.png"), b"old").unwrap();
         {
-            let s = Staging::begin(&out, false).unwrap();
+            let s = Staging::begin(&out, SUMMARY, false).unwrap();
             std::fs::write(s.path().join("texture.png"), b"new").unwrap();
         }
         assert_eq!(std::fs::read(out.join("texture.png")).unwrap(), b"old");
@@ -267,10 +270,10 @@ mod tests {
     #[test]
     fn a_kind_clash_is_refused_before_anything_moves() {
         let out = tmp("clash");
-        std::fs::create_dir_all(out.join(LAST)).unwrap();
-        let s = Staging::begin(&out, false).unwrap();
+        std::fs::create_dir_all(out.join(SUMMARY)).unwrap();
+        let s = Staging::begin(&out, SUMMARY, false).unwrap();
         std::fs::write(s.path().join("texture.png"), b"new").unwrap();
-        std::fs::write(s.path().join(LAST), b"{}").unwrap();
+        std::fs::write(s.path().join(SUMMARY), b"{}").unwrap();
         let e = format!("{:#}", s.commit().unwrap_err());
         assert!(!e.contains(PREFIX), "{e}");
         assert!(
@@ -278,7 +281,7 @@ mod tests {
             "{e}"
         );
         assert!(!out.join("texture.png").exists(), "nothing moved");
-        assert!(out.join(LAST).is_dir());
+        assert!(out.join(SUMMARY).is_dir());
         assert_eq!(
             std::fs::read_dir(&out).unwrap().count(),
             1,
@@ -293,7 +296,7 @@ mod tests {
         // A pid far above any live one (Linux caps pids at 2^22).
         let stale = out.join(format!("{PREFIX}{}", 9_999_999));
         std::fs::create_dir_all(stale.join("x")).unwrap();
-        let s = Staging::begin(&out, false).unwrap();
+        let s = Staging::begin(&out, SUMMARY, false).unwrap();
         if Path::new("/proc/self").exists() {
             assert!(!stale.exists());
         }
@@ -301,7 +304,7 @@ mod tests {
         let _ = std::fs::remove_dir_all(&out);
         let file = tmp("file");
         std::fs::write(&file, b"x").unwrap();
-        let e = format!("{:#}", Staging::begin(&file, false).unwrap_err());
+        let e = format!("{:#}", Staging::begin(&file, SUMMARY, false).unwrap_err());
         assert!(e.contains("not a folder"), "{e}");
         std::fs::remove_file(&file).unwrap();
     }

@@ -1032,6 +1032,19 @@ fn failed_and_interrupted_extractions_leave_no_partial_result() {
     assert_error_names(&o, "material.json");
     assert_eq!(entries(&out), ["material.json", "texture.png"]);
     assert_eq!(std::fs::read(out.join("texture.png")).unwrap(), b"older");
+    // `picker infer` stages its set the same way.
+    let inf = tmp.path().join("infer");
+    std::fs::create_dir_all(inf.join("manifest.json")).unwrap();
+    let o = picker([
+        "infer",
+        photo.to_str().unwrap(),
+        "--weights",
+        w.to_str().unwrap(),
+        "--out",
+        inf.to_str().unwrap(),
+    ]);
+    assert_error_names(&o, "manifest.json");
+    assert_eq!(entries(&inf), ["manifest.json"]);
     // A good run replaces the older files and leaves no hidden entry.
     let good = tmp.path().join("good");
     std::fs::create_dir_all(&good).unwrap();
