@@ -68,13 +68,14 @@ pub fn parse_size(s: &str) -> Result<(usize, usize), String> {
 /// are refused up front instead of failing an allocation half-way.
 pub const MAX_MEGAPIXELS: f64 = 16.0;
 
-/// Refuses `pixels` above [`MAX_MEGAPIXELS`], naming `what` (an option).
+/// Refuses `pixels` above [`MAX_MEGAPIXELS`] as a usage error (exit
+/// status 2), naming `what` (the options).
 pub fn check_megapixels(what: &str, pixels: u64) -> anyhow::Result<()> {
     let mp = pixels as f64 / 1e6;
     if mp > MAX_MEGAPIXELS {
-        anyhow::bail!(
+        return Err(anyhow::Error::new(crate::UsageError(format!(
             "{what}: {mp:.1} megapixels is more than the {MAX_MEGAPIXELS} this command accepts"
-        );
+        ))));
     }
     Ok(())
 }

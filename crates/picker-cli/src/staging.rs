@@ -195,7 +195,7 @@ fn remove_stale(out: &Path) {
 }
 
 /// True when process `pid` surely no longer exists.
-fn process_gone(pid: u32) -> bool {
+pub fn process_gone(pid: u32) -> bool {
     let proc = Path::new("/proc");
     proc.join("self").exists() && !proc.join(pid.to_string()).exists()
 }

@@ -4,7 +4,7 @@
 //! same seed gives identical files whatever `--threads` is.
 
 use std::io::IsTerminal;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
@@ -58,6 +58,30 @@ pub enum ViewsArg {
     Wide,
 }
 
+/// Infix of a scene folder being written: `.scene_000007.partial-<pid>`.
+const PARTIAL: &str = ".partial-";
+
+/// Removes the hidden partial scene folders of runs that were killed
+/// (their process no longer exists; Linux only, by `/proc`).
+fn remove_stale_partials(out: &Path) {
+    let Ok(entries) = std::fs::read_dir(out) else {
+        return;
+    };
+    for e in entries.flatten() {
+        let name = e.file_name().to_string_lossy().into_owned();
+        let Some(pid) = name
+            .strip_prefix('.')
+            .and_then(|n| n.rsplit_once(PARTIAL))
+            .and_then(|(_, pid)| pid.parse::<u32>().ok())
+        else {
+            continue;
+        };
+        if pid != std::process::id() && crate::staging::process_gone(pid) {
+            let _ = std::fs::remove_dir_all(e.path());
+        }
+    }
+}
+
 /// Runs `picker synth`.
 pub fn run(a: Args) -> Result<()> {
     let t0 = Instant::now();
@@ -73,6 +97,7 @@ pub fn run(a: Args) -> Result<()> {
     };
     std::fs::create_dir_all(&a.out)
         .with_context(|| format!("creating output directory {}", a.out.display()))?;
+    remove_stale_partials(&a.out);
     let config = SceneConfig {
         views: match a.views {
             ViewsArg::Room => Views::Room,
@@ -100,9 +125,37 @@ pub fn run(a: Args) -> Result<()> {
     (a.start..a.start + n)
         .into_par_iter()
         .try_for_each(|i| -> Result<()> {
-            let dir = a.out.join(picker_synth::scene_dir_name(i));
-            picker_synth::generate_scene_to(&dir, a.seed, i, config, assets.as_ref(), true)
-                .with_context(|| format!("scene {i} ({})", dir.display()))?;
+            // Each scene folder appears whole: written as a hidden folder,
+            // then renamed into place (an older one of the name replaced).
+            let name = picker_synth::scene_dir_name(i);
+            let dir = a.out.join(&name);
+            let partial = a
+                .out
+                .join(format!(".{name}{PARTIAL}{}", std::process::id()));
+            let made = (|| -> Result<()> {
+                if partial.exists() {
+                    std::fs::remove_dir_all(&partial)
+                        .with_context(|| format!("removing {}", partial.display()))?;
+                }
+                picker_synth::generate_scene_to(
+                    &partial,
+                    a.seed,
+                    i,
+                    config,
+                    assets.as_ref(),
+                    true,
+                )?;
+                if dir.exists() {
+                    std::fs::remove_dir_all(&dir)
+                        .with_context(|| format!("removing the older {}", dir.display()))?;
+                }
+                std::fs::rename(&partial, &dir)
+                    .with_context(|| format!("moving {} into place", dir.display()))
+            })();
+            if made.is_err() {
+                let _ = std::fs::remove_dir_all(&partial);
+            }
+            made.with_context(|| format!("scene {i} ({})", dir.display()))?;
             let k = done.fetch_add(1, Ordering::Relaxed) + 1;
             match &bar {
                 Some(b) => b.inc(1),

@@ -123,6 +123,12 @@ fn golden_scenes_regenerate_bit_exactly() {
 fn synth_writes_scene_folders_and_a_contact_sheet() {
     let tmp = tempfile::tempdir().unwrap();
     let sheet = tmp.path().join("sheet.png");
+    // What a killed run left (a hidden partial scene of a process that is
+    // gone) is removed; a scene that was there is replaced whole.
+    let stale = tmp.path().join("run/.scene_000005.partial-9999999");
+    std::fs::create_dir_all(&stale).unwrap();
+    std::fs::create_dir_all(tmp.path().join("run/scene_000006")).unwrap();
+    std::fs::write(tmp.path().join("run/scene_000006/old.txt"), b"x").unwrap();
     let st = succeed(
         picker()
             .args([
@@ -149,8 +155,24 @@ fn synth_writes_scene_folders_and_a_contact_sheet() {
         }
         assert!(d.join("materials/1/material.json").is_file());
     }
+    let entries: Vec<String> = std::fs::read_dir(tmp.path().join("run"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert!(
+        entries.iter().all(|n| !n.starts_with('.')),
+        "hidden entries left: {entries:?}"
+    );
+    assert!(!tmp.path().join("run/scene_000006/old.txt").exists());
     let img = image::open(&sheet).unwrap();
     assert_eq!((img.width(), img.height()), (2 * 12, 8));
+    // Sizes whose scenes could not be held in memory are refused up front.
+    refused(
+        picker()
+            .args(["synth", "--size", "100000x100000", "--out"])
+            .arg(tmp.path().join("huge")),
+    );
+    assert!(!tmp.path().join("huge").exists());
 
     refused(
         picker()
