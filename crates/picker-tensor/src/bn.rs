@@ -35,6 +35,20 @@ impl BatchNorm {
                 return Err(shape_err("batch_norm", name, c, v.len()));
             }
         }
+        // var + eps is a variance: it must be positive (and finite) for the
+        // scale to be a number.
+        if let Some(i) = (0..c).find(|&i| {
+            let v = self.var[i] as f64 + self.eps as f64;
+            !(v > 0.0 && v.is_finite())
+        }) {
+            return Err(crate::error::invalid(
+                "batch_norm",
+                format!(
+                    "channel {i}: var {} + eps {} must be positive and finite",
+                    self.var[i], self.eps
+                ),
+            ));
+        }
         let scale: Vec<f64> = (0..c)
             .map(|i| self.gamma[i] as f64 / (self.var[i] as f64 + self.eps as f64).sqrt())
             .collect();

@@ -56,13 +56,25 @@ impl ConvSpec {
                 format!("channels, kernel and stride must be positive: {self:?}"),
             ));
         }
+        if checked_product(&[self.c_out, self.c_in, self.kh, self.kw]).is_none() {
+            return Err(invalid(
+                "conv2d",
+                format!("the weight's length overflows: {self:?}"),
+            ));
+        }
         Ok(())
     }
 
     /// Output `(height, width)` for an input of `h × w`; refuses inputs smaller than the kernel.
     pub fn out_hw(&self, h: usize, w: usize) -> Result<(usize, usize)> {
         self.validate()?;
-        let (hp, wp) = (h + 2 * self.pad, w + 2 * self.pad);
+        let padded = |n: usize| self.pad.checked_mul(2).and_then(|p| p.checked_add(n));
+        let (Some(hp), Some(wp)) = (padded(h), padded(w)) else {
+            return Err(invalid(
+                "conv2d",
+                format!("the padded {h}x{w} input overflows: {self:?}"),
+            ));
+        };
         if hp < self.kh || wp < self.kw {
             return Err(shape_err(
                 "conv2d",
@@ -77,9 +89,11 @@ impl ConvSpec {
         ))
     }
 
-    /// Length of the weight `[c_out, c_in, kh, kw]`.
+    /// Length of the weight `[c_out, c_in, kh, kw]` (`usize::MAX` when it
+    /// overflows, a length no weight has; such specs are refused by every
+    /// layer and op).
     pub fn weight_len(&self) -> usize {
-        self.c_out * self.c_in * self.kh * self.kw
+        checked_product(&[self.c_out, self.c_in, self.kh, self.kw]).unwrap_or(usize::MAX)
     }
 
     /// Floating-point operations (2 × multiply-adds) for one `h × w` input image.
@@ -138,6 +152,12 @@ impl ConvTransposeSpec {
                 format!("channels, kernel and stride must be positive: {self:?}"),
             ));
         }
+        if checked_product(&[self.c_in, self.c_out, self.kh, self.kw]).is_none() {
+            return Err(invalid(
+                "conv_transpose2d",
+                format!("the weight's length overflows: {self:?}"),
+            ));
+        }
         if self.output_padding >= self.stride {
             return Err(invalid(
                 "conv_transpose2d",
@@ -153,9 +173,20 @@ impl ConvTransposeSpec {
     /// Output `(height, width)`: `(h-1)·stride − 2·pad + k + output_padding`.
     pub fn out_hw(&self, h: usize, w: usize) -> Result<(usize, usize)> {
         self.validate()?;
-        let full = |n: usize, k: usize| (n.max(1) - 1) * self.stride + k + self.output_padding;
-        let (fh, fw) = (full(h, self.kh), full(w, self.kw));
-        if h == 0 || w == 0 || fh <= 2 * self.pad || fw <= 2 * self.pad {
+        let full = |n: usize, k: usize| {
+            (n.max(1) - 1)
+                .checked_mul(self.stride)
+                .and_then(|v| v.checked_add(k + self.output_padding))
+        };
+        let (Some(fh), Some(fw), Some(pads)) =
+            (full(h, self.kh), full(w, self.kw), self.pad.checked_mul(2))
+        else {
+            return Err(invalid(
+                "conv_transpose2d",
+                format!("the output of a {h}x{w} input overflows: {self:?}"),
+            ));
+        };
+        if h == 0 || w == 0 || fh <= pads || fw <= pads {
             return Err(shape_err(
                 "conv_transpose2d",
                 "output size",
@@ -163,18 +194,24 @@ impl ConvTransposeSpec {
                 format!("input {h}x{w} with {self:?}"),
             ));
         }
-        Ok((fh - 2 * self.pad, fw - 2 * self.pad))
+        Ok((fh - pads, fw - pads))
     }
 
-    /// Length of the weight `[c_in, c_out, kh, kw]`.
+    /// Length of the weight `[c_in, c_out, kh, kw]` (`usize::MAX` when it
+    /// overflows; such specs are refused by every layer and op).
     pub fn weight_len(&self) -> usize {
-        self.c_in * self.c_out * self.kh * self.kw
+        checked_product(&[self.c_in, self.c_out, self.kh, self.kw]).unwrap_or(usize::MAX)
     }
 
     /// Floating-point operations (2 × multiply-adds, direct form) for one `h × w` input image.
     pub fn flops(&self, h: usize, w: usize) -> u64 {
         sat_flops(self.weight_len(), h, w)
     }
+}
+
+/// The product of `v`, or `None` when it overflows `usize`.
+pub(crate) fn checked_product(v: &[usize]) -> Option<usize> {
+    v.iter().try_fold(1usize, |a, &b| a.checked_mul(b))
 }
 
 /// `2 · weights · h · w`, saturating at `u64::MAX` instead of overflowing.

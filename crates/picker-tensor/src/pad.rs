@@ -12,7 +12,11 @@ pub type Pads = [usize; 4];
 /// Index into `0..n` of position `i` under mirror extension without repeating
 /// the edge (`… 2 1 | 0 1 2 … n-1 | n-2 …`), periodic with period `2(n-1)`.
 /// For `n == 1` every position maps to 0.
+///
+/// # Panics
+/// When `n` is 0 (an empty axis has no index).
 pub fn reflect_index(i: isize, n: usize) -> usize {
+    assert!(n > 0, "reflect_index: an empty axis has no index");
     if n == 1 {
         return 0;
     }
@@ -73,10 +77,18 @@ pub fn reflect_pad(x: &Tensor, pads: Pads) -> Result<Tensor> {
 }
 
 /// Mirror extension by any amount (equal to [`reflect_pad`] where that is defined).
+///
+/// # Panics
+/// When the padded size overflows `usize`.
 pub fn mirror_pad(x: &Tensor, pads: Pads) -> Tensor {
     let [t, b, l, r] = pads;
     let (h, w) = (x.h(), x.w());
-    let (oh, ow) = (h + t + b, w + l + r);
+    let grown = |n: usize, a: usize, b: usize| {
+        n.checked_add(a)
+            .and_then(|v| v.checked_add(b))
+            .unwrap_or_else(|| panic!("mirror_pad: padding {pads:?} overflows the size"))
+    };
+    let (oh, ow) = (grown(h, t, b), grown(w, l, r));
     if x.is_empty() {
         return Tensor::zeros([x.n(), x.c(), oh, ow]);
     }

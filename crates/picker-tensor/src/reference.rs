@@ -22,6 +22,11 @@ pub fn conv2d(x: &Tensor, weight: &[f32], bias: Option<&[f32]>, s: ConvSpec) -> 
             weight.len(),
         ));
     }
+    if let Some(b) = bias {
+        if b.len() != s.c_out {
+            return Err(shape_err("conv2d", "bias length", s.c_out, b.len()));
+        }
+    }
     let mut out = Tensor::zeros([x.n(), s.c_out, oh, ow]);
     for n in 0..x.n() {
         for co in 0..s.c_out {
@@ -74,6 +79,16 @@ pub fn conv_transpose2d(
             s.weight_len(),
             weight.len(),
         ));
+    }
+    if let Some(b) = bias {
+        if b.len() != s.c_out {
+            return Err(shape_err(
+                "conv_transpose2d",
+                "bias length",
+                s.c_out,
+                b.len(),
+            ));
+        }
     }
     let mut acc = vec![0.0f64; x.n() * s.c_out * oh * ow];
     for n in 0..x.n() {

@@ -47,8 +47,14 @@ impl Rng {
     }
 
     /// Uniform integer in `[lo, hi]`.
+    ///
+    /// # Panics
+    /// When `hi < lo` (an empty range).
     pub fn range(&mut self, lo: usize, hi: usize) -> usize {
-        lo + (self.f64() * (hi - lo + 1) as f64) as usize
+        assert!(lo <= hi, "Rng::range: empty range [{lo}, {hi}]");
+        // (hi − lo + 1 may be 2^64: computed in f64.)
+        let span = (hi - lo) as f64 + 1.0;
+        (lo + (self.f64() * span) as usize).min(hi)
     }
 
     /// Standard normal (Box–Muller).

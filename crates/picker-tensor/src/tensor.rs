@@ -43,9 +43,15 @@ impl std::fmt::Debug for Tensor {
 }
 
 impl Tensor {
-    /// Wraps `data` as a tensor of `shape`; refuses a length mismatch.
+    /// Wraps `data` as a tensor of `shape`; refuses a length mismatch (and
+    /// a shape whose element count overflows `usize`).
     pub fn new(shape: [usize; 4], data: Vec<f32>) -> Result<Self> {
-        let expected = shape.iter().product::<usize>();
+        let Some(expected) = crate::conv::checked_product(&shape) else {
+            return Err(crate::error::invalid(
+                "tensor",
+                format!("the element count of shape {shape:?} overflows"),
+            ));
+        };
         if data.len() != expected {
             return Err(Error::DataLength {
                 shape,
@@ -61,6 +67,11 @@ impl Tensor {
     }
 
     /// A tensor of zeros.
+    ///
+    /// # Panics
+    /// When the element count of `shape` overflows `usize` (and, as for any
+    /// allocation, aborts when memory runs out); [`Tensor::new`] refuses
+    /// such shapes with an error instead.
     pub fn zeros(shape: [usize; 4]) -> Self {
         let mut t = Self::for_overwrite(shape);
         t.data_mut().fill(0.0);
@@ -71,17 +82,23 @@ impl Tensor {
     /// its contents are unspecified (stale values of a reused buffer). Its
     /// elements start on a cache line.
     pub(crate) fn for_overwrite(shape: [usize; 4]) -> Self {
-        let len: usize = shape.iter().product();
+        let len = crate::conv::checked_product(&shape)
+            .unwrap_or_else(|| panic!("tensor shape {shape:?}: the element count overflows"));
         let (buf, off) = crate::pool::take_aligned(len);
         Self { shape, buf, off }
     }
 
     /// A tensor filled by `f(n, c, y, x)`.
+    ///
+    /// # Panics
+    /// As [`Tensor::zeros`].
     pub fn from_fn(
         shape: [usize; 4],
         mut f: impl FnMut(usize, usize, usize, usize) -> f32,
     ) -> Self {
-        let mut data = Vec::with_capacity(shape.iter().product());
+        let len = crate::conv::checked_product(&shape)
+            .unwrap_or_else(|| panic!("tensor shape {shape:?}: the element count overflows"));
+        let mut data = Vec::with_capacity(len);
         for n in 0..shape[0] {
             for c in 0..shape[1] {
                 for y in 0..shape[2] {
@@ -168,12 +185,17 @@ impl Tensor {
     /// The window `[y0, y0+h) × [x0, x0+w)` of every plane.
     pub fn crop(&self, y0: usize, x0: usize, h: usize, w: usize) -> Result<Tensor> {
         let [n, c, hh, ww] = self.shape;
-        if y0 + h > hh || x0 + w > ww {
+        let inside = |a: usize, len: usize, n: usize| a.checked_add(len).is_some_and(|e| e <= n);
+        if !inside(y0, h, hh) || !inside(x0, w, ww) {
             return Err(crate::error::shape_err(
                 "crop",
                 "window",
                 format!("inside {hh}x{ww}"),
-                format!("rows {y0}..{} cols {x0}..{}", y0 + h, x0 + w),
+                format!(
+                    "rows {y0}..{} cols {x0}..{}",
+                    y0.saturating_add(h),
+                    x0.saturating_add(w)
+                ),
             ));
         }
         let mut out = Vec::with_capacity(n * c * h * w);
@@ -189,12 +211,12 @@ impl Tensor {
     /// Channels `[c0, c0+len)` of every image.
     pub fn channels(&self, c0: usize, len: usize) -> Result<Tensor> {
         let [n, c, h, w] = self.shape;
-        if c0 + len > c {
+        if c0.checked_add(len).is_none_or(|e| e > c) {
             return Err(crate::error::shape_err(
                 "channels",
                 "range",
                 format!("inside 0..{c}"),
-                format!("{c0}..{}", c0 + len),
+                format!("{c0}..{}", c0.saturating_add(len)),
             ));
         }
         let hw = h * w;
