@@ -12,6 +12,11 @@ use picker_tensor::Tensor;
 use crate::error::{Error, Result};
 use crate::io;
 
+/// Largest radiance magnitude an [`EnvMap`] holds (far above any physical
+/// scene, the sun included: ~1e9 in typical HDR units), so that every sum
+/// of the map over the sphere stays finite in `f32`.
+pub const MAX_RADIANCE: f32 = 1e30;
+
 /// A linear-RGB HDR radiance map, `height × width`, row-major.
 #[derive(Clone, Debug, PartialEq)]
 pub struct EnvMap {
@@ -22,8 +27,11 @@ pub struct EnvMap {
 
 impl EnvMap {
     /// A map from row-major radiance values; refuses a zero size, a wrong
-    /// length, or NaN or infinite values (a corrupt map: its NaN would reach
-    /// every shaded pixel through the prefiltering and the exposure).
+    /// length, NaN or infinite values (a corrupt map: its NaN would reach
+    /// every shaded pixel through the prefiltering and the exposure) and
+    /// magnitudes beyond [`MAX_RADIANCE`]. Shading integrates the map at its
+    /// pixel centres: a map only one or two pixels tall samples too few
+    /// directions to light a surface faithfully.
     pub fn new(width: usize, height: usize, data: Vec<Vec3>) -> Result<Self> {
         if width == 0 || height == 0 {
             return Err(Error::Invalid {
@@ -31,7 +39,13 @@ impl EnvMap {
                 reason: format!("{height}x{width} is empty"),
             });
         }
-        if data.len() != width * height {
+        let Some(n) = width.checked_mul(height) else {
+            return Err(Error::Invalid {
+                what: "environment map size",
+                reason: format!("{height}x{width} overflows"),
+            });
+        };
+        if data.len() != n {
             return Err(Error::shape(
                 format!("{height}x{width} environment map"),
                 format!("{} pixels", width * height),
@@ -51,6 +65,21 @@ impl EnvMap {
                 ),
             });
         }
+        if let Some(first) = data
+            .iter()
+            .position(|v| v.abs().max_element() > MAX_RADIANCE)
+        {
+            return Err(Error::Invalid {
+                what: "environment map radiance",
+                reason: format!(
+                    "the pixel at row {}, column {} has magnitude {:e}, beyond the {MAX_RADIANCE:e} an \
+                     environment map may hold (sums of it over the sphere would overflow)",
+                    first / width,
+                    first % width,
+                    data[first].abs().max_element()
+                ),
+            });
+        }
         Ok(Self {
             width,
             height,
@@ -58,13 +87,31 @@ impl EnvMap {
         })
     }
 
-    /// A map of constant radiance `rgb` (sizes of 0 are raised to 1).
-    pub fn uniform(width: usize, height: usize, rgb: Vec3) -> Self {
-        let (width, height) = (width.max(1), height.max(1));
+    /// A map derived inside this crate from a valid one (its irradiance: at
+    /// most π times [`MAX_RADIANCE`], finite): no radiance bound.
+    pub(crate) fn derived(width: usize, height: usize, data: Vec<Vec3>) -> Self {
+        debug_assert_eq!(data.len(), width * height);
+        debug_assert!(data.iter().all(|v| v.is_finite()));
         Self {
             width,
             height,
-            data: vec![rgb; width * height],
+            data,
+        }
+    }
+
+    /// A map of constant radiance `rgb` (sizes of 0 are raised to 1).
+    ///
+    /// # Panics
+    /// When `width · height` overflows `usize`.
+    pub fn uniform(width: usize, height: usize, rgb: Vec3) -> Self {
+        let (width, height) = (width.max(1), height.max(1));
+        let n = width
+            .checked_mul(height)
+            .unwrap_or_else(|| panic!("EnvMap::uniform: {height}x{width} overflows"));
+        Self {
+            width,
+            height,
+            data: vec![rgb; n],
         }
     }
 
@@ -372,11 +419,15 @@ mod tests {
                 "{e}"
             );
         }
-        // Negative and huge finite values are radiance the caller chose.
+        // Negative and large finite values are radiance the caller chose, up
+        // to MAX_RADIANCE (beyond it the shaders' sums would overflow).
         let mut data = vec![Vec3::splat(0.5); 12];
         data[0] = Vec3::splat(-1.0);
+        data[1] = Vec3::splat(MAX_RADIANCE);
+        assert!(EnvMap::new(4, 3, data.clone()).is_ok());
         data[1] = Vec3::splat(3e38);
-        assert!(EnvMap::new(4, 3, data).is_ok());
+        let e = EnvMap::new(4, 3, data).unwrap_err().to_string();
+        assert!(e.contains("row 0, column 1"), "{e}");
     }
 
     /// A smooth map (so bilinear sampling is accurate): a sky gradient and a soft lobe.

@@ -26,7 +26,16 @@ pub struct Image {
 impl Image {
     /// An image from planar data; refuses a length that is not `channels·height·width`.
     pub fn new(channels: usize, height: usize, width: usize, data: Vec<f32>) -> Result<Self> {
-        let n = channels * height * width;
+        let Some(n) = channels
+            .checked_mul(height)
+            .and_then(|v| v.checked_mul(width))
+        else {
+            return Err(Error::shape(
+                format!("{channels}x{height}x{width} image"),
+                "a size that fits in memory",
+                "an overflowing size",
+            ));
+        };
         if data.len() != n {
             return Err(Error::shape(
                 format!("{channels}x{height}x{width} image"),
@@ -43,13 +52,41 @@ impl Image {
     }
 
     /// An image of zeros.
+    ///
+    /// # Panics
+    /// When `channels · height · width` overflows `usize`.
     pub fn zeros(channels: usize, height: usize, width: usize) -> Self {
+        let n = channels
+            .checked_mul(height)
+            .and_then(|v| v.checked_mul(width))
+            .unwrap_or_else(|| panic!("Image::zeros: {channels}x{height}x{width} overflows"));
         Self {
             channels,
             height,
             width,
-            data: vec![0.0; channels * height * width],
+            data: vec![0.0; n],
         }
+    }
+
+    /// Refuses an image whose fields disagree (they are public): a data
+    /// length other than `channels · height · width`, or no channel at all
+    /// where pixels are read; `what` names it in the error.
+    pub fn check_readable(&self, what: &str) -> Result<()> {
+        let n = self
+            .channels
+            .checked_mul(self.height)
+            .and_then(|v| v.checked_mul(self.width));
+        if n != Some(self.data.len()) {
+            return Err(Error::shape(
+                format!("{what} ({}x{}x{})", self.channels, self.height, self.width),
+                "channels x height x width values",
+                format!("{} values", self.data.len()),
+            ));
+        }
+        if self.channels == 0 && self.height * self.width > 0 {
+            return Err(Error::shape(format!("{what} channels"), "at least 1", 0));
+        }
+        Ok(())
     }
 
     /// Pixels per plane (`height · width`).

@@ -155,7 +155,7 @@ fn irradiance_map(env: &EnvMap) -> EnvMap {
             acc.as_vec3()
         })
         .collect();
-    EnvMap::new(w, h, data).expect("grid size matches")
+    EnvMap::derived(w, h, data)
 }
 
 impl PrefilteredEnv {

@@ -327,6 +327,10 @@ pub const TILE_TILT_DEGREES: f32 = 30.0;
 /// reflection of the environment shows and varies across the tile. With a
 /// `texture` (linear RGB, 3 channels, wrapped once over the tile, bilinear) it
 /// replaces the diffuse albedo. Linear RGB; pixels off the tile are black.
+///
+/// # Panics
+/// When `texture` is malformed ([`Image::check_readable`]: no channel, or
+/// data that does not match its size).
 pub fn preview_tile(
     material: &PhongMaterial,
     env: &EnvMap,
@@ -337,12 +341,20 @@ pub fn preview_tile(
 }
 
 /// [`preview_tile`] with a prepared [`Shader`].
+///
+/// # Panics
+/// As [`preview_tile`].
 pub fn preview_tile_with(
     material: &PhongMaterial,
     shader: &Shader,
     size: usize,
     texture: Option<&Image>,
 ) -> Image {
+    if let Some(t) = texture {
+        if let Err(e) = t.check_readable("preview texture") {
+            panic!("preview_tile: {e}");
+        }
+    }
     let tilt = Mat3::from_rotation_x(-TILE_TILT_DEGREES.to_radians());
     let normal = tilt * Vec3::Z;
     let (u_axis, v_axis) = (tilt * Vec3::X, tilt * Vec3::NEG_Y);
@@ -431,6 +443,8 @@ fn psnr(mse: f64) -> f64 {
 }
 
 fn check_pair(render: &Image, reference: &Image) -> Result<()> {
+    render.check_readable("rendered image")?;
+    reference.check_readable("reference image")?;
     if render.channels != 3 {
         return Err(Error::shape("rendered image channels", 3, render.channels));
     }
