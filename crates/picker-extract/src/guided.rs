@@ -91,7 +91,12 @@ pub(crate) fn coefficients(
 }
 
 /// The guided filter of plane `p` (`w×h`) by the grey `guide`, radius `r`, ridge `eps`.
+///
+/// # Panics
+/// When a plane's length is not `w · h`, or `eps` is not positive (a flat
+/// guide would divide 0 by 0).
 pub fn guided_filter(guide: &[f32], p: &[f32], w: usize, h: usize, r: usize, eps: f32) -> Vec<f32> {
+    assert!(eps > 0.0, "guided_filter: eps {eps} must be positive");
     assert_eq!(guide.len(), w * h, "guide length");
     assert_eq!(p.len(), w * h, "input length");
     let (ma, mb) = coefficients(guide, p, w, h, r, eps);
@@ -147,8 +152,12 @@ pub fn guided_filter_reference(
     out
 }
 
-/// The grey guide of an RGB image: Rec. 709 luma of its (display) values.
+/// The grey guide of an RGB image: Rec. 709 luma of its (display) values
+/// (a one- or two-channel image's first channel; all zeros without any).
 pub fn luma(img: &Image) -> Vec<f32> {
+    if img.channels == 0 {
+        return vec![0.0; img.plane_len()];
+    }
     if img.channels < 3 {
         return img.plane(0).to_vec();
     }

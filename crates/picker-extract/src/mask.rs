@@ -312,7 +312,15 @@ pub fn valley_tolerance(d: &[f32], tau0: f32) -> f32 {
 /// A mask grown from a strict one: the 8-connected regions of `candidate`
 /// that contain at least one pixel of `core` (hysteresis thresholding, as
 /// Canny's edges). Pixels of `core` outside `candidate` are dropped.
+///
+/// # Panics
+/// When `core` and `candidate` differ in length.
 pub fn hysteresis(core: &[bool], candidate: &Mask) -> Mask {
+    assert_eq!(
+        core.len(),
+        candidate.data.len(),
+        "hysteresis: the core and the candidate mask differ in size"
+    );
     let (label, sizes) = components(candidate);
     let mut keep = vec![false; sizes.len()];
     for (i, &l) in label.iter().enumerate() {
@@ -361,12 +369,28 @@ pub const LEAK_GUARD_OTHER: f32 = 0.2;
 /// are a few pixels wide).
 pub const LEAK_GUARD_SIGMA: f32 = 1.5;
 
+/// Largest `sigma` [`gradient_magnitude`] takes (pixels).
+pub const MAX_GRADIENT_SIGMA: f32 = 1e4;
+
 /// Gradient magnitude of a multi-channel image with Gaussian derivatives of
 /// scale `sigma` (pixels): per channel the derivative of a Gaussian along
 /// one axis and the Gaussian along the other (kernel radius `⌈4σ⌉`, sampled
 /// and normalised, borders reflected half-sample as `d c b a | a b c d`),
 /// `√Σ_c (∂x² + ∂y²)`. `sigma ≤ 0` gives central differences.
+///
+/// # Panics
+/// When `sigma` is NaN or above [`MAX_GRADIENT_SIGMA`] (its kernel would
+/// not fit in memory), or `img`'s data is not `channels · width · height`.
 pub fn gradient_magnitude(img: &Image, sigma: f32) -> Vec<f32> {
+    assert!(
+        sigma <= MAX_GRADIENT_SIGMA,
+        "gradient_magnitude: sigma {sigma} must be at most {MAX_GRADIENT_SIGMA}"
+    );
+    assert_eq!(
+        img.data.len(),
+        img.channels * img.width * img.height,
+        "gradient_magnitude: image data length"
+    );
     let (w, h) = (img.width, img.height);
     let (smooth, deriv) = gaussian_kernels(sigma);
     let mut sum = vec![0f32; w * h];
@@ -522,12 +546,14 @@ pub fn watershed(relief: &[f32], w: usize, h: usize, markers: &[u8]) -> Vec<u8> 
 /// The 4-neighbours of pixel `i` inside a `w × h` grid (left, right, up,
 /// down; those outside the grid left out).
 pub fn neighbours4(i: usize, w: usize, h: usize) -> impl Iterator<Item = usize> {
-    let (x, y) = (i % w, i / w);
+    // An index outside the grid (or any index of an empty one) has none.
+    let inside = w > 0 && i < w.saturating_mul(h);
+    let (x, y) = if inside { (i % w, i / w) } else { (0, 0) };
     [
-        (x > 0).then(|| i - 1),
-        (x + 1 < w).then(|| i + 1),
-        (y > 0).then(|| i - w),
-        (y + 1 < h).then(|| i + w),
+        (inside && x > 0).then(|| i - 1),
+        (inside && x + 1 < w).then(|| i + 1),
+        (inside && y > 0).then(|| i - w),
+        (inside && y + 1 < h).then(|| i + w),
     ]
     .into_iter()
     .flatten()
@@ -573,6 +599,9 @@ pub fn components(mask: &Mask) -> (Vec<u32>, Vec<usize>) {
 /// nearest to `(x, y)` (Euclidean; ties: the first in row order), or 0 when
 /// no pixel is labelled.
 pub fn nearest_label(label: &[u32], w: usize, (x, y): (usize, usize)) -> u32 {
+    if w == 0 {
+        return 0;
+    }
     let mut best = (u64::MAX, 0u32);
     for (i, &l) in label.iter().enumerate() {
         if l != 0 {
@@ -646,12 +675,24 @@ pub fn pick_mask_on(
     opts: &MaskOptions,
 ) -> Result<PickMask> {
     let (w, h) = (seg.width, seg.height);
-    if seg.channels != 3 {
+    if seg.channels != 3 || seg.data.len() != 3 * w * h {
         return Err(Error::Shape {
             what: "segmentation".into(),
-            expected: "3 channels".into(),
-            found: format!("{}", seg.channels),
+            expected: "3 channels of width x height values".into(),
+            found: format!("{} channels, {} values", seg.channels, seg.data.len()),
         });
+    }
+    if valid.len() != w * h {
+        return Err(Error::Shape {
+            what: "valid pixels".into(),
+            expected: format!("{}", w * h),
+            found: format!("{}", valid.len()),
+        });
+    }
+    if let Some(t) = opts.tolerance.filter(|t| !(t.is_finite() && *t > 0.0)) {
+        return Err(Error::Invalid(format!(
+            "tolerance {t} must be a positive number"
+        )));
     }
     if x >= w || y >= h {
         return Err(Error::Invalid(format!(

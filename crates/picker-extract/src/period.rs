@@ -550,7 +550,8 @@ pub const SNAP_MARGIN: f32 = 0.05;
 /// pattern by `k` times its error. The best is taken when it correlates at
 /// least [`MIN_WEAK_PEAK`] on average and at its farthest multiple at least
 /// [`HARMONIC_SHARE`] of the period's strength, over at least two
-/// multiples, and beats every other candidate by [`SNAP_MARGIN`].
+/// multiples, and beats every other candidate by [`SNAP_MARGIN`]. `None`
+/// for the zero axis `(0, 0)`, which has no shifts.
 pub fn snap_repeats(
     tex: &Image,
     known: &[bool],
@@ -558,7 +559,12 @@ pub fn snap_repeats(
     p: AxisPeriod,
     side: usize,
 ) -> Option<usize> {
-    if p.texels.is_nan() || p.texels <= 0.0 || side == 0 || known.len() != tex.width * tex.height {
+    if p.texels.is_nan()
+        || p.texels <= 0.0
+        || side == 0
+        || (dx, dy) == (0, 0)
+        || known.len() != tex.width * tex.height
+    {
         return None;
     }
     let g = LumaGrid::new(tex, known)?;
@@ -583,7 +589,9 @@ pub fn snap_repeats(
         .iter()
         .filter_map(|&n| {
             let period = side as f32 / n as f32 / g.f as f32 * SUBSTEPS as f32;
-            let r: Vec<f32> = (1..)
+            // (Shifts past the grid pair no texels and end the run; the
+            // bound only guards against a run that never ends.)
+            let r: Vec<f32> = (1..=g.w + g.h)
                 .map(|k| (k as f32 * period).round() as usize)
                 .map(|d| correlation_at(grid, (dx, dy), d, least))
                 .take_while(|r| r.is_finite())

@@ -761,9 +761,12 @@ fn jpeg_is_complete(b: &[u8]) -> bool {
 
 /// The working size `(width, height)` for a `w × h` photo: the long side
 /// becomes exactly `work_size` (up or down), the short side keeps the aspect
-/// ratio (rounded, at least 1).
+/// ratio (rounded, at least 1); `(0, 0)` for a photo with no pixels.
 pub fn working_size(w: u32, h: u32, work_size: u32) -> (u32, u32) {
     let (long, short) = (w.max(h) as u64, w.min(h) as u64);
+    if short == 0 {
+        return (0, 0);
+    }
     let s = work_size as u64;
     let short_new = ((short * s + long / 2) / long).max(1) as u32;
     if w >= h {

@@ -663,9 +663,22 @@ fn median(mut v: Vec<f32>) -> f32 {
     v[mid]
 }
 
-/// Bilinear, wrapped lookup of an RGB texture at `(u, v)` ∈ [0,1)².
+/// Bilinear, wrapped lookup of an RGB texture at `(u, v)` (wrapped into
+/// [0,1)²; a non-finite coordinate reads as 0).
+///
+/// # Panics
+/// When the texture has no pixels.
 pub fn sample_wrapped(tex: &Image, u: f32, v: f32) -> Vec3 {
     let (w, h) = (tex.width as i64, tex.height as i64);
+    assert!(w > 0 && h > 0, "sample_wrapped: the texture has no pixels");
+    let wrap = |t: f32| {
+        if t.is_finite() {
+            t.rem_euclid(1.0)
+        } else {
+            0.0
+        }
+    };
+    let (u, v) = (wrap(u), wrap(v));
     let x = u * w as f32 - 0.5;
     let y = v * h as f32 - 0.5;
     let (x0, y0) = (x.floor(), y.floor());
@@ -692,6 +705,7 @@ pub fn extract(
     pm: &PickMask,
     opts: &Options,
 ) -> Result<(Material, Diagnostics)> {
+    check_request(p, pm, opts)?;
     match extract_as(p, name, pick, pm, opts, false) {
         Err(Error::NoTexture(why)) if opts.uv == UvChoice::Auto => {
             let (m, mut diag) = extract_as(p, name, pick, pm, opts, true)?;
@@ -700,6 +714,35 @@ pub fn extract(
         }
         r => r,
     }
+}
+
+/// Largest texture side [`extract`] makes ([`Options::size`],
+/// [`Options::max_size`]): 64 M texels, 0.8 GB of f32 RGB.
+pub const MAX_TEXTURE_SIDE: usize = 8192;
+
+/// Refuses what [`extract`] cannot honour: a texture side beyond
+/// [`MAX_TEXTURE_SIDE`] (or 0), a pick mask of another size than the
+/// working resolution, or one whose fields disagree (they are public).
+fn check_request(p: &Prepared, pm: &PickMask, opts: &Options) -> Result<()> {
+    for (what, v) in [("size", opts.size), ("max_size", Some(opts.max_size))] {
+        if let Some(v) = v.filter(|&v| v == 0 || v > MAX_TEXTURE_SIDE) {
+            return Err(Error::Invalid(format!(
+                "texture {what} {v} must be between 1 and {MAX_TEXTURE_SIDE}"
+            )));
+        }
+    }
+    let (w, h) = p.work_size();
+    let m = &pm.mask;
+    if (m.width, m.height) != (w, h) || m.data.len() != w * h || pm.sure.len() != w * h {
+        return Err(Error::Invalid(format!(
+            "the pick mask is {}x{} ({} values, {} sure) but the working resolution is {w}x{h}",
+            m.width,
+            m.height,
+            m.data.len(),
+            pm.sure.len()
+        )));
+    }
+    Ok(())
 }
 
 /// A pick mask ([`Prepared::pick_mask`], working resolution) at the photo's
@@ -1640,6 +1683,87 @@ mod tests {
             seed: 1,
             inpainter,
         }
+    }
+
+    #[test]
+    fn requests_extract_cannot_honour_are_refused() {
+        let p = twins(false, false);
+        let inpainter = picker_inpaint::DiffusionInpainter::default();
+        let pm = p.pick_mask([4, 4], &MaskOptions::default()).unwrap();
+        for (size, max) in [
+            (Some(1usize << 40), 256),
+            (Some(0), 256),
+            (None, 0),
+            (None, 9000),
+        ] {
+            let opts = Options {
+                size,
+                max_size: max,
+                ..test_options(&inpainter, UvChoice::Auto)
+            };
+            let e = extract(&p, "m", Some([4, 4]), &pm, &opts).unwrap_err();
+            assert!(e.to_string().contains("texture"), "{e}");
+        }
+        let opts = test_options(&inpainter, UvChoice::Auto);
+        let mut small = pm.clone();
+        small.mask = Mask {
+            width: 2,
+            height: 2,
+            data: vec![true; 4],
+        };
+        let e = extract(&p, "m", Some([1, 1]), &small, &opts).unwrap_err();
+        assert!(e.to_string().contains("working resolution"), "{e}");
+        let mut short = pm.clone();
+        short.sure.pop();
+        assert!(extract(&p, "m", Some([4, 4]), &short, &opts).is_err());
+        assert!(extract(&p, "m", Some([4, 4]), &pm, &opts).is_ok());
+    }
+
+    #[test]
+    fn helpers_at_the_edges_of_their_inputs() {
+        // A zero axis has no shifts: no answer, and no endless search.
+        let tex = Image::new(3, 8, 8, vec![0.5; 192]).unwrap();
+        let p = crate::period::AxisPeriod {
+            texels: 4.0,
+            strength: 0.9,
+            double: None,
+        };
+        assert_eq!(
+            crate::period::snap_repeats(&tex, &[true; 64], (0, 0), p, 8),
+            None
+        );
+        assert_eq!(crate::reproject::texture_size(Some(1e-45), 64), 64);
+        assert_eq!(crate::photo::working_size(0, 0, 512), (0, 0));
+        assert_eq!(crate::photo::working_size(0, 7, 512), (0, 0));
+        assert_eq!(
+            crate::guided::luma(&Image::new(0, 2, 2, vec![]).unwrap()),
+            vec![0.0; 4]
+        );
+        let t = Image::new(3, 1, 2, vec![0.0, 1.0, 0.0, 1.0, 0.0, 1.0]).unwrap();
+        assert!(sample_wrapped(&t, f32::NAN, 0.5).is_finite());
+        assert!(sample_wrapped(&t, 1e30, -3.25).is_finite());
+        assert_eq!(crate::mask::neighbours4(0, 0, 0).count(), 0);
+        assert_eq!(crate::mask::neighbours4(9, 3, 3).count(), 0);
+        assert_eq!(crate::mask::neighbours4(4, 3, 3).count(), 4);
+        assert_eq!(crate::mask::nearest_label(&[1], 0, (0, 0)), 0);
+        let seg = Image::new(3, 2, 2, vec![0.5; 12]).unwrap();
+        let opts = MaskOptions::default();
+        assert!(crate::mask::pick_mask(&seg, &[true; 3], 1, 1, &opts).is_err());
+        for t in [f32::NAN, -0.1, 0.0] {
+            let o = MaskOptions {
+                tolerance: Some(t),
+                ..MaskOptions::default()
+            };
+            assert!(
+                crate::mask::pick_mask(&seg, &[true; 4], 1, 1, &o).is_err(),
+                "{t}"
+            );
+        }
+        let empty = Image::new(3, 0, 0, vec![]).unwrap();
+        let r = std::panic::catch_unwind(|| crate::resample::bilinear(&empty, 4, 4));
+        let msg = r.unwrap_err();
+        let msg = msg.downcast_ref::<&str>().copied().unwrap_or_default();
+        assert!(msg.contains("no pixels"), "{msg}");
     }
 
     #[test]

@@ -201,7 +201,8 @@ pub fn texture_size(area: Option<f32>, max: usize) -> usize {
         Some(a) if a > 0.0 => (1.0 / a.sqrt()) as f64,
         _ => 256.0,
     };
-    ((side / 4.0).round() as usize * 4).clamp(16, max)
+    // Clamped in f64 first: a tiny area's side does not fit a usize.
+    (((side / 4.0).round().min(max as f64 / 4.0 + 1.0)) as usize * 4).clamp(16, max)
 }
 
 /// The reprojected texture.

@@ -3,6 +3,11 @@
 //! Pixel centres follow the conventions (`design.md` §2): pixel `(x, y)` covers
 //! `[x, x+1) × [y, y+1)`, so a position `p` in an image of `n` pixels maps to
 //! `(p + 0.5)·m/n − 0.5` in one of `m` pixels (PyTorch's `align_corners=False`).
+//!
+//! # Panics
+//! Every function here panics, with a message, when asked to resample a
+//! source that has no pixels to a destination that has some, and when a
+//! plane's length is not its `width · height`.
 
 use picker_render::io::Image;
 use rayon::prelude::*;
@@ -11,6 +16,7 @@ use rayon::prelude::*;
 /// pixels (half-pixel centres), clamped to the source.
 #[inline]
 pub(crate) fn src_coord(i: usize, src: usize, dst: usize) -> (usize, usize, f32) {
+    assert!(src > 0, "resample: the source has no pixels to sample");
     let p = ((i as f32 + 0.5) * src as f32 / dst as f32 - 0.5).max(0.0);
     let i0 = (p.floor() as usize).min(src - 1);
     let i1 = (i0 + 1).min(src - 1);

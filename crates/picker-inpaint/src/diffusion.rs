@@ -145,7 +145,7 @@ pub(crate) fn diffuse_planes(
             for &i in &lv.order {
                 v[i] = mean;
             }
-            sweep(lv, v, toroidal, max_sweeps * 20, tolerance);
+            sweep(lv, v, toroidal, max_sweeps.saturating_mul(20), tolerance);
         }
         // Prolongation and smoothing, coarse to fine.
         for l in (0..top).rev() {

@@ -91,8 +91,10 @@ impl SeamScore {
 }
 
 impl Texture {
-    /// A texture of one colour.
+    /// A texture of one colour (sizes of 0 are raised to 1: a texture has
+    /// at least one texel).
     pub fn uniform(width: usize, height: usize, rgb: Vec3) -> Self {
+        let (width, height) = (width.max(1), height.max(1));
         Self {
             width,
             height,
@@ -100,8 +102,10 @@ impl Texture {
         }
     }
 
-    /// A texture whose texel `(col, row)` is `f(u, v)` at its centre.
+    /// A texture whose texel `(col, row)` is `f(u, v)` at its centre (sizes
+    /// of 0 are raised to 1).
     pub fn from_fn(width: usize, height: usize, f: impl Fn(f32, f32) -> Vec3) -> Self {
+        let (width, height) = (width.max(1), height.max(1));
         let mut data = Vec::with_capacity(width * height);
         for row in 0..height {
             let v = (row as f32 + 0.5) / height as f32;
@@ -117,7 +121,15 @@ impl Texture {
     }
 
     /// Texel `(col, row)`, wrapped.
+    ///
+    /// # Panics
+    /// When the texture has no texels (its fields were set by hand: the
+    /// constructors make at least one).
     pub fn get(&self, col: isize, row: isize) -> Vec3 {
+        assert!(
+            self.width > 0 && self.height > 0,
+            "Texture::get: the texture has no texels"
+        );
         let c = col.rem_euclid(self.width as isize) as usize;
         let r = row.rem_euclid(self.height as isize) as usize;
         self.data[r * self.width + c]
@@ -160,8 +172,12 @@ impl Texture {
     }
 
     /// The seam metric ([`SeamScore`]).
+    ///
+    /// # Panics
+    /// As [`Texture::get`].
     pub fn seam(&self) -> SeamScore {
         let (w, h) = (self.width, self.height);
+        assert!(w > 0 && h > 0, "Texture::seam: the texture has no texels");
         let d = |a: Vec3, b: Vec3| ((a - b).abs().element_sum() / 3.0) as f64;
         let col_pair = |x0: usize, x1: usize| {
             (0..h)
@@ -201,8 +217,10 @@ impl Texture {
     }
 
     /// Resampled to `width × height` with wrap-around: bilinear, box-averaged over the
-    /// footprint of each output texel when shrinking.
+    /// footprint of each output texel when shrinking (sizes of 0 are raised
+    /// to 1).
     pub fn resample_wrapped(&self, width: usize, height: usize) -> Texture {
+        let (width, height) = (width.max(1), height.max(1));
         let kx = self.width.div_ceil(width).max(1);
         let ky = self.height.div_ceil(height).max(1);
         let norm = 1.0 / (kx * ky) as f32;
@@ -1216,6 +1234,18 @@ fn weave(rng: &mut Rng, size: usize) -> Pattern {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn zero_sizes_are_raised_to_one_texel() {
+        let c = Vec3::new(0.1, 0.2, 0.3);
+        let t = Texture::uniform(0, 0, c);
+        assert_eq!((t.width, t.height), (1, 1));
+        assert_eq!(t.get(5, -3), c);
+        assert_eq!(Texture::from_fn(0, 3, |_, _| c).width, 1);
+        let r = Texture::uniform(4, 4, c).resample_wrapped(0, 4);
+        assert_eq!((r.width, r.height), (1, 4));
+        let _ = t.seam(); // a 1×1 texture has a seam score, without panicking
+    }
 
     const SIZE: usize = 64;
 
