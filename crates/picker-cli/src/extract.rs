@@ -592,9 +592,11 @@ fn read_elements(dir: &Path, photo: Image) -> Result<(Inputs, Value)> {
     ))
 }
 
-/// Refuses a colour image (segmentation, embedding) holding NaN or infinite
-/// values: the masks compare colours, and such a value matches nothing.
-fn check_finite(path: &Path, img: &Image) -> Result<()> {
+/// Refuses an image read from `path` that holds NaN or infinite values
+/// (a corrupt EXR), naming the file: colours are compared (segmentation,
+/// embedding) or rendered (`picker render`), and such a value matches or
+/// lights nothing.
+pub(crate) fn check_finite(path: &Path, img: &Image) -> Result<()> {
     let bad = img.data.iter().filter(|v| !v.is_finite()).count();
     if bad > 0 {
         bail!(

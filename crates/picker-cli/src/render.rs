@@ -135,14 +135,7 @@ fn num(v: f64) -> serde_json::Value {
 /// NaN or infinite values (a corrupt EXR), naming the file.
 fn read_linear(path: &Path) -> Result<Image> {
     let img = io::read_image(path)?;
-    let bad = img.data.iter().filter(|v| !v.is_finite()).count();
-    if bad > 0 {
-        bail!(
-            "{}: {bad} of its {} values are NaN or infinite; give finite colours",
-            path.display(),
-            img.data.len()
-        );
-    }
+    crate::extract::check_finite(path, &img)?;
     let is_png = path
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("png"));

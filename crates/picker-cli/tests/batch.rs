@@ -468,6 +468,13 @@ fn usage_errors_exit_2() {
     let w = weights();
     let o = out.to_str().unwrap();
     let i = input.to_str().unwrap();
+    // Picks files: a short row, and an absolute path (refused as one, not
+    // as an unknown image).
+    let bad = tmp.path().join("bad.csv");
+    std::fs::write(&bad, "a.png,1\n").unwrap();
+    let abs = tmp.path().join("abs.csv");
+    std::fs::write(&abs, "/tmp/a.png,1,2\n").unwrap();
+    let (bad, abs) = (bad.to_str().unwrap(), abs.to_str().unwrap());
     let cases: Vec<(Vec<&str>, &str)> = vec![
         (vec!["batch", i, "--out", o, "--weights", &w], "--picks"),
         (
@@ -496,6 +503,29 @@ fn usage_errors_exit_2() {
             ],
             "not a folder",
         ),
+        (
+            vec!["batch", i, "--out", o, "--weights", &w, "--picks", bad],
+            "bad.csv line 1",
+        ),
+        (
+            vec!["batch", i, "--out", o, "--weights", &w, "--picks", abs],
+            "must be a path inside IN_DIR",
+        ),
+        // A report path that is a folder, refused before any photo is made.
+        (
+            vec![
+                "batch",
+                i,
+                "--out",
+                o,
+                "--weights",
+                &w,
+                "--all",
+                "--report",
+                i,
+            ],
+            "is a folder",
+        ),
     ];
     for (args, want) in cases {
         let r = picker().args(&args).output().unwrap();
@@ -503,53 +533,6 @@ fn usage_errors_exit_2() {
         assert_eq!(r.status.code(), Some(2), "{args:?}: {err}");
         assert!(err.contains(want), "{args:?}: {err}");
     }
-    let csv = tmp.path().join("bad.csv");
-    std::fs::write(&csv, "a.png,1\n").unwrap();
-    let r = picker()
-        .args([
-            "batch",
-            i,
-            "--out",
-            o,
-            "--weights",
-            &w,
-            "--picks",
-            csv.to_str().unwrap(),
-        ])
-        .output()
-        .unwrap();
-    let err = String::from_utf8_lossy(&r.stderr);
-    assert_eq!(r.status.code(), Some(2), "{err}");
-    assert!(err.contains("bad.csv line 1"), "{err}");
-    // An absolute path in the picks is refused as one (not as an unknown
-    // image), and a report path that is a folder before any photo is made.
-    std::fs::write(&csv, "/tmp/a.png,1,2\n").unwrap();
-    let mut args = vec!["batch", i, "--out", o, "--weights", &w, "--picks"];
-    args.push(csv.to_str().unwrap());
-    let r = picker().args(&args).output().unwrap();
-    let err = String::from_utf8_lossy(&r.stderr);
-    assert_eq!(r.status.code(), Some(2), "{err}");
-    assert!(err.contains("must be a path inside IN_DIR"), "{err}");
-    let r = picker()
-        .args([
-            "batch",
-            i,
-            "--out",
-            o,
-            "--weights",
-            &w,
-            "--all",
-            "--report",
-            i,
-        ])
-        .output()
-        .unwrap();
-    let err = String::from_utf8_lossy(&r.stderr);
-    assert_eq!(r.status.code(), Some(2), "{err}");
-    assert!(
-        err.contains("--report") && err.contains("is a folder"),
-        "{err}"
-    );
 }
 
 #[test]
