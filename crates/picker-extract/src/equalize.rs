@@ -50,6 +50,15 @@ pub enum Edges {
 }
 
 impl Edges {
+    /// The period of [`Edges::index`] over a line of `n ≥ 1` values.
+    fn period(self, n: usize) -> usize {
+        match self {
+            Edges::Wrap => n,
+            Edges::Mirror if n == 1 => 1,
+            Edges::Mirror => 2 * n - 2,
+        }
+    }
+
     /// Index `j` of a line of `n ≥ 1` values.
     fn index(self, j: isize, n: usize) -> usize {
         match self {
@@ -67,7 +76,9 @@ impl Edges {
 /// Box blur of a `w × h` plane (row-major) with half-width `r` along rows
 /// and then columns, each output the mean of the `2r + 1` values around it,
 /// read past the edges as `edges` says (a box wider than the plane wraps or
-/// mirrors again). `plane.len()` must be `w · h`.
+/// mirrors again). `plane.len()` must be `w · h`. A box wider than a line's
+/// period is summed as whole periods plus the rest, so any `r` costs the
+/// same.
 pub fn box_blur(plane: &[f64], w: usize, h: usize, r: usize, edges: Edges) -> Vec<f64> {
     assert_eq!(plane.len(), w * h, "box_blur: plane is not {w}x{h}");
     let mut out = plane.to_vec();
@@ -77,16 +88,33 @@ pub fn box_blur(plane: &[f64], w: usize, h: usize, r: usize, edges: Edges) -> Ve
     let mut tmp = vec![0.0; plane.len()];
     // `count` lines of `n` values: line `l` starts at `l·step`, its values
     // `stride` apart. A running sum over the window.
+    // The window [i − r, i + r] holds `whole` periods of the line and a
+    // rest of `part` values from i − r ≡ i + start (mod the period); below
+    // one period (every blur the pipeline makes) that is the plain running
+    // sum over [i − r, i + r].
     let pass =
         |src: &[f64], dst: &mut [f64], n: usize, stride: usize, count: usize, step: usize| {
-            let k = (2 * r + 1) as f64;
-            let ri = r as isize;
+            let period = edges.period(n) as u128;
+            let len = 2 * r as u128 + 1;
+            let k = len as f64;
+            let whole = (len / period) as f64;
+            let part = (len % period) as isize;
+            let start = -((r as u128 % period) as isize);
             for l in 0..count {
                 let at = |j: isize| l * step + edges.index(j, n) * stride;
-                let mut s: f64 = (-ri..=ri).map(|d| src[at(d)]).sum();
+                let full: f64 = if whole > 0.0 {
+                    (0..period as isize).map(|j| src[at(j)]).sum()
+                } else {
+                    0.0
+                };
+                let mut s: f64 = (start..start + part).map(|d| src[at(d)]).sum();
                 for i in 0..n as isize {
-                    dst[at(i)] = s / k;
-                    s += src[at(i + ri + 1)] - src[at(i - ri)];
+                    dst[at(i)] = if whole > 0.0 {
+                        (whole * full + s) / k
+                    } else {
+                        s / k
+                    };
+                    s += src[at(i + start + part)] - src[at(i + start)];
                 }
             }
         };
@@ -203,6 +231,7 @@ mod tests {
             (7, 11, 9),
             (3, 3, 20),
             (32, 17, 5),
+            (5, 6, 1000),
         ] {
             let p: Vec<f64> = (0..w * h).map(|_| rng.f64() * 2.0 - 0.5).collect();
             for edges in [Edges::Wrap, Edges::Mirror] {
@@ -224,6 +253,16 @@ mod tests {
             );
         }
         assert!(box_blur(&[], 0, 3, 2, Edges::Wrap).is_empty());
+        // Any half-width costs the same: an endless box is the plane's mean.
+        let p: Vec<f64> = (0..12).map(|i| f64::from(i) * 0.25).collect();
+        let mean = p.iter().sum::<f64>() / 12.0;
+        for v in box_blur(&p, 4, 3, usize::MAX / 2, Edges::Wrap) {
+            assert!((v - mean).abs() < 1e-9, "{v} vs {mean}");
+        }
+        // Mirrored, the period weights the inner texels twice: still finite.
+        assert!(box_blur(&p, 4, 3, usize::MAX / 2, Edges::Mirror)
+            .iter()
+            .all(|v| v.is_finite()));
         // Mirrored, a ramp's ends are not pulled towards each other.
         let ramp: Vec<f64> = (0..16).map(f64::from).collect();
         let m = box_blur(&ramp, 16, 1, 2, Edges::Mirror);

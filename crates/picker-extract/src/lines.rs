@@ -509,6 +509,9 @@ impl SmallLuma {
 
     /// A full-resolution mask at this size: a block is in it when all its
     /// pixels are.
+    ///
+    /// # Panics
+    /// When `mask` is not the full resolution's size.
     pub fn mask(&self, mask: &[bool]) -> Vec<bool> {
         let (fw, fh) = self.full;
         assert_eq!(mask.len(), fw * fh, "mask is the photo's size");

@@ -23,7 +23,16 @@ pub const TONE_MAP_KEY: f32 = 0.18;
 /// Reinhard et al. 2002's global operator with automatic exposure — scale so
 /// the log-average Rec. 709 luminance becomes [`TONE_MAP_KEY`], then
 /// `c / (1 + c)` per channel — followed by [`srgb_encode`].
+///
+/// # Panics
+/// When `planes` holds fewer than three planes of `n` values (further planes
+/// are ignored).
 pub fn tone_map_rgb(planes: &[f32], n: usize) -> Vec<f32> {
+    assert!(
+        n.checked_mul(3).is_some_and(|m| planes.len() >= m),
+        "tone_map_rgb: expected 3 planes of {n} values, got {} values",
+        planes.len()
+    );
     let (r, rest) = planes.split_at(n);
     let (g, b) = rest.split_at(n);
     let mut log_sum = 0.0f64;
