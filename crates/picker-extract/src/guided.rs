@@ -20,6 +20,8 @@ use crate::resample;
 /// through a summed-area table in `f64` (exact to rounding for any `r`).
 pub fn box_mean(src: &[f32], w: usize, h: usize, r: usize) -> Vec<f32> {
     assert_eq!(src.len(), w * h, "plane length");
+    // A box wider than the plane is clipped to it anyway.
+    let r = r.min(w.max(h));
     let mut sat = vec![0.0f64; (w + 1) * (h + 1)];
     for y in 0..h {
         let mut row = 0.0f64;

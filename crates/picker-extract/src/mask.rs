@@ -156,6 +156,13 @@ fn colour(seg: &Image, i: usize) -> [f32; 3] {
 /// `valid[i]`: the pixel has a surface.
 pub fn pick_colour(seg: &Image, valid: &[bool], x: usize, y: usize) -> Option<([f32; 3], f32)> {
     let (w, h) = (seg.width, seg.height);
+    // A pick outside the image, or inputs that disagree, have no colour.
+    if seg.channels < 3 || seg.data.len() != seg.channels * w * h || valid.len() != w * h {
+        return None;
+    }
+    if x >= w || y >= h {
+        return None;
+    }
     let window = |r: usize| -> Vec<usize> {
         let mut v = Vec::new();
         for yy in y.saturating_sub(r)..(y + r + 1).min(h) {

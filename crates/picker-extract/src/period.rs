@@ -720,9 +720,16 @@ pub fn fold_uv_if_periodic(
 /// side and resampled to the square with wrap-around (area average along an
 /// axis that shrinks, bilinear along one that grows; no resampling where
 /// `repeats · tile side == side`).
+///
+/// # Panics
+/// When `repeats` times the tile's size overflows `usize`.
 pub fn unfold(tile: &Image, repeats: [usize; 2], side: usize) -> Image {
     let (c, th, tw) = (tile.channels, tile.height, tile.width);
     let (nx, ny) = (repeats[0].max(1), repeats[1].max(1));
+    assert!(
+        th.checked_mul(ny).is_some() && tw.checked_mul(nx).is_some(),
+        "unfold: {repeats:?} repeats of a {tw}x{th} tile overflow"
+    );
     crate::report::resize_rows((c, th * ny, tw * nx), side, side, true, |ch, r, out| {
         let src = &tile.plane(ch)[(r % th) * tw..(r % th + 1) * tw];
         for (x, o) in out.iter_mut().enumerate() {

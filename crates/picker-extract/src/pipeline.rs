@@ -1746,6 +1746,16 @@ mod tests {
         assert_eq!(crate::mask::neighbours4(9, 3, 3).count(), 0);
         assert_eq!(crate::mask::neighbours4(4, 3, 3).count(), 4);
         assert_eq!(crate::mask::nearest_label(&[1], 0, (0, 0)), 0);
+        let seg2 = Image::new(2, 2, 2, vec![0.5; 8]).unwrap();
+        assert_eq!(crate::mask::pick_colour(&seg2, &[true; 4], 0, 0), None);
+        let seg3 = Image::new(3, 2, 2, vec![0.5; 12]).unwrap();
+        assert_eq!(crate::mask::pick_colour(&seg3, &[true; 4], 3, 3), None);
+        assert!(crate::mask::pick_colour(&seg3, &[true; 4], 1, 1).is_some());
+        let plane: Vec<f32> = (0..12).map(|i| i as f32).collect();
+        assert_eq!(
+            crate::guided::box_mean(&plane, 4, 3, usize::MAX),
+            crate::guided::box_mean(&plane, 4, 3, 4)
+        );
         let seg = Image::new(3, 2, 2, vec![0.5; 12]).unwrap();
         let opts = MaskOptions::default();
         assert!(crate::mask::pick_mask(&seg, &[true; 3], 1, 1, &opts).is_err());

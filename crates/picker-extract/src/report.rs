@@ -497,8 +497,15 @@ pub fn dimmed_tile<'a>(
 }
 
 /// A [`LazyTile`] of `img` repeated `k × k` times, made row by row.
+///
+/// # Panics
+/// When `k` times the image's size overflows `usize`.
 pub fn tiled_tile(label: String, img: Image, k: usize) -> LazyTile<'static> {
     let (c, h, w) = (img.channels, img.height, img.width);
+    assert!(
+        h.checked_mul(k).is_some() && w.checked_mul(k).is_some(),
+        "tiled_tile: {k} x {k} copies of a {w}x{h} image overflow"
+    );
     LazyTile {
         label,
         width: w * k,

@@ -163,9 +163,10 @@ impl Coords {
     /// the coordinates of the `mask`ed pixels fall into (wrapped into [0,1)
     /// when the coordinates wrap, else only those inside). Near 0 when the
     /// coordinates have collapsed onto a point or a line; `None` for an
-    /// empty mask or `cells == 0`.
+    /// empty mask, `cells == 0` or a grid too large to hold (`cells²`
+    /// overflows).
     pub fn footprint(&self, mask: &[bool], cells: usize) -> Option<f64> {
-        if cells == 0 || !mask.iter().any(|&m| m) {
+        if cells == 0 || cells.checked_mul(cells).is_none() || !mask.iter().any(|&m| m) {
             return None;
         }
         let mut hit = vec![false; cells * cells];

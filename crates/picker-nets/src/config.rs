@@ -661,6 +661,10 @@ impl NetConfig {
         if h == 0 || w == 0 {
             return 0;
         }
+        // Past any size a pass could run at, the count saturates.
+        if h.max(w) > 1 << 24 {
+            return u64::MAX;
+        }
         let (hp, wp) = self.kind().padded_size(h, w);
         let [w0, w1, w2] = self.widths();
         let mut total = 0u64;
@@ -788,6 +792,7 @@ mod tests {
         assert_eq!(c.flops(1, 1), c.flops(8, 8));
         assert_eq!(c.flops(13, 17), c.flops(16, 20));
         assert_eq!(c.flops(0, 5), 0);
+        assert_eq!(c.flops(usize::MAX, usize::MAX), u64::MAX);
         let e = NetConfig::preset(NetKind::EnvMap, "tiny").unwrap();
         assert_eq!(e.flops(3, 3), e.flops(16, 16));
     }

@@ -285,7 +285,11 @@ pub fn envmap_position(d: [f64; 3], h: usize, w: usize) -> (f64, f64) {
 }
 
 /// The pixel `(row, col)` containing direction `d`.
+///
+/// # Panics
+/// When the map has no pixels (`h` or `w` is 0).
 pub fn envmap_pixel(d: [f64; 3], h: usize, w: usize) -> (usize, usize) {
+    assert!(h > 0 && w > 0, "envmap_pixel: a {h}x{w} map has no pixels");
     let (x, y) = envmap_position(d, h, w);
     ((y as usize).min(h - 1), (x as usize).min(w - 1))
 }

@@ -136,7 +136,16 @@ impl EnvMap {
     }
 
     /// Radiance of pixel `(row, col)`.
+    ///
+    /// # Panics
+    /// When the pixel is outside the map.
     pub fn get(&self, row: usize, col: usize) -> Vec3 {
+        assert!(
+            row < self.height && col < self.width,
+            "EnvMap::get: pixel ({row}, {col}) is outside the {}x{} map",
+            self.height,
+            self.width
+        );
         self.data[row * self.width + col]
     }
 
@@ -208,6 +217,12 @@ impl EnvMap {
         }
         if width == self.width && height == self.height {
             return Ok(self.clone());
+        }
+        if width.checked_mul(height).is_none() {
+            return Err(Error::Invalid {
+                what: "environment map size",
+                reason: format!("{height}x{width} overflows"),
+            });
         }
         if width >= self.width && height >= self.height {
             let sx = self.width as f64 / width as f64;

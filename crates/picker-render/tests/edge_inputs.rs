@@ -34,6 +34,12 @@ fn sizes_that_overflow_are_refused() {
     assert!(Image::new(3, 1 << 32, 1 << 32, vec![]).is_err());
     assert!(EnvMap::new(1 << 32, 1 << 32, vec![]).is_err());
     assert!(std::panic::catch_unwind(|| Image::zeros(3, 1 << 32, 1 << 32)).is_err());
+    let env = EnvMap::uniform(4, 2, Vec3::ONE);
+    assert!(env.resample(1 << 32, 1 << 32).is_err());
+    let r = std::panic::catch_unwind(|| env.get(2, 0));
+    let msg = r.unwrap_err();
+    let msg = msg.downcast_ref::<String>().cloned().unwrap_or_default();
+    assert!(msg.contains("outside the 2x4 map"), "{msg}");
 }
 
 #[test]

@@ -83,7 +83,14 @@ pub fn fold_batchnorm(
     let (scale, shift) = bn.scale_shift()?;
     let block = match layout {
         WeightLayout::Conv => c_out,
-        WeightLayout::Transposed { kernel_area } => c_out * kernel_area,
+        WeightLayout::Transposed { kernel_area } => {
+            c_out.checked_mul(kernel_area).ok_or_else(|| {
+                crate::error::invalid(
+                    "fold_batchnorm",
+                    format!("{c_out} channels x kernel area {kernel_area} overflows"),
+                )
+            })?
+        }
     };
     if c_out == 0 || block == 0 || !weight.len().is_multiple_of(block) {
         return Err(shape_err(

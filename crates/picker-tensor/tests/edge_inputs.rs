@@ -65,6 +65,14 @@ fn batchnorm_with_a_variance_that_is_not_positive_is_refused() {
     }
     let (w, b) = fold_batchnorm(&[2.0], None, &bn(0.0, 1e-5), WeightLayout::Conv).unwrap();
     assert!(w[0].is_finite() && b[0].is_finite());
+    let huge = WeightLayout::Transposed {
+        kernel_area: usize::MAX,
+    };
+    let mut two = bn(1.0, 1e-5);
+    for v in [&mut two.gamma, &mut two.beta, &mut two.mean, &mut two.var] {
+        v.push(v[0]);
+    }
+    assert!(fold_batchnorm(&[1.0; 4], None, &two, huge).is_err());
 }
 
 #[test]
