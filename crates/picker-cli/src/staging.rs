@@ -176,6 +176,14 @@ fn kind(dir: bool) -> &'static str {
 /// Removes the staging folders in `out` whose process is gone (Linux, where
 /// `/proc/PID` tells; elsewhere none is removed).
 fn remove_stale(out: &Path) {
+    remove_dead_partials(out, |n| n.strip_prefix(PREFIX));
+}
+
+/// Removes the folders in `out` that a run left while writing and whose
+/// process is gone (Linux, where `/proc/PID` tells; elsewhere none):
+/// `pid_of` gives the process id's text from an entry's name, `None` for
+/// entries that are not such folders.
+pub fn remove_dead_partials(out: &Path, pid_of: impl Fn(&str) -> Option<&str>) {
     let Ok(entries) = std::fs::read_dir(out) else {
         return;
     };
@@ -183,7 +191,7 @@ fn remove_stale(out: &Path) {
         let name = e.file_name();
         let Some(pid) = name
             .to_str()
-            .and_then(|n| n.strip_prefix(PREFIX))
+            .and_then(&pid_of)
             .and_then(|p| p.parse::<u32>().ok())
         else {
             continue;
@@ -195,7 +203,7 @@ fn remove_stale(out: &Path) {
 }
 
 /// True when process `pid` surely no longer exists.
-pub fn process_gone(pid: u32) -> bool {
+fn process_gone(pid: u32) -> bool {
     let proc = Path::new("/proc");
     proc.join("self").exists() && !proc.join(pid.to_string()).exists()
 }

@@ -64,22 +64,11 @@ const PARTIAL: &str = ".partial-";
 /// Removes the hidden partial scene folders of runs that were killed
 /// (their process no longer exists; Linux only, by `/proc`).
 fn remove_stale_partials(out: &Path) {
-    let Ok(entries) = std::fs::read_dir(out) else {
-        return;
-    };
-    for e in entries.flatten() {
-        let name = e.file_name().to_string_lossy().into_owned();
-        let Some(pid) = name
-            .strip_prefix('.')
+    crate::staging::remove_dead_partials(out, |n| {
+        n.strip_prefix('.')
             .and_then(|n| n.rsplit_once(PARTIAL))
-            .and_then(|(_, pid)| pid.parse::<u32>().ok())
-        else {
-            continue;
-        };
-        if pid != std::process::id() && crate::staging::process_gone(pid) {
-            let _ = std::fs::remove_dir_all(e.path());
-        }
-    }
+            .map(|(_, pid)| pid)
+    });
 }
 
 /// Runs `picker synth`.
