@@ -119,6 +119,9 @@ pub struct Args {
     /// error costs the extraction. Needs the networks' working size to be the scene's.
     #[arg(long, value_enum, value_delimiter = ',', value_name = "PARTS")]
     pub truth: Vec<TruthPart>,
+    /// Texture side in texels, as `extract --size` (default: the observed texel density).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=8192))]
+    pub size: Option<u32>,
     /// Long side of the networks' working resolution in pixels (as `extract --work-size`); with
     /// --truth it must make the working size the scene's.
     #[arg(long, default_value_t = 320, value_parser = clap::value_parser!(u32).range(8..=4096))]
@@ -488,7 +491,7 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
     let opts = pipeline::Options {
         mask: Default::default(),
         uv: a.uv.choice(),
-        size: None,
+        size: a.size.map(|s| s as usize),
         max_size: pipeline::DEFAULT_MAX_SIZE,
         fov_deg: None,
         line_refine: !a.no_lines,

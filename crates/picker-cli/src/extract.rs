@@ -104,7 +104,9 @@ pub struct Flags {
     /// (by default a band across each such edge is inpainted so the texture tiles without a seam).
     #[arg(long)]
     pub keep_seams: bool,
-    /// Texture side in texels (default: the observed texel density, capped by --max-size).
+    /// Texture side in texels (default: the observed texel density, capped by --max-size). A side
+    /// above the observed density is made at that density and enlarged (bicubic) at the end: the
+    /// photo holds no finer detail.
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=8192))]
     pub size: Option<u32>,
     /// Cap of the automatic texture side.

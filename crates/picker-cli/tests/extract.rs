@@ -214,6 +214,28 @@ fn eval_scores_plane_textures_at_their_best_quarter_turn() {
     assert!(agg["turned_rows"].as_u64().unwrap() <= 2);
 }
 
+/// `picker eval --size N` makes every texture N texels a side, as
+/// `extract --size`, and scores it (the truth is resampled to the
+/// extracted size, so the score stays comparable).
+#[test]
+fn eval_size_fixes_the_texture_side() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scenes = repo().join("fixtures/blender");
+    let (_, r) = eval_report(&scenes, &["--size", "200"], &tmp.path().join("eval.json"));
+    let mut textured = 0;
+    for row in r["rows"].as_array().unwrap() {
+        if row["textured_extracted"].as_bool().unwrap() {
+            textured += 1;
+            assert_eq!(row["texture_size"].as_u64(), Some(200), "{row}");
+            let psnr = row["texture_psnr_db"].as_f64().unwrap();
+            assert!(psnr.is_finite() && psnr > 15.0, "{row}");
+        }
+    }
+    assert_eq!(textured, 2);
+    let e = run(&["eval", scenes.to_str().unwrap(), "--size", "0"]);
+    assert_eq!(e.status.code(), Some(2));
+}
+
 /// `picker eval` with networks on a scene that is not the networks' working
 /// size (the 120×160 Cycles fixture; the nets run at 240×320): the elements
 /// are compared at the scene's size (this panicked until stop 29), and a

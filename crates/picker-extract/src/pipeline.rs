@@ -607,6 +607,38 @@ pub struct UvDecision {
     pub plane_normal: Option<[f32; 3]>,
 }
 
+/// A `--size` above the observed texel density is kept when the picked
+/// pixels cover at least this share of what they cover at the observed
+/// size; below it the texture is made at the observed size and enlarged
+/// ([`Diagnostics::texture_made_size`]).
+pub const ENLARGE_BELOW_COVERAGE: f64 = 0.9;
+
+/// A `--size` more than this many times the observed side is first looked
+/// at this many times the observed side (twice the largest splat radius,
+/// [`reproject::MAX_SPLAT_RADIUS`]: past it the pixels stop covering the
+/// texels between them); when that square is already too little covered
+/// ([`ENLARGE_BELOW_COVERAGE`]), the larger one is not reprojected.
+pub const ENLARGE_PROBE_FACTOR: usize = 8;
+
+/// The picked pixels reprojected into the texture square at one size,
+/// completed from the rest of the mask and from other repeats.
+struct Observed {
+    /// Mean colour per texel (0 where unobserved).
+    texture: Image,
+    /// Observed texels.
+    known: Vec<bool>,
+    /// Coverage per texel (1 channel).
+    coverage: Image,
+    /// Share of texels observed, the completed ones included.
+    fraction: f64,
+    /// Share observed by the picked pixels and the rest of the mask alone.
+    own_fraction: f64,
+    /// Share filled from the rest of the mask ([`Options::fill_from_mask`]).
+    from_mask: Option<f64>,
+    /// Share filled from other repeats of a repeating square.
+    repeat_filled: Option<f64>,
+}
+
 /// Diagnostics of one extraction, beyond the [`Material`].
 #[derive(Clone, Debug, Serialize)]
 pub struct Diagnostics {
@@ -619,8 +651,20 @@ pub struct Diagnostics {
     pub textured_flag: f32,
     /// UV decision, for textured materials.
     pub uv: Option<UvDecision>,
-    /// Texels per unit of texture square at the median observed density.
+    /// The texture's side: `--size` when given, else
+    /// [`Diagnostics::texture_observed_size`].
     pub texture_size: Option<usize>,
+    /// Texels per unit of texture square at the median observed density
+    /// (capped by `--max-size`): the side the texture is made at without a
+    /// `--size`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub texture_observed_size: Option<usize>,
+    /// The side the texture was reprojected and inpainted at: the
+    /// texture's, or the observed one when a larger `--size` left the
+    /// square markedly less covered ([`ENLARGE_BELOW_COVERAGE`]) and the
+    /// texture was enlarged to it at the end.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub texture_made_size: Option<usize>,
     /// Why a material flagged textured came out as a single colour under
     /// `--uv auto`: neither mode's coordinates reached the texture square
     /// ([`Error::NoTexture`]); absent otherwise.
@@ -889,6 +933,8 @@ fn extract_as(
         textured_flag: t_flag,
         uv: None,
         texture_size: None,
+        texture_observed_size: None,
+        texture_made_size: None,
         texture_fallback: None,
         filled_from_mask: None,
         greyscale_photo: p.greyscale,
@@ -1254,33 +1300,112 @@ fn extract_as(
         } else {
             observed_cap
         };
-        let size = opts.size.unwrap_or_else(|| {
+        let observed = {
             let area = if fold.is_some() {
                 coords.sizing_area(&full.data)
             } else {
                 sizing_area
             };
             reproject::texture_size(area, cap)
-        });
-        diag.texture_size = Some(size);
-        let mut r = reproject::reproject(&coords, &full.data, &delit, &confidence, size);
-        // A texture that repeats: the texels no repeat of the surest part
-        // showed, from the rest of the mask where it showed them
-        // (`Options::fill_from_mask`).
+        };
         let rest = match (mode, &rest_full) {
             (UvMode::Plane, _) if fold.is_some() => plane_rest.as_ref().map(|m| (m, None)),
             (UvMode::Net, Some(rest)) if uv_fold.is_some() => rest_uv().map(|c| (rest, Some(c))),
             _ => None,
         };
-        if let Some((rest, rest_coords)) = rest {
-            let c = rest_coords.unwrap_or(&coords);
-            let o = reproject::reproject(c, &rest.data, &delit, &confidence, size);
-            let n = reproject::fill_unknown_from(&mut r, &o);
-            diag.filled_from_mask = Some(n as f64 / r.known.len().max(1) as f64);
+        // The picked pixels reprojected into a square of `size` texels a
+        // side, completed from the rest of the mask and from other repeats.
+        let observe = |size: usize| -> Observed {
+            let mut r = reproject::reproject(&coords, &full.data, &delit, &confidence, size);
+            // A texture that repeats: the texels no repeat of the surest part
+            // showed, from the rest of the mask where it showed them
+            // (`Options::fill_from_mask`).
+            let mut from_mask = None;
+            if let Some((rest, rest_coords)) = rest {
+                let c = rest_coords.unwrap_or(&coords);
+                let o = reproject::reproject(c, &rest.data, &delit, &confidence, size);
+                let n = reproject::fill_unknown_from(&mut r, &o);
+                from_mask = Some(n as f64 / r.known.len().max(1) as f64);
+            }
+            let own_fraction = r.known_fraction();
+            match uv_fold.as_ref() {
+                // A square that repeats: a hole that another repeat showed is
+                // filled from the tile of every repeat seen; the observed texels
+                // are kept (they hold each repeat's own variation) and what no
+                // repeat showed is inpainted as usual.
+                Some((folded, rep)) => {
+                    let c = crate::period::complete_from_repeats(
+                        &r,
+                        folded,
+                        rep,
+                        &full.data,
+                        &delit,
+                        &confidence,
+                    );
+                    let len = c.known.len().max(1) as f64;
+                    Observed {
+                        fraction: c.known.iter().filter(|&&k| k).count() as f64 / len,
+                        texture: c.texture,
+                        known: c.known,
+                        coverage: c.coverage,
+                        own_fraction,
+                        from_mask,
+                        repeat_filled: Some(c.filled as f64 / len),
+                    }
+                }
+                None => Observed {
+                    texture: r.texture,
+                    known: r.known,
+                    coverage: r.coverage,
+                    fraction: own_fraction,
+                    own_fraction,
+                    from_mask,
+                    repeat_filled: None,
+                },
+            }
+        };
+        let mut size = opts.size.unwrap_or(observed);
+        // A `--size` above the observed density: the photo's pixels may land
+        // in that square as sparse dots (a 2048² square of a 60-texel
+        // observation was 0.5 % observed) that no inpainter completes into the
+        // texture they came from (and PatchMatch takes minutes there). When
+        // the square at the requested size is markedly less covered than at
+        // the observed size, the texture is made at the observed size and
+        // enlarged at the end instead. (Where many repeats or a close view
+        // cover the larger square, it is kept: they hold the finer detail.)
+        // Coverage only falls as the square grows, so a square
+        // `ENLARGE_PROBE_FACTOR` times the observed side is looked at first: a
+        // far larger one (`--size 4096` of a 60-texel view) is not reprojected
+        // in vain (2.2 s and 1 GB there).
+        let seen = if size > observed {
+            let at_observed = observe(observed);
+            let enough = |o: &Observed| o.fraction >= ENLARGE_BELOW_COVERAGE * at_observed.fraction;
+            let probe = size.min(observed.saturating_mul(ENLARGE_PROBE_FACTOR));
+            let probed = (probe < size).then(|| observe(probe));
+            let at_size = match probed {
+                Some(o) if !enough(&o) => None,
+                _ => Some(observe(size)),
+            };
+            match at_size {
+                Some(o) if enough(&o) => o,
+                _ => {
+                    size = observed;
+                    at_observed
+                }
+            }
+        } else {
+            observe(size)
+        };
+        let out_size = opts.size.unwrap_or(size);
+        diag.texture_size = Some(out_size);
+        diag.texture_observed_size = Some(observed);
+        diag.texture_made_size = Some(size);
+        diag.filled_from_mask = seen.from_mask;
+        if let (Some(f), Some((_, rep))) = (seen.repeat_filled, uv_fold.as_mut()) {
+            rep.filled = f;
         }
         lap("reproject", &mut timings);
-        let known_fraction = r.known_fraction();
-        if known_fraction == 0.0 {
+        if seen.own_fraction == 0.0 {
             return Err(Error::NoTexture(format!(
                 "no picked pixel landed in the texture square ({} coordinates unusable); try --uv plane or --uv net",
                 match mode {
@@ -1337,37 +1462,14 @@ fn extract_as(
         // What the report and coverage.png show as observed: the
         // reprojection, with the texels filled from other repeats (at the
         // tile's coverage there) when the square repeats.
-        let (final_tex, raw, coverage, known_fraction) = match uv_fold.as_mut() {
-            // A square that repeats: a hole that another repeat showed is
-            // filled from the tile of every repeat seen; the observed texels
-            // are kept (they hold each repeat's own variation) and what no
-            // repeat showed is inpainted as usual.
-            Some((folded, rep)) => {
-                let c = crate::period::complete_from_repeats(
-                    &r,
-                    folded,
-                    rep,
-                    &full.data,
-                    &delit,
-                    &confidence,
-                );
-                rep.filled = c.filled as f64 / c.known.len().max(1) as f64;
-                let fraction =
-                    c.known.iter().filter(|&&k| k).count() as f64 / c.known.len().max(1) as f64;
-                (
-                    inpaint(&c.texture, &c.known, &mut diag.seam_band)?,
-                    c.texture,
-                    c.coverage,
-                    fraction,
-                )
-            }
-            None => (
-                inpaint(&r.texture, &r.known, &mut diag.seam_band)?,
-                r.texture,
-                r.coverage,
-                known_fraction,
-            ),
-        };
+        let Observed {
+            texture: raw,
+            known,
+            coverage,
+            fraction: known_fraction,
+            ..
+        } = seen;
+        let final_tex = inpaint(&raw, &known, &mut diag.seam_band)?;
         if let Some(d) = diag.uv.as_mut() {
             d.repeats = uv_fold.as_ref().map(|f| f.1);
         }
@@ -1402,12 +1504,30 @@ fn extract_as(
         } else {
             (final_tex, false)
         };
+        // Enlarged to a `--size` above the observed one: the texture smoothly
+        // (bicubic, wrapped when it tiles; negative overshoot clipped), what
+        // was observed as blocks (the report and coverage.png show where the
+        // photo's texels are).
+        let (final_tex, raw, coverage) = if out_size > size {
+            let e = if opts.tileable {
+                crate::resample::Edges::Wrap
+            } else {
+                crate::resample::Edges::Clamp
+            };
+            let mut t = crate::resample::bicubic(&final_tex, out_size, out_size, e);
+            t.data.iter_mut().for_each(|v| *v = v.max(0.0));
+            let blocks = |i: &Image| crate::resample::area(i, out_size, out_size);
+            (t, blocks(&raw), blocks(&coverage))
+        } else {
+            (final_tex, raw, coverage)
+        };
         lap("inpaint", &mut timings);
+        let texels = final_tex.plane_len();
         let mut mean = Vec3::ZERO;
-        for i in 0..size * size {
+        for i in 0..texels {
             mean += final_tex.rgb(i);
         }
-        diffuse_mean = mean / (size * size) as f32;
+        diffuse_mean = mean / texels.max(1) as f32;
         if mode == UvMode::Net {
             uv_work = el.uv.as_ref();
         }
@@ -2341,6 +2461,67 @@ mod tests {
             ..test_options(&inpainter, UvChoice::Plane)
         };
         extract(p, "crop", Some(pick), pm, &opts).unwrap()
+    }
+
+    /// A `--size` above the observed texel density: one texel more is still
+    /// covered (made at that size); twelve times the side (past the largest
+    /// splat footprint, [`reproject::MAX_SPLAT_RADIUS`]) is not, so the
+    /// texture is made at the observed size and enlarged at the end, bit for
+    /// bit the wrapped bicubic enlargement (clipped at 0) of the
+    /// observed-size extraction, its coverage and raw reprojection as blocks.
+    /// A smaller `--size` is made at that size. All report the observed size.
+    #[test]
+    fn a_size_above_the_observed_density_enlarges_the_observed_texture() {
+        let (h, w) = (48, 64);
+        // Seeded noise: no period to fold, so the square holds one view.
+        let noise = picker_tensor::Rng::new(7).uniform_vec(w * h, 0.2, 0.7);
+        let p = frontal_plane(w, h, &|i| noise[i]);
+        let pick = [30, 20];
+        let pm = p.pick_mask(pick, &MaskOptions::default()).unwrap();
+        let inpainter = picker_inpaint::PatchMatchInpainter::default();
+        let run = |size| {
+            let opts = Options {
+                size,
+                max_size: 64,
+                fov_deg: Some(60.0),
+                ..test_options(&inpainter, UvChoice::Plane)
+            };
+            extract(&p, "m", Some(pick), &pm, &opts).unwrap()
+        };
+        let (m0, d0) = run(None);
+        let s = d0.texture_observed_size.unwrap();
+        assert_eq!((d0.texture_size, d0.texture_made_size), (Some(s), Some(s)));
+        assert!(s >= 16, "observed size {s}");
+        let t0 = m0.texture.unwrap();
+        let sizes =
+            |d: &Diagnostics| (d.texture_size, d.texture_observed_size, d.texture_made_size);
+
+        let (m1, d1) = run(Some(s + 1));
+        assert_eq!(sizes(&d1), (Some(s + 1), Some(s), Some(s + 1)));
+        assert_eq!(m1.texture.unwrap().texture.width, s + 1);
+
+        let big = 12 * s;
+        let (m2, d2) = run(Some(big));
+        assert_eq!(sizes(&d2), (Some(big), Some(s), Some(s)));
+        let t2 = m2.texture.unwrap();
+        let mut want =
+            crate::resample::bicubic(&t0.texture, big, big, crate::resample::Edges::Wrap);
+        want.data.iter_mut().for_each(|v| *v = v.max(0.0));
+        assert!(
+            t2.texture.data == want.data,
+            "not the enlarged observed texture"
+        );
+        for (got, from) in [(&t2.coverage, &t0.coverage), (&t2.raw, &t0.raw)] {
+            assert_eq!((got.width, got.height), (big, big));
+            assert!(got.data == crate::resample::area(from, big, big).data);
+        }
+        assert_eq!(t2.coverage_fraction, t0.coverage_fraction);
+
+        let small = s / 2;
+        let (m3, d3) = run(Some(small));
+        assert_eq!(sizes(&d3), (Some(small), Some(s), Some(small)));
+        let t3 = m3.texture.unwrap();
+        assert_eq!((t3.texture.width, t3.coverage.width), (small, small));
     }
 
     /// The extraction of `pm` in `p` (diffusion inpainting, seed 1,
