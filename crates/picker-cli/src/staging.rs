@@ -106,7 +106,17 @@ impl Staging {
     /// the same name and kind, `summary.json` last. Refuses, before moving
     /// anything, when an entry would replace one of the other kind (a file
     /// where a folder is, or the reverse).
+    ///
+    /// Runs into the same folder commit one at a time: the folder is locked
+    /// (an advisory `flock` on the folder itself, where the platform allows
+    /// one; released when the move is done or the process ends), so two
+    /// runs that finish together leave one run's whole set, never a mix.
     pub fn commit(mut self) -> Result<()> {
+        let lock = std::fs::File::open(&self.out).ok();
+        if let Some(l) = &lock {
+            // A platform or file system without folder locks moves unlocked.
+            let _ = l.lock();
+        }
         let mut names: Vec<std::ffi::OsString> = std::fs::read_dir(&self.dir)
             .with_context(|| format!("{}: reading the staging folder", self.dir.display()))?
             .map(|e| e.map(|e| e.file_name()))
@@ -144,7 +154,7 @@ impl Staging {
         }
         std::fs::remove_dir(&self.dir)
             .with_context(|| format!("{}: removing the staging folder", self.dir.display()))?;
-        if let Ok(d) = std::fs::File::open(&self.out) {
+        if let Some(d) = &lock {
             let _ = d.sync_all();
         }
         self.done = true;
@@ -243,6 +253,32 @@ mod tests {
             .filter(|n| n.starts_with('.'))
             .collect();
         assert!(left.is_empty(), "hidden entries left: {left:?}");
+        std::fs::remove_dir_all(&out).unwrap();
+    }
+
+    /// A commit waits while another run holds the output folder's lock
+    /// (as a run that is moving its own set into place does), then moves.
+    #[test]
+    fn commit_waits_for_the_folders_lock() {
+        let out = tmp("lock");
+        let s = Staging::begin(&out, SUMMARY, false).unwrap();
+        std::fs::write(s.path().join("texture.png"), b"new").unwrap();
+        std::fs::write(s.path().join(SUMMARY), b"{}").unwrap();
+        let other = std::fs::File::open(&out).unwrap();
+        if other.try_lock().is_err() {
+            // No folder locks on this platform or file system: nothing to test.
+            eprintln!("skipped: {} cannot be locked here", out.display());
+            std::fs::remove_dir_all(&out).unwrap();
+            return;
+        }
+        let mover = std::thread::spawn(move || s.commit());
+        std::thread::sleep(std::time::Duration::from_millis(300));
+        assert!(!out.join("texture.png").exists(), "moved while locked");
+        assert!(!mover.is_finished());
+        other.unlock().unwrap();
+        mover.join().unwrap().unwrap();
+        assert_eq!(std::fs::read(out.join("texture.png")).unwrap(), b"new");
+        assert!(out.join(SUMMARY).is_file());
         std::fs::remove_dir_all(&out).unwrap();
     }
 
