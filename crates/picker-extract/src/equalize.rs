@@ -60,7 +60,7 @@ impl Edges {
     }
 
     /// Index `j` of a line of `n ≥ 1` values.
-    fn index(self, j: isize, n: usize) -> usize {
+    pub(crate) fn index(self, j: isize, n: usize) -> usize {
         match self {
             Edges::Wrap => j.rem_euclid(n as isize) as usize,
             Edges::Mirror if n == 1 => 0,

@@ -1505,16 +1505,11 @@ fn extract_as(
             (final_tex, false)
         };
         // Enlarged to a `--size` above the observed one: the texture smoothly
-        // (bicubic, wrapped when it tiles; negative overshoot clipped), what
+        // (bicubic, wrapped when it tiles, else mirrored; negative overshoot clipped), what
         // was observed as blocks (the report and coverage.png show where the
         // photo's texels are).
         let (final_tex, raw, coverage) = if out_size > size {
-            let e = if opts.tileable {
-                crate::resample::Edges::Wrap
-            } else {
-                crate::resample::Edges::Clamp
-            };
-            let mut t = crate::resample::bicubic(&final_tex, out_size, out_size, e);
+            let mut t = crate::resample::bicubic(&final_tex, out_size, out_size, edges);
             t.data.iter_mut().for_each(|v| *v = v.max(0.0));
             let blocks = |i: &Image| crate::resample::area(i, out_size, out_size);
             (t, blocks(&raw), blocks(&coverage))
@@ -2505,7 +2500,7 @@ mod tests {
         assert_eq!(sizes(&d2), (Some(big), Some(s), Some(s)));
         let t2 = m2.texture.unwrap();
         let mut want =
-            crate::resample::bicubic(&t0.texture, big, big, crate::resample::Edges::Wrap);
+            crate::resample::bicubic(&t0.texture, big, big, crate::equalize::Edges::Wrap);
         want.data.iter_mut().for_each(|v| *v = v.max(0.0));
         assert!(
             t2.texture.data == want.data,

@@ -12,6 +12,8 @@
 use picker_render::io::Image;
 use rayon::prelude::*;
 
+use crate::equalize::Edges;
+
 /// Source coordinate of destination index `i` when `src` pixels become `dst`
 /// pixels (half-pixel centres), clamped to the source.
 #[inline]
@@ -130,15 +132,6 @@ pub fn area(img: &Image, dw: usize, dh: usize) -> Image {
     per_plane(img, dw, dh, area_plane)
 }
 
-/// How [`bicubic`] reads past a plane's edges.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Edges {
-    /// The plane repeats (a tileable texture): the result tiles too.
-    Wrap,
-    /// The edge pixels repeat outwards.
-    Clamp,
-}
-
 /// Catmull-Rom weights of the four taps `i0 − 1 … i0 + 2` at fraction `t`
 /// past `i0` (they sum to 1 and reproduce linear functions).
 fn catmull_rom(t: f64) -> [f64; 4] {
@@ -160,20 +153,14 @@ fn cubic_taps(n: usize, dn: usize, edges: Edges) -> Vec<([usize; 4], [f32; 4])> 
             let p = (i as f64 + 0.5) * n as f64 / dn as f64 - 0.5;
             let i0 = p.floor();
             let w = catmull_rom(p - i0);
-            let idx = std::array::from_fn(|k| {
-                let j = i0 as i64 - 1 + k as i64;
-                match edges {
-                    Edges::Wrap => j.rem_euclid(n as i64) as usize,
-                    Edges::Clamp => j.clamp(0, n as i64 - 1) as usize,
-                }
-            });
+            let idx = std::array::from_fn(|k| edges.index(i0 as isize - 1 + k as isize, n));
             (idx, w.map(|v| v as f32))
         })
         .collect()
 }
 
 /// Bicubic (Catmull-Rom) resize of one plane (`w×h` → `dw×dh`), half-pixel
-/// centres, the edges wrapped or clamped ([`Edges`]); separable, rows in
+/// centres, the edges wrapped or mirrored ([`Edges`]); separable, rows in
 /// parallel (each value one fixed-order sum: the same bits for any thread
 /// count). Meant for enlarging; it may overshoot near sharp edges.
 pub fn bicubic_plane(
@@ -501,9 +488,24 @@ mod tests {
         dh: usize,
         edges: Edges,
     ) -> Vec<f64> {
-        let fetch = |j: i64, n: usize| match edges {
-            Edges::Wrap => j.rem_euclid(n as i64) as usize,
-            Edges::Clamp => j.clamp(0, n as i64 - 1) as usize,
+        // Read past the edges by unrolling the line: wrapped, or mirrored
+        // about the edge pixels (`…, 2, 1, 0, 1, 2, …`).
+        let fetch = |j: i64, n: usize| {
+            let n = n as i64;
+            let mut j = j;
+            match edges {
+                Edges::Wrap => j.rem_euclid(n) as usize,
+                Edges::Mirror => {
+                    while n > 1 && !(0..n).contains(&j) {
+                        j = if j < 0 { -j } else { 2 * (n - 1) - j };
+                    }
+                    if n == 1 {
+                        0
+                    } else {
+                        j as usize
+                    }
+                }
+            }
         };
         let mut out = Vec::with_capacity(dw * dh);
         for y in 0..dh {
@@ -542,7 +544,7 @@ mod tests {
             (5, 40, 5, 40),
         ];
         for (w, h, dw, dh) in shapes {
-            for edges in [Edges::Wrap, Edges::Clamp] {
+            for edges in [Edges::Wrap, Edges::Mirror] {
                 let src = rng.uniform_vec(w * h, -1.0, 2.0);
                 let fast = bicubic_plane(&src, w, h, dw, dh, edges);
                 let slow = bicubic_reference(&src, w, h, dw, dh, edges);
@@ -559,19 +561,19 @@ mod tests {
     }
 
     /// Analytic cases: a constant stays constant; a linear ramp is
-    /// reproduced exactly away from clamped edges; a periodic sinusoid
+    /// reproduced exactly away from mirrored edges; a periodic sinusoid
     /// enlarged 8× with wrapped edges follows the continuous one closely at
     /// every pixel, across the wrap edges too (the result tiles); a
     /// same-size resize is the identity.
     #[test]
     fn bicubic_analytic_cases() {
-        for edges in [Edges::Wrap, Edges::Clamp] {
+        for edges in [Edges::Wrap, Edges::Mirror] {
             let c = bicubic_plane(&[0.25; 35], 7, 5, 29, 13, edges);
             assert!(c.iter().all(|&v| (v - 0.25).abs() < 1e-6));
         }
         let (w, dw) = (12usize, 48usize);
         let ramp: Vec<f32> = (0..w).map(|x| 0.1 * x as f32).collect();
-        let up = bicubic_plane(&ramp, w, 1, dw, 1, Edges::Clamp);
+        let up = bicubic_plane(&ramp, w, 1, dw, 1, Edges::Mirror);
         for (x, &v) in up.iter().enumerate() {
             let p = (x as f32 + 0.5) * w as f32 / dw as f32 - 0.5;
             if p >= 1.0 && p <= (w - 2) as f32 {
@@ -601,7 +603,7 @@ mod tests {
                 "wave at {i}: {v} vs {truth}"
             );
         }
-        let same = bicubic_plane(&src, n, n, n, n, Edges::Clamp);
+        let same = bicubic_plane(&src, n, n, n, n, Edges::Mirror);
         assert!(same.iter().zip(&src).all(|(a, b)| (a - b).abs() < 1e-6));
     }
 
