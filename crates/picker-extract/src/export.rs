@@ -277,6 +277,7 @@ pub fn material_json(m: &Material, extra: &Value, opts: &ExportOptions) -> Resul
             "width": t.texture.width,
             "height": t.texture.height,
             "coverage_fraction": t.coverage_fraction,
+            "observed_size": t.observed_size,
             "seam": {
                 "wrap": t.seam.wrap,
                 "interior": t.seam.interior,
@@ -393,6 +394,10 @@ fn conventions() -> Value {
     put(
         "texture.coverage_fraction",
         "fraction of texels observed in the photo (coverage > 0), counting those filled from another repeat of a texture square that repeats (diagnostics.uv.repeats.filled)",
+    );
+    put(
+        "texture.observed_size",
+        "texels per unit of texture square at the photo's density: the automatic side; a larger --size than the photo covers is made at this side and enlarged (bicubic), a smaller one is made at its own",
     );
     put(
         "texture.seam",

@@ -53,6 +53,12 @@ pub struct TextureResult {
     pub coverage: Image,
     /// Fraction of texels observed (coverage > 0), the repeat-filled ones included.
     pub coverage_fraction: f64,
+    /// Texels per unit of texture square at the photo's density (the
+    /// automatic side, [`crate::pipeline::Diagnostics::texture_observed_size`]): the
+    /// texture's own side unless `--size` chose another. It keeps the scale
+    /// the material had in the photo (the preview sphere wraps the texture
+    /// by it).
+    pub observed_size: usize,
     /// How the coordinates were obtained.
     pub uv_mode: UvMode,
     /// Seam score of the final texture (wrap-edge difference vs interior).

@@ -1533,6 +1533,7 @@ fn extract_as(
             raw,
             coverage,
             coverage_fraction: known_fraction,
+            observed_size: observed,
             uv_mode: mode,
             inpainter: opts.inpainter.name().to_string(),
         });
@@ -1614,11 +1615,13 @@ pub fn preview_repeats(side: usize, size: usize) -> f32 {
 }
 
 /// The repeats of [`preview_repeats`] for material `m`'s texture (1 for a
-/// single-colour material).
+/// single-colour material), by the side the texture had at the photo's
+/// density ([`TextureResult::observed_size`]): a `--size` does not change the
+/// scale the preview shows the material at.
 pub fn material_preview_repeats(m: &Material, size: usize) -> f32 {
-    m.texture.as_ref().map_or(1.0, |t| {
-        preview_repeats(t.texture.width.max(t.texture.height), size)
-    })
+    m.texture
+        .as_ref()
+        .map_or(1.0, |t| preview_repeats(t.observed_size, size))
 }
 
 /// A textured preview sphere (orthographic, `size × size`, linear RGB; the
@@ -1951,6 +1954,7 @@ mod tests {
             raw: tex.clone(),
             coverage: Image::zeros(1, tex.height, tex.width),
             coverage_fraction: 1.0,
+            observed_size: tex.width.max(tex.height),
             uv_mode: UvMode::Plane,
             inpainter: "test".into(),
         });
@@ -2047,6 +2051,12 @@ mod tests {
         .unwrap();
         let m = with_texture(plain_material([0.5; 3], 0.0), &tex);
         assert_eq!(material_preview_repeats(&m, 256), 8.0);
+        // A texture made larger than the photo showed it (`--size`) wraps
+        // as often as at the photo's density.
+        let mut big = with_texture(plain_material([0.5; 3], 0.0), &Image::zeros(3, 512, 512));
+        big.texture.as_mut().unwrap().observed_size = 100;
+        assert_eq!(material_preview_repeats(&big, 256), 8.0);
+        assert_eq!(preview_repeats(512, 256), 2.0);
         assert_eq!(
             material_preview_repeats(&plain_material([0.5; 3], 0.0), 256),
             1.0
@@ -2511,6 +2521,7 @@ mod tests {
             assert!(got.data == crate::resample::area(from, big, big).data);
         }
         assert_eq!(t2.coverage_fraction, t0.coverage_fraction);
+        assert_eq!((t0.observed_size, t2.observed_size), (s, s));
 
         let small = s / 2;
         let (m3, d3) = run(Some(small));

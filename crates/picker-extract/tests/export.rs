@@ -46,6 +46,7 @@ fn textured() -> Material {
             texture: tex,
             coverage,
             coverage_fraction: 0.66,
+            observed_size: s,
             uv_mode: UvMode::Plane,
             seam: picker_inpaint::SeamScore {
                 wrap: 0.1,
