@@ -29,10 +29,15 @@
 //!   Beckmann/GGX correspondence (Walter et al. 2007) then gives
 //!   `α = sqrt(2 / (n_b + 2))` and glTF's perceptual roughness
 //!   `roughnessFactor = sqrt(α)`, clamped to `[0, 1]`;
-//! - `KHR_materials_specular`: `specularFactor = max_c ρs,c` and
-//!   `specularColorFactor = ρs / max_c ρs,c` (white when ρs = 0), i.e. the
-//!   specular strength relative to glTF's default dielectric (ior 1.5, F0 = 0.04)
-//!   and its tint.
+//! - `KHR_materials_specular` (ratified): `specularFactor = 1` and
+//!   `specularColorFactor = ρs / 0.04` ([`GLTF_DIELECTRIC_F0`]; the spec allows
+//!   values above 1), so that glTF's dielectric Fresnel at normal incidence,
+//!   `F0 = min(0.04 · specularColorFactor, 1) · specularFactor`, is `ρs`: the
+//!   Phong lobe's directional albedo at normal incidence
+//!   (`∫ ρs (n+2)/2π cosⁿθ cos θ dω = ρs`). A material with `ρs = 0` gets
+//!   `specularFactor = 0` (no specular layer). (Before stop 43 the factor was
+//!   `max ρs` and the colour `ρs / max ρs`, which made `F0 = 0.04 ρs`: a
+//!   typical `ρs = 0.04` wall came out 25× too weakly specular.)
 //!
 //! **MTL**: `Kd` = mean diffuse ρd (linear; white when textured, because MTL
 //! multiplies `map_Kd` by `Kd` — the mean is then a comment), `Ks` = ρs, `Ns` = the Phong
@@ -76,6 +81,10 @@ pub const MTL_MAX_NS: f32 = 1000.0;
 /// reflection-vector Phong exponent: `n_b = 4 n`.
 pub const BLINN_PER_PHONG_EXPONENT: f64 = 4.0;
 
+/// glTF's dielectric reflectance at normal incidence (ior 1.5), which
+/// `KHR_materials_specular.specularColorFactor` scales.
+pub const GLTF_DIELECTRIC_F0: f64 = 0.04;
+
 /// How [`write_material_files`] writes its images.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct ExportOptions {
@@ -93,9 +102,11 @@ pub struct GltfConversion {
     pub alpha: f64,
     /// glTF `roughnessFactor = sqrt(α)` in `[0, 1]`.
     pub perceptual_roughness: f64,
-    /// `KHR_materials_specular.specularFactor = max_c ρs,c` in `[0, 1]`.
+    /// `KHR_materials_specular.specularFactor`: 1, or 0 when `ρs = 0`.
     pub specular_factor: f64,
-    /// `KHR_materials_specular.specularColorFactor = ρs / max_c ρs,c` (white if ρs = 0).
+    /// `KHR_materials_specular.specularColorFactor = ρs / GLTF_DIELECTRIC_F0`
+    /// (each `ρs,c` clamped to `[0, 1]`; white when `ρs = 0`), so that
+    /// `min(0.04 · specularColorFactor, 1) · specularFactor = ρs`.
     pub specular_color: [f64; 3],
 }
 
@@ -113,14 +124,13 @@ impl GltfConversion {
         let alpha = (2.0 / (blinn_phong_exponent + 2.0)).sqrt().clamp(0.0, 1.0);
         let rho = specular.map(|v| {
             if v.is_finite() {
-                short(v).max(0.0)
+                short(v).clamp(0.0, 1.0)
             } else {
                 0.0
             }
         });
-        let max = rho.iter().copied().fold(0.0, f64::max);
-        let (specular_factor, specular_color) = if max > 0.0 {
-            (max.min(1.0), rho.map(|v| v / max))
+        let (specular_factor, specular_color) = if rho.iter().any(|&v| v > 0.0) {
+            (1.0, rho.map(|v| v / GLTF_DIELECTRIC_F0))
         } else {
             (0.0, [1.0; 3])
         };
@@ -441,11 +451,11 @@ fn conventions() -> Value {
     );
     put(
         "gltf.specular_factor",
-        "KHR_materials_specular.specularFactor = max over channels of rho_s",
+        "KHR_materials_specular.specularFactor = 1 (0 when rho_s = 0)",
     );
     put(
         "gltf.specular_color",
-        "KHR_materials_specular.specularColorFactor = rho_s / max over channels of rho_s (white if rho_s = 0)",
+        "KHR_materials_specular.specularColorFactor = rho_s / 0.04 (white if rho_s = 0), so that glTF's dielectric F0 = min(0.04 specularColorFactor, 1) specularFactor = rho_s, the Phong lobe's albedo at normal incidence",
     );
     put(
         "mtl",

@@ -219,7 +219,7 @@ fn textured_material_writes_every_file() {
     let conv = GltfConversion::new(m.params.exponent, m.params.specular);
     assert!((rough - conv.perceptual_roughness).abs() < 1e-12);
     let spec = &mat["extensions"]["KHR_materials_specular"];
-    assert!((spec["specularFactor"].as_f64().unwrap() - 0.05).abs() < 1e-6);
+    assert_eq!(spec["specularFactor"], 1.0);
     let sc: Vec<f64> = spec["specularColorFactor"]
         .as_array()
         .unwrap()
@@ -227,7 +227,12 @@ fn textured_material_writes_every_file() {
         .map(|v| v.as_f64().unwrap())
         .collect();
     assert_eq!(sc.len(), 3);
-    assert!((sc[0] - 1.0).abs() < 1e-9 && (sc[1] - 0.8).abs() < 1e-6);
+    // The ratified extension's F0 = min(0.04 · specularColorFactor, 1) · specularFactor
+    // is ρs, channel by channel.
+    for (c, &v) in sc.iter().enumerate() {
+        let f0 = (0.04 * v).min(1.0);
+        assert!((f0 - m.params.specular[c] as f64).abs() < 1e-6, "{sc:?}");
+    }
     assert_eq!(g["textures"][0]["source"], 0);
     assert_eq!(g["textures"][0]["sampler"], 0);
     assert_eq!(g["images"][0]["uri"], "texture.png");
@@ -388,6 +393,35 @@ fn exponent_conversions_are_sane() {
         assert_eq!(c.specular_factor, 0.0);
         assert_eq!(c.specular_color, [1.0; 3]);
     }
+    // glTF's dielectric F0 (KHR_materials_specular, ratified:
+    // min(0.04 · specularColorFactor, 1) · specularFactor) is ρs, clamped to
+    // [0, 1]; a non-finite ρs reads as 0.
+    for rho in [
+        [0.04f32, 0.04, 0.04],
+        [0.5, 0.25, 0.0],
+        [1.0, 1.0, 1.0],
+        [2.0, -1.0, f32::NAN],
+        [1e-6, 0.0, 0.0],
+    ] {
+        let c = GltfConversion::new(16.0, rho);
+        assert_eq!(c.specular_factor, 1.0, "{rho:?}");
+        for ch in 0..3 {
+            let f0 = (0.04 * c.specular_color[ch]).min(1.0) * c.specular_factor;
+            let want = if rho[ch].is_finite() {
+                rho[ch].clamp(0.0, 1.0) as f64
+            } else {
+                0.0
+            };
+            assert!(
+                (f0 - want).abs() < 1e-7,
+                "{rho:?} channel {ch}: {f0} vs {want}"
+            );
+        }
+    }
+    assert_eq!(
+        GltfConversion::new(16.0, [0.04; 3]).specular_color,
+        [1.0; 3]
+    );
 }
 
 #[test]
