@@ -597,6 +597,7 @@ fn picks_on_edges_tiny_and_single_colour_materials_never_crash() {
             "material.json",
             "material.mtl",
             "material.gltf",
+            "material.usda",
             "mask.png",
             "preview.png",
             "report.png",
@@ -786,6 +787,7 @@ fn extraction_is_deterministic() {
         "coverage.png",
         "material.mtl",
         "material.gltf",
+        "material.usda",
         "preview.png",
         "report.png",
     ] {

@@ -12,6 +12,7 @@
 //! | `material.json` | every parameter with its convention, plus the caller's `extra` |
 //! | `material.mtl` | Wavefront MTL (Phong) |
 //! | `material.gltf` | glTF 2.0 material (metallic-roughness + `KHR_materials_specular`) |
+//! | `material.usda` | USD material (`UsdPreviewSurface`, specular workflow) |
 //!
 //! The texture files and `coverage.png` exist only for a textured material
 //! (one with a [`TextureResult`](crate::TextureResult)); an untextured material
@@ -38,6 +39,18 @@
 //!   `specularFactor = 0` (no specular layer). (Before stop 43 the factor was
 //!   `max ρs` and the colour `ρs / max ρs`, which made `F0 = 0.04 ρs`: a
 //!   typical `ρs = 0.04` wall came out 25× too weakly specular.)
+//!
+//! **USD** ([`usda_text`]): one `Material` prim named after the material (made
+//! a USD identifier) with a `UsdPreviewSurface` in the specular workflow
+//! (`useSpecularWorkflow = 1`): `diffuseColor` = ρd (a `UsdUVTexture` of
+//! `texture.png`, sRGB, wrapped `repeat` both ways, read through a
+//! `UsdPrimvarReader_float2` of the `st` primvar; a constant when untextured),
+//! `specularColor` = ρs (the specular workflow's colour at normal incidence,
+//! the Phong lobe's albedo there, as for glTF's F0), `roughness` = glTF's
+//! perceptual roughness (`UsdPreviewSurface` squares it, as glTF does),
+//! `metallic` 0, `opacity` 1. USD's `st` has `(0, 0)` at the bottom left of the
+//! image, glTF's UV at the top left: the texture tiles, so that flip only
+//! mirrors it vertically relative to glTF.
 //!
 //! **MTL**: `Kd` = mean diffuse ρd (linear; white when textured, because MTL
 //! multiplies `map_Kd` by `Kd` — the mean is then a comment), `Ks` = ρs, `Ns` = the Phong
@@ -70,6 +83,8 @@ pub const MATERIAL_JSON: &str = "material.json";
 pub const MATERIAL_MTL: &str = "material.mtl";
 /// File name of the glTF material.
 pub const MATERIAL_GLTF: &str = "material.gltf";
+/// File name of the USD material (ASCII `.usda`, `UsdPreviewSurface`).
+pub const MATERIAL_USDA: &str = "material.usda";
 
 /// Version of the `material.json` layout (bumped on incompatible changes).
 pub const MATERIAL_JSON_VERSION: u32 = 1;
@@ -245,7 +260,8 @@ pub fn write_material_images(
 }
 
 /// The description files of [`write_material_files`]: `material.json` (with
-/// `extra`), `material.mtl` and `material.gltf`. Returns their paths.
+/// `extra`), `material.mtl`, `material.gltf` and `material.usda`. Returns
+/// their paths.
 pub fn write_material_descriptions(
     dir: &Path,
     m: &Material,
@@ -265,6 +281,10 @@ pub fn write_material_descriptions(
 
     let path = dir.join(MATERIAL_GLTF);
     write_json(&path, &gltf_json(m), "material.gltf")?;
+    written.push(path);
+
+    let path = dir.join(MATERIAL_USDA);
+    write_atomic(&path, usda_text(m).as_bytes())?;
     written.push(path);
 
     Ok(written)
@@ -332,6 +352,7 @@ pub fn material_json(m: &Material, extra: &Value, opts: &ExportOptions) -> Resul
             "mask_png": MASK_PNG,
             "mtl": MATERIAL_MTL,
             "gltf": MATERIAL_GLTF,
+            "usda": MATERIAL_USDA,
         },
         "conventions": conventions(),
     });
@@ -593,6 +614,92 @@ pub fn mtl_text(m: &Material) -> String {
     s
 }
 
+/// The contents of `material.usda` for `m`: a USD layer holding one
+/// `Material` prim (the layer's default prim) with a `UsdPreviewSurface` in
+/// the specular workflow (see the module docs for the mapping).
+pub fn usda_text(m: &Material) -> String {
+    let p = &m.params;
+    let conv = GltfConversion::new(p.exponent, p.specular);
+    let name = usd_identifier(&m.name);
+    let colour = |v: [f32; 3]| {
+        let c = v.map(|x| short(finite(x)).clamp(0.0, 1.0));
+        format!("({}, {}, {})", c[0], c[1], c[2])
+    };
+    let root = format!("/{name}");
+    let mut s = String::new();
+    s.push_str("#usda 1.0\n(\n");
+    s.push_str(&format!("    defaultPrim = \"{name}\"\n"));
+    s.push_str(concat!(
+        "    doc = \"Material Picker picker-extract ",
+        env!("CARGO_PKG_VERSION"),
+        ": Phong material as UsdPreviewSurface (specular workflow), linear colours\"\n"
+    ));
+    // No geometry here, but the stage metadata USD's validators ask for
+    // (a layer that is referenced into a scene takes the scene's).
+    s.push_str("    metersPerUnit = 1\n");
+    s.push_str("    upAxis = \"Y\"\n");
+    s.push_str(")\n\n");
+    s.push_str(&format!("def Material \"{name}\"\n{{\n"));
+    s.push_str(&format!(
+        "    token outputs:surface.connect = <{root}/PreviewSurface.outputs:surface>\n\n"
+    ));
+    s.push_str("    def Shader \"PreviewSurface\"\n    {\n");
+    s.push_str("        uniform token info:id = \"UsdPreviewSurface\"\n");
+    if m.texture.is_some() {
+        s.push_str(&format!(
+            "        color3f inputs:diffuseColor.connect = <{root}/DiffuseTexture.outputs:rgb>\n"
+        ));
+    } else {
+        s.push_str(&format!(
+            "        color3f inputs:diffuseColor = {}\n",
+            colour(p.diffuse)
+        ));
+    }
+    s.push_str("        int inputs:useSpecularWorkflow = 1\n");
+    s.push_str(&format!(
+        "        color3f inputs:specularColor = {}\n",
+        colour(p.specular)
+    ));
+    s.push_str(&format!(
+        "        float inputs:roughness = {}\n",
+        conv.perceptual_roughness as f32
+    ));
+    s.push_str("        float inputs:metallic = 0\n");
+    s.push_str("        float inputs:opacity = 1\n");
+    s.push_str("        token outputs:surface\n    }\n");
+    if m.texture.is_some() {
+        s.push_str("\n    def Shader \"TexCoordReader\"\n    {\n");
+        s.push_str("        uniform token info:id = \"UsdPrimvarReader_float2\"\n");
+        s.push_str("        string inputs:varname = \"st\"\n");
+        s.push_str("        float2 outputs:result\n    }\n");
+        s.push_str("\n    def Shader \"DiffuseTexture\"\n    {\n");
+        s.push_str("        uniform token info:id = \"UsdUVTexture\"\n");
+        s.push_str(&format!("        asset inputs:file = @{TEXTURE_PNG}@\n"));
+        s.push_str(&format!(
+            "        float2 inputs:st.connect = <{root}/TexCoordReader.outputs:result>\n"
+        ));
+        s.push_str("        token inputs:sourceColorSpace = \"sRGB\"\n");
+        s.push_str("        token inputs:wrapS = \"repeat\"\n");
+        s.push_str("        token inputs:wrapT = \"repeat\"\n");
+        s.push_str("        float3 outputs:rgb\n    }\n");
+    }
+    s.push_str("}\n");
+    s
+}
+
+/// `name` as a USD prim name: letters, digits and `_`, not starting with a
+/// digit, never empty (every other character becomes `_`).
+fn usd_identifier(name: &str) -> String {
+    let mut s: String = name
+        .chars()
+        .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
+        .collect();
+    if s.is_empty() || s.starts_with(|c: char| c.is_ascii_digit()) {
+        s.insert(0, '_');
+    }
+    s
+}
+
 /// The contents of `material.gltf` for `m` (glTF 2.0, one material, no meshes).
 pub fn gltf_json(m: &Material) -> Value {
     let p = &m.params;
@@ -641,4 +748,25 @@ pub fn gltf_json(m: &Material) -> Value {
         root["textures"] = json!([{ "sampler": 0, "source": 0 }]);
     }
     sorted(root)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Prim names: letters, digits and `_` kept, anything else `_`, a leading
+    /// digit or an empty name prefixed with `_`.
+    #[test]
+    fn usd_identifiers_are_valid_prim_names() {
+        for (name, want) in [
+            ("material_0", "material_0"),
+            ("plain paint", "plain_paint"),
+            ("3d wall", "_3d_wall"),
+            ("", "_"),
+            ("über-wand.1", "_ber_wand_1"),
+            ("日本", "__"),
+        ] {
+            assert_eq!(usd_identifier(name), want, "{name:?}");
+        }
+    }
 }

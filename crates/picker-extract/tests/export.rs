@@ -117,6 +117,7 @@ fn textured_material_writes_every_file() {
         "material.gltf",
         "material.json",
         "material.mtl",
+        "material.usda",
         "texture.exr",
         "texture.png",
     ];
@@ -239,6 +240,69 @@ fn textured_material_writes_every_file() {
     assert_eq!(g["samplers"][0]["wrapS"], 10497);
     assert_eq!(g["samplers"][0]["wrapT"], 10497);
     assert!(g.get("meshes").is_none());
+
+    // material.usda
+    let usda = std::fs::read_to_string(dir.path().join("material.usda")).unwrap();
+    let u = usda_attributes(&usda);
+    assert!(usda.starts_with("#usda 1.0\n"));
+    assert!(usda.contains("defaultPrim = \"material_0\""));
+    assert!(usda.contains("def Material \"material_0\""));
+    assert_eq!(
+        u["token outputs:surface.connect"],
+        "</material_0/PreviewSurface.outputs:surface>"
+    );
+    assert_eq!(u["uniform token info:id"], "\"UsdPreviewSurface\"");
+    assert_eq!(u["int inputs:useSpecularWorkflow"], "1");
+    assert_eq!(
+        usd_triple(&u["color3f inputs:specularColor"]),
+        m.params.specular
+    );
+    let r: f64 = u["float inputs:roughness"].parse().unwrap();
+    assert!((r - conv.perceptual_roughness).abs() < 1e-6);
+    assert_eq!(
+        u["color3f inputs:diffuseColor.connect"],
+        "</material_0/DiffuseTexture.outputs:rgb>"
+    );
+    assert_eq!(u["asset inputs:file"], "@texture.png@");
+    assert_eq!(
+        u["float2 inputs:st.connect"],
+        "</material_0/TexCoordReader.outputs:result>"
+    );
+    assert_eq!(u["string inputs:varname"], "\"st\"");
+    assert_eq!(u["token inputs:sourceColorSpace"], "\"sRGB\"");
+    assert_eq!(u["token inputs:wrapS"], "\"repeat\"");
+    assert_eq!(u["token inputs:wrapT"], "\"repeat\"");
+    for shader in ["PreviewSurface", "TexCoordReader", "DiffuseTexture"] {
+        assert!(
+            usda.contains(&format!("def Shader \"{shader}\"")),
+            "{shader}"
+        );
+    }
+    assert_eq!(usda.matches('{').count(), usda.matches('}').count());
+}
+
+/// The `type name = value` lines of a `.usda` text (the last of each kind:
+/// shader ids repeat, the first is the surface's).
+fn usda_attributes(usda: &str) -> std::collections::HashMap<String, String> {
+    let mut m = std::collections::HashMap::new();
+    for line in usda.lines().map(str::trim) {
+        if let Some((k, v)) = line.split_once(" = ") {
+            if !k.contains('"') {
+                m.entry(k.to_string()).or_insert_with(|| v.to_string());
+            }
+        }
+    }
+    m
+}
+
+/// `(a, b, c)` as three floats.
+fn usd_triple(v: &str) -> [f32; 3] {
+    let f: Vec<f32> = v
+        .trim_matches(|c| c == '(' || c == ')')
+        .split(", ")
+        .map(|x| x.parse().unwrap())
+        .collect();
+    [f[0], f[1], f[2]]
 }
 
 #[test]
@@ -248,7 +312,13 @@ fn untextured_material_has_constant_colours_and_no_texture_files() {
     write_material_files(dir.path(), &m, &Value::Null, &ExportOptions::default()).unwrap();
     assert_eq!(
         names(dir.path()),
-        ["mask.png", "material.gltf", "material.json", "material.mtl"]
+        [
+            "mask.png",
+            "material.gltf",
+            "material.json",
+            "material.mtl",
+            "material.usda"
+        ]
     );
     let j = read_json(&dir.path().join("material.json"));
     assert_eq!(j["textured"], false);
@@ -276,6 +346,17 @@ fn untextured_material_has_constant_colours_and_no_texture_files() {
     assert!((bc[0] - 0.4).abs() < 1e-6 && (bc[1] - 0.2).abs() < 1e-6 && bc[3] == 1.0);
     assert!(g.get("images").is_none() && g.get("textures").is_none());
     assert_eq!(g["asset"]["version"], "2.0");
+
+    // USD: a constant diffuse colour, no texture shaders, the name made an identifier.
+    let usda = std::fs::read_to_string(dir.path().join("material.usda")).unwrap();
+    let u = usda_attributes(&usda);
+    assert!(usda.contains("def Material \"plain_paint\""));
+    assert_eq!(
+        usd_triple(&u["color3f inputs:diffuseColor"]),
+        m.params.diffuse
+    );
+    assert!(!usda.contains("UsdUVTexture") && !usda.contains("texture.png"));
+    assert!(!u.contains_key("color3f inputs:diffuseColor.connect"));
 }
 
 #[test]
