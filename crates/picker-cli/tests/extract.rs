@@ -754,48 +754,58 @@ fn bad_picks_and_inputs_fail_clearly_and_write_nothing() {
     );
 }
 
+/// The same bytes with 1 and 2 threads, for a texture made at its observed
+/// size (capped at 64) and for one made at `--size 300` (below the photo's
+/// density of ~340 texels here; the enlargement's thread independence is
+/// tested in the pipeline's tests).
 #[test]
 fn extraction_is_deterministic() {
     let tmp = tempfile::tempdir().unwrap();
     let photo = repo().join("fixtures/examples/coffee.jpg");
     let w = repo().join("fixtures/weights/tiny");
-    let mut outs = Vec::new();
-    for (k, threads) in ["1", "2"].iter().enumerate() {
-        let out = tmp.path().join(format!("r{k}"));
-        ok(&[
-            "extract",
-            photo.to_str().unwrap(),
-            "--weights",
-            w.to_str().unwrap(),
-            "--pick",
-            "150,120",
-            "--uv",
-            "plane",
-            "--max-size",
-            "64",
-            "--threads",
-            threads,
-            "--out",
-            out.to_str().unwrap(),
-        ]);
-        outs.push(out);
-    }
-    for f in [
-        "texture.png",
-        "texture.exr",
-        "mask.png",
-        "coverage.png",
-        "material.mtl",
-        "material.gltf",
-        "material.usda",
-        "preview.png",
-        "report.png",
-    ] {
-        assert_eq!(
-            std::fs::read(outs[0].join(f)).unwrap(),
-            std::fs::read(outs[1].join(f)).unwrap(),
-            "{f} differs between runs"
-        );
+    for (c, size) in [["--max-size", "64"], ["--size", "300"]].iter().enumerate() {
+        let mut outs = Vec::new();
+        for (k, threads) in ["1", "2"].iter().enumerate() {
+            let out = tmp.path().join(format!("c{c}r{k}"));
+            ok(&[
+                "extract",
+                photo.to_str().unwrap(),
+                "--weights",
+                w.to_str().unwrap(),
+                "--pick",
+                "150,120",
+                "--uv",
+                "plane",
+                size[0],
+                size[1],
+                "--threads",
+                threads,
+                "--out",
+                out.to_str().unwrap(),
+            ]);
+            outs.push(out);
+        }
+        for f in [
+            "texture.png",
+            "texture.exr",
+            "mask.png",
+            "coverage.png",
+            "material.mtl",
+            "material.gltf",
+            "material.usda",
+            "preview.png",
+            "report.png",
+        ] {
+            assert_eq!(
+                std::fs::read(outs[0].join(f)).unwrap(),
+                std::fs::read(outs[1].join(f)).unwrap(),
+                "{f} differs between runs ({size:?})"
+            );
+        }
+        if c == 1 {
+            let m: Value = json_file(&outs[0].join("material.json"));
+            assert_eq!(m["texture"]["width"], 300, "{}", m["texture"]);
+        }
     }
 }
 

@@ -2507,6 +2507,20 @@ mod tests {
 
         let big = 12 * s;
         let (m2, d2) = run(Some(big));
+        // The same bits on one thread as on two.
+        let one = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap();
+        let (m1t, _) = one.install(|| run(Some(big)));
+        let (t2a, t2b) = (
+            &m2.texture.as_ref().unwrap().texture,
+            &m1t.texture.unwrap().texture,
+        );
+        assert!(
+            t2a.data == t2b.data,
+            "the enlargement depends on the thread count"
+        );
         assert_eq!(sizes(&d2), (Some(big), Some(s), Some(s)));
         let t2 = m2.texture.unwrap();
         let mut want =
