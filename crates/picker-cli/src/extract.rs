@@ -648,20 +648,31 @@ pub fn inpainter(spec: &str) -> Result<Box<dyn Inpainter>> {
     })
 }
 
-/// Display (sRGB) values of a linear image.
-fn display(linear: &Image) -> Image {
-    use rayon::prelude::*;
-    // `Image::map` in parallel (per value: the same bits).
-    Image {
-        channels: linear.channels,
-        height: linear.height,
-        width: linear.width,
-        data: linear
-            .data
-            .par_iter()
-            .map(|&v| conv::srgb_encode(v.clamp(0.0, 1.0)))
-            .collect(),
+/// The largest side of a picture the report sheet shows as it is: a larger
+/// one is area-averaged down to it first ([`for_report`]). Four times the
+/// sheet's tile height, so every picture of a default extraction (working
+/// resolution elements, observed-size textures) is shown from its own
+/// values; a 8192² texture's tiles took 7 s and 1.6 GB before.
+const REPORT_SOURCE_MAX: usize = 1024;
+
+/// `img`, or, when a side exceeds [`REPORT_SOURCE_MAX`], its area average
+/// down to that side (aspect kept).
+fn for_report(img: &Image) -> std::borrow::Cow<'_, Image> {
+    let side = img.width.max(img.height);
+    if side <= REPORT_SOURCE_MAX {
+        return std::borrow::Cow::Borrowed(img);
     }
+    let fit = |v: usize| (v * REPORT_SOURCE_MAX / side).max(1);
+    std::borrow::Cow::Owned(picker_extract::resample::area(
+        img,
+        fit(img.width),
+        fit(img.height),
+    ))
+}
+
+/// A linear value as shown: clipped to [0, 1] and sRGB-encoded.
+fn display_value(v: f32) -> f32 {
+    conv::srgb_encode(v.clamp(0.0, 1.0))
 }
 
 fn tone_mapped(linear: &Image) -> Image {
@@ -725,13 +736,23 @@ fn report_sheet(p: &Prepared, m: &Material, preview: &Image) -> Image {
         }
         None => report::borrowed_tile("photo + pick".into(), photo),
     };
+    // Linear pictures are shown sRGB-encoded per value, row by row as the
+    // tiles are made (no displayed copy of them), from at most
+    // REPORT_SOURCE_MAX texels a side (a 12-megapixel element or an 8192²
+    // texture is area-averaged down first, in linear light).
+    let displayed = |label: &str, img, k| report::mapped_tile(label.into(), img, k, display_value);
+    let (diffuse, specular) = (for_report(&el.diffuse), for_report(&el.specular));
+    let textures = m
+        .texture
+        .as_ref()
+        .map(|t| (for_report(&t.raw), for_report(&t.texture)));
     let mut tiles = vec![
         photo_tile,
-        shown("diffuse albedo", display(&el.diffuse)),
-        shown("specular albedo", display(&el.specular)),
-        shown("glossiness", el.glossiness.clone()),
+        displayed("diffuse albedo", &diffuse, 1),
+        displayed("specular albedo", &specular, 1),
+        report::borrowed_tile("glossiness".into(), &el.glossiness),
         shown("normals", direction_colours(&el.normals)),
-        shown("segmentation", p.inputs.segmentation.clone()),
+        report::borrowed_tile("segmentation".into(), &p.inputs.segmentation),
     ];
     if let Some(e) = &p.inputs.embedding {
         // What the masks read when the MSN has one, shown as `picker infer`
@@ -751,21 +772,11 @@ fn report_sheet(p: &Prepared, m: &Material, preview: &Image) -> Image {
     if let Some(e) = &p.inputs.envmap {
         tiles.push(shown("lighting (envmap)", tone_mapped(&e.to_image())));
     }
-    if let Some(t) = &m.texture {
-        tiles.push(shown("reprojected", display(&t.raw)));
-        tiles.push(shown("coverage", t.coverage.clone()));
-        // The display map is per value, so tiling the displayed texture is
-        // the same as displaying the tiled one (at a quarter of the cost).
-        let shown_texture = display(&t.texture);
-        tiles.push(shown(
-            &format!("texture ({})", t.inpainter),
-            shown_texture.clone(),
-        ));
-        tiles.push(report::tiled_tile(
-            "texture tiled 2x2".into(),
-            shown_texture,
-            2,
-        ));
+    if let (Some(t), Some((raw, texture))) = (&m.texture, &textures) {
+        tiles.push(displayed("reprojected", raw, 1));
+        tiles.push(report::borrowed_tile("coverage".into(), &t.coverage));
+        tiles.push(displayed(&format!("texture ({})", t.inpainter), texture, 1));
+        tiles.push(displayed("texture tiled 2x2", texture, 2));
     }
     tiles.push(shown("preview", preview.clone()));
     report::compose_lazy_sheet(&tiles, 4, 192)

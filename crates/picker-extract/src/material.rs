@@ -46,7 +46,9 @@ pub struct TextureResult {
     pub texture: Image,
     /// The reprojected texture before inpainting (unknown texels 0), linear
     /// RGB, with the texels filled from another repeat of a repeating
-    /// square ([`crate::period::fill_from_repeats`]).
+    /// square ([`crate::period::fill_from_repeats`]), at the side it was
+    /// made at ([`crate::pipeline::Diagnostics::texture_made_size`]: smaller
+    /// than `texture` when a `--size` above the photo's density enlarged it).
     pub raw: Image,
     /// Per-texel coverage/confidence in `[0, 1]` (1 channel): 0 = never
     /// observed; a texel filled from another repeat has the repeats' tile's.

@@ -1505,14 +1505,13 @@ fn extract_as(
             (final_tex, false)
         };
         // Enlarged to a `--size` above the observed one: the texture smoothly
-        // (bicubic, wrapped when it tiles, else mirrored; negative overshoot clipped), what
-        // was observed as blocks (the report and coverage.png show where the
-        // photo's texels are).
+        // (bicubic, wrapped when it tiles, else mirrored; negative overshoot
+        // clipped), the coverage as blocks (coverage.png lines up with the
+        // texture); the reprojection stays what was reprojected.
         let (final_tex, raw, coverage) = if out_size > size {
             let mut t = crate::resample::bicubic(&final_tex, out_size, out_size, edges);
             t.data.iter_mut().for_each(|v| *v = v.max(0.0));
-            let blocks = |i: &Image| crate::resample::area(i, out_size, out_size);
-            (t, blocks(&raw), blocks(&coverage))
+            (t, raw, crate::resample::area(&coverage, out_size, out_size))
         } else {
             (final_tex, raw, coverage)
         };
@@ -2473,7 +2472,8 @@ mod tests {
     /// splat footprint, [`reproject::MAX_SPLAT_RADIUS`]) is not, so the
     /// texture is made at the observed size and enlarged at the end, bit for
     /// bit the wrapped bicubic enlargement (clipped at 0) of the
-    /// observed-size extraction, its coverage and raw reprojection as blocks.
+    /// observed-size extraction, its coverage as blocks, its raw reprojection
+    /// the observed-size one.
     /// A smaller `--size` is made at that size. All report the observed size.
     #[test]
     fn a_size_above_the_observed_density_enlarges_the_observed_texture() {
@@ -2530,10 +2530,9 @@ mod tests {
             t2.texture.data == want.data,
             "not the enlarged observed texture"
         );
-        for (got, from) in [(&t2.coverage, &t0.coverage), (&t2.raw, &t0.raw)] {
-            assert_eq!((got.width, got.height), (big, big));
-            assert!(got.data == crate::resample::area(from, big, big).data);
-        }
+        assert_eq!((t2.coverage.width, t2.coverage.height), (big, big));
+        assert!(t2.coverage.data == crate::resample::area(&t0.coverage, big, big).data);
+        assert!(t2.raw.data == t0.raw.data && t2.raw.width == s);
         assert_eq!(t2.coverage_fraction, t0.coverage_fraction);
         assert_eq!((t0.observed_size, t2.observed_size), (s, s));
 

@@ -8,6 +8,7 @@
 
 use picker_render::io::Image;
 use rayon::prelude::*;
+use std::borrow::Cow;
 
 /// Background of a sheet (display value, neutral dark grey).
 pub const SHEET_BACKGROUND: f32 = 0.2;
@@ -501,6 +502,32 @@ pub fn dimmed_tile<'a>(
 /// # Panics
 /// When `k` times the image's size overflows `usize`.
 pub fn tiled_tile(label: String, img: Image, k: usize) -> LazyTile<'static> {
+    tiling(label, Cow::Owned(img), k, None)
+}
+
+/// A [`LazyTile`] of `img` with `map` applied to every value, repeated
+/// `k × k` times (1: once), made row by row: the same tile as the mapped,
+/// tiled picture resized ([`LazyTile::from`] of it), without that picture
+/// ever existing (a 8192² texture shown on a report sheet).
+///
+/// # Panics
+/// When `k` times the image's size overflows `usize`.
+pub fn mapped_tile<'a>(
+    label: String,
+    img: &'a Image,
+    k: usize,
+    map: fn(f32) -> f32,
+) -> LazyTile<'a> {
+    tiling(label, Cow::Borrowed(img), k, Some(map))
+}
+
+/// [`tiled_tile`] and [`mapped_tile`].
+fn tiling<'a>(
+    label: String,
+    img: Cow<'a, Image>,
+    k: usize,
+    map: Option<fn(f32) -> f32>,
+) -> LazyTile<'a> {
     let (c, h, w) = (img.channels, img.height, img.width);
     assert!(
         h.checked_mul(k).is_some() && w.checked_mul(k).is_some(),
@@ -514,8 +541,11 @@ pub fn tiled_tile(label: String, img: Image, k: usize) -> LazyTile<'static> {
         render: Box::new(move |th, tw| {
             resize_rows((c, h * k, w * k), th, tw, false, |ch, r, out| {
                 let src = &img.plane(ch)[(r % h) * w..(r % h + 1) * w];
-                for (x, o) in out.iter_mut().enumerate() {
-                    *o = src[x % w];
+                for copy in out.chunks_mut(w.max(1)) {
+                    match map {
+                        Some(f) => copy.iter_mut().zip(src).for_each(|(o, &v)| *o = f(v)),
+                        None => copy.copy_from_slice(src),
+                    }
                 }
             })
         }),
@@ -764,6 +794,21 @@ mod tests {
             bits(&(lazy.render)(192, 256)),
             bits(&resize(&tiled, 192, 256, false))
         );
+        // Mapped per value: the mapped picture (tiled or not), resized.
+        let half = |v: f32| (v * 0.5).sqrt();
+        for (k, whole) in [(1, &img), (2, &tiled)] {
+            let mut mapped = whole.clone();
+            mapped.data.iter_mut().for_each(|v| *v = half(*v));
+            let lazy = mapped_tile("m".into(), &img, k, half);
+            assert_eq!((lazy.width, lazy.height), (k * w, k * h));
+            for (th, tw) in [(48, 64), (192, 256), (7, 3)] {
+                assert_eq!(
+                    bits(&(lazy.render)(th, tw)),
+                    bits(&resize(&mapped, th, tw, false)),
+                    "k {k}, {th}x{tw}"
+                );
+            }
+        }
     }
 
     #[test]
