@@ -544,25 +544,31 @@ fn golden_extraction_from_ground_truth() {
     );
 }
 
-#[test]
-fn golden_extraction_from_tiny_networks() {
+/// `extract coffee.jpg --weights TINY --pick 150,120 --uv plane`: the tiny
+/// networks' plane extraction of the golden and determinism tests.
+fn tiny_coffee_plane() -> Vec<String> {
     let photo = repo().join("fixtures/examples/coffee.jpg");
     let w = repo().join("fixtures/weights/tiny");
-    golden(
-        "coffee_tiny_plane",
-        &[
-            "extract",
-            photo.to_str().unwrap(),
-            "--weights",
-            w.to_str().unwrap(),
-            "--pick",
-            "150,120",
-            "--uv",
-            "plane",
-            "--max-size",
-            "64",
-        ],
-    );
+    [
+        "extract",
+        photo.to_str().unwrap(),
+        "--weights",
+        w.to_str().unwrap(),
+        "--pick",
+        "150,120",
+        "--uv",
+        "plane",
+    ]
+    .map(String::from)
+    .to_vec()
+}
+
+#[test]
+fn golden_extraction_from_tiny_networks() {
+    let args = tiny_coffee_plane();
+    let mut args: Vec<&str> = args.iter().map(String::as_str).collect();
+    args.extend(["--max-size", "64"]);
+    golden("coffee_tiny_plane", &args);
 }
 
 #[test]
@@ -761,28 +767,15 @@ fn bad_picks_and_inputs_fail_clearly_and_write_nothing() {
 #[test]
 fn extraction_is_deterministic() {
     let tmp = tempfile::tempdir().unwrap();
-    let photo = repo().join("fixtures/examples/coffee.jpg");
-    let w = repo().join("fixtures/weights/tiny");
+    let base = tiny_coffee_plane();
     for (c, size) in [["--max-size", "64"], ["--size", "300"]].iter().enumerate() {
         let mut outs = Vec::new();
         for (k, threads) in ["1", "2"].iter().enumerate() {
             let out = tmp.path().join(format!("c{c}r{k}"));
-            ok(&[
-                "extract",
-                photo.to_str().unwrap(),
-                "--weights",
-                w.to_str().unwrap(),
-                "--pick",
-                "150,120",
-                "--uv",
-                "plane",
-                size[0],
-                size[1],
-                "--threads",
-                threads,
-                "--out",
-                out.to_str().unwrap(),
-            ]);
+            let mut args: Vec<&str> = base.iter().map(String::as_str).collect();
+            args.extend(size);
+            args.extend(["--threads", threads, "--out", out.to_str().unwrap()]);
+            ok(&args);
             outs.push(out);
         }
         for f in [

@@ -625,63 +625,65 @@ pub fn usda_text(m: &Material) -> String {
         let c = v.map(|x| short(finite(x)).clamp(0.0, 1.0));
         format!("({}, {}, {})", c[0], c[1], c[2])
     };
-    let root = format!("/{name}");
-    let mut s = String::new();
-    s.push_str("#usda 1.0\n(\n");
-    s.push_str(&format!("    defaultPrim = \"{name}\"\n"));
-    s.push_str(concat!(
-        "    doc = \"Material Picker picker-extract ",
-        env!("CARGO_PKG_VERSION"),
-        ": Phong material as UsdPreviewSurface (specular workflow), linear colours\"\n"
-    ));
-    // No geometry here, but the stage metadata USD's validators ask for
-    // (a layer that is referenced into a scene takes the scene's).
-    s.push_str("    metersPerUnit = 1\n");
-    s.push_str("    upAxis = \"Y\"\n");
-    s.push_str(")\n\n");
-    s.push_str(&format!("def Material \"{name}\"\n{{\n"));
-    s.push_str(&format!(
-        "    token outputs:surface.connect = <{root}/PreviewSurface.outputs:surface>\n\n"
-    ));
-    s.push_str("    def Shader \"PreviewSurface\"\n    {\n");
-    s.push_str("        uniform token info:id = \"UsdPreviewSurface\"\n");
+    let version = env!("CARGO_PKG_VERSION");
+    let diffuse = match m.texture {
+        Some(_) => {
+            format!("color3f inputs:diffuseColor.connect = </{name}/DiffuseTexture.outputs:rgb>")
+        }
+        None => format!("color3f inputs:diffuseColor = {}", colour(p.diffuse)),
+    };
+    let specular = colour(p.specular);
+    let roughness = conv.perceptual_roughness as f32;
+    // The stage metadata USD's validators ask for, though there is no
+    // geometry here (a layer referenced into a scene takes the scene's).
+    let mut s = format!(
+        r#"#usda 1.0
+(
+    defaultPrim = "{name}"
+    doc = "Material Picker picker-extract {version}: Phong material as UsdPreviewSurface (specular workflow), linear colours"
+    metersPerUnit = 1
+    upAxis = "Y"
+)
+
+def Material "{name}"
+{{
+    token outputs:surface.connect = </{name}/PreviewSurface.outputs:surface>
+
+    def Shader "PreviewSurface"
+    {{
+        uniform token info:id = "UsdPreviewSurface"
+        {diffuse}
+        int inputs:useSpecularWorkflow = 1
+        color3f inputs:specularColor = {specular}
+        float inputs:roughness = {roughness}
+        float inputs:metallic = 0
+        float inputs:opacity = 1
+        token outputs:surface
+    }}
+"#
+    );
     if m.texture.is_some() {
         s.push_str(&format!(
-            "        color3f inputs:diffuseColor.connect = <{root}/DiffuseTexture.outputs:rgb>\n"
+            r#"
+    def Shader "TexCoordReader"
+    {{
+        uniform token info:id = "UsdPrimvarReader_float2"
+        string inputs:varname = "st"
+        float2 outputs:result
+    }}
+
+    def Shader "DiffuseTexture"
+    {{
+        uniform token info:id = "UsdUVTexture"
+        asset inputs:file = @{TEXTURE_PNG}@
+        float2 inputs:st.connect = </{name}/TexCoordReader.outputs:result>
+        token inputs:sourceColorSpace = "sRGB"
+        token inputs:wrapS = "repeat"
+        token inputs:wrapT = "repeat"
+        float3 outputs:rgb
+    }}
+"#
         ));
-    } else {
-        s.push_str(&format!(
-            "        color3f inputs:diffuseColor = {}\n",
-            colour(p.diffuse)
-        ));
-    }
-    s.push_str("        int inputs:useSpecularWorkflow = 1\n");
-    s.push_str(&format!(
-        "        color3f inputs:specularColor = {}\n",
-        colour(p.specular)
-    ));
-    s.push_str(&format!(
-        "        float inputs:roughness = {}\n",
-        conv.perceptual_roughness as f32
-    ));
-    s.push_str("        float inputs:metallic = 0\n");
-    s.push_str("        float inputs:opacity = 1\n");
-    s.push_str("        token outputs:surface\n    }\n");
-    if m.texture.is_some() {
-        s.push_str("\n    def Shader \"TexCoordReader\"\n    {\n");
-        s.push_str("        uniform token info:id = \"UsdPrimvarReader_float2\"\n");
-        s.push_str("        string inputs:varname = \"st\"\n");
-        s.push_str("        float2 outputs:result\n    }\n");
-        s.push_str("\n    def Shader \"DiffuseTexture\"\n    {\n");
-        s.push_str("        uniform token info:id = \"UsdUVTexture\"\n");
-        s.push_str(&format!("        asset inputs:file = @{TEXTURE_PNG}@\n"));
-        s.push_str(&format!(
-            "        float2 inputs:st.connect = <{root}/TexCoordReader.outputs:result>\n"
-        ));
-        s.push_str("        token inputs:sourceColorSpace = \"sRGB\"\n");
-        s.push_str("        token inputs:wrapS = \"repeat\"\n");
-        s.push_str("        token inputs:wrapT = \"repeat\"\n");
-        s.push_str("        float3 outputs:rgb\n    }\n");
     }
     s.push_str("}\n");
     s
