@@ -105,8 +105,8 @@ pub struct Flags {
     #[arg(long)]
     pub keep_seams: bool,
     /// Texture side in texels (default: the observed texel density, capped by --max-size). A side
-    /// above the observed density is made at that density and enlarged (bicubic) at the end: the
-    /// photo holds no finer detail.
+    /// above the observed density is made at that side where the photo's pixels cover it (many
+    /// repeats, a near view), else at the observed side and enlarged (bicubic) at the end.
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=8192))]
     pub size: Option<u32>,
     /// Cap of the automatic texture side.
