@@ -617,7 +617,9 @@ pub const ENLARGE_BELOW_COVERAGE: f64 = 0.9;
 /// at this many times the observed side (twice the largest splat radius,
 /// [`reproject::MAX_SPLAT_RADIUS`]: past it the pixels stop covering the
 /// texels between them); when that square is already too little covered
-/// ([`ENLARGE_BELOW_COVERAGE`]), the larger one is not reprojected.
+/// ([`ENLARGE_BELOW_COVERAGE`]), the larger one is not reprojected, and when
+/// it is covered but the larger one is not, the texture is made at this
+/// side and enlarged.
 pub const ENLARGE_PROBE_FACTOR: usize = 8;
 
 /// The picked pixels reprojected into the texture square at one size,
@@ -660,9 +662,10 @@ pub struct Diagnostics {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub texture_observed_size: Option<usize>,
     /// The side the texture was reprojected and inpainted at: the
-    /// texture's, or the observed one when a larger `--size` left the
-    /// square markedly less covered ([`ENLARGE_BELOW_COVERAGE`]) and the
-    /// texture was enlarged to it at the end.
+    /// texture's, or, when a larger `--size` left the square markedly less
+    /// covered ([`ENLARGE_BELOW_COVERAGE`]), the largest of
+    /// [`ENLARGE_PROBE_FACTOR`] times the observed side and the observed side
+    /// that was covered, the texture enlarged from it at the end.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub texture_made_size: Option<usize>,
     /// Why a material flagged textured came out as a single colour under
@@ -1376,23 +1379,28 @@ fn extract_as(
         // Coverage only falls as the square grows, so a square
         // `ENLARGE_PROBE_FACTOR` times the observed side is looked at first: a
         // far larger one (`--size 4096` of a 60-texel view) is not reprojected
-        // in vain (2.2 s and 1 GB there).
+        // in vain (2.2 s and 1 GB there); when that square is covered and the
+        // requested one is not, the texture is made at the probe's side.
         let seen = if size > observed {
             let at_observed = observe(observed);
             let enough = |o: &Observed| o.fraction >= ENLARGE_BELOW_COVERAGE * at_observed.fraction;
             let probe = size.min(observed.saturating_mul(ENLARGE_PROBE_FACTOR));
-            let probed = (probe < size).then(|| observe(probe));
-            let at_size = match probed {
-                Some(o) if !enough(&o) => None,
-                _ => Some(observe(size)),
+            let sides: &[usize] = if probe < size {
+                &[probe, size]
+            } else {
+                &[size]
             };
-            match at_size {
-                Some(o) if enough(&o) => o,
-                _ => {
-                    size = observed;
-                    at_observed
+            let mut chosen = None;
+            for &side in sides {
+                let o = observe(side);
+                if !enough(&o) {
+                    break;
                 }
+                chosen = Some((side, o));
             }
+            let (side, o) = chosen.unwrap_or((observed, at_observed));
+            size = side;
+            o
         } else {
             observe(size)
         };
