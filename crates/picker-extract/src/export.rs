@@ -63,7 +63,7 @@
 use std::path::{Path, PathBuf};
 
 use picker_nets::conventions::srgb_encode;
-use picker_render::io::{write_atomic, write_exr, write_png, write_png16, Image};
+use picker_render::io::{write_atomic, write_exr, write_png, write_png_mapped, Image};
 use serde_json::{json, Map, Value};
 
 use crate::error::{Error, Result};
@@ -221,24 +221,8 @@ pub fn write_material_images(
         jobs.push((
             dir.join(TEXTURE_PNG),
             Box::new(move |path| {
-                // `map(srgb_encode)` in parallel (per value: the same bits).
-                let srgb = Image {
-                    channels: tex.texture.channels,
-                    height: tex.texture.height,
-                    width: tex.texture.width,
-                    data: tex
-                        .texture
-                        .data
-                        .par_iter()
-                        .map(|&v| srgb_encode(v))
-                        .collect(),
-                };
-                if sixteen {
-                    write_png16(path, &srgb)
-                } else {
-                    write_png(path, &srgb)
-                }
-                .map_err(Error::from)
+                // sRGB-encoded as it is quantised: no encoded copy of the texture.
+                Ok(write_png_mapped(path, &tex.texture, sixteen, srgb_encode)?)
             }),
         ));
         jobs.push((
