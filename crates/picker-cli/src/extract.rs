@@ -962,6 +962,15 @@ pub fn write_materials(
     if let Some(ids) = &palette_ids {
         rio::write_png16(&out_dir.join("palette_ids.png"), ids)?;
     }
+    // Several materials: one USD layer that references them all.
+    if !single {
+        let entries: Vec<(String, String)> = jobs
+            .iter()
+            .map(|(name, _, _)| (name.clone(), format!("{name}/{}", export::MATERIAL_USDA)))
+            .collect();
+        let path = out_dir.join(export::MATERIALS_USDA);
+        crate::output::write_atomic(&path, export::usda_library_text(&entries).as_bytes())?;
+    }
     let mut summary = json!({
         "format": "material-picker-extract",
         "format_version": 1,
@@ -973,6 +982,7 @@ pub fn write_materials(
         "materials": summaries,
         "envmap": env.as_ref().map(|_| "envmap.exr"),
         "palette_ids": palette_ids.as_ref().map(|_| "palette_ids.png (16-bit: 0 = none, k = material_{k-1})"),
+        "usd": (!single).then_some(export::MATERIALS_USDA),
     });
     if layout.timings {
         let mut timings = loaded.timings.clone();

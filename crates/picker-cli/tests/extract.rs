@@ -612,6 +612,13 @@ fn picks_on_edges_tiny_and_single_colour_materials_never_crash() {
         }
     }
     assert!(out.join("summary.json").exists() && out.join("envmap.exr").exists());
+    // One USD layer that references every material's own layer.
+    assert_eq!(s["usd"], "materials.usda");
+    let lib = std::fs::read_to_string(out.join("materials.usda")).unwrap();
+    for k in 0..4 {
+        let r = format!("prepend references = @material_{k}/material.usda@");
+        assert!(lib.contains(&r), "{r}\n{lib}");
+    }
     // --all: a palette with an id map.
     let all = tmp.path().join("all");
     ok(&[

@@ -673,6 +673,58 @@ def Material "{name}"
     s
 }
 
+/// File name of the USD layer that gathers several materials of one run
+/// ([`usda_library_text`]).
+pub const MATERIALS_USDA: &str = "materials.usda";
+
+/// A USD layer gathering materials written by [`usda_text`] elsewhere: a
+/// `Scope` named `Materials` (the default prim) holding, for each
+/// `(name, layer)`, a prim that references the default prim of the layer
+/// at the relative path `layer` (its texture paths stay relative to that
+/// layer). Prim names are the names made USD identifiers, made unique by
+/// `_2`, `_3`, … in order; a path is quoted `@…@`, or `@@@…@@@` when it
+/// holds an `@`; an entry whose path holds `@@@` (no USD quoting admits
+/// it) is left out.
+pub fn usda_library_text(entries: &[(String, String)]) -> String {
+    let version = env!("CARGO_PKG_VERSION");
+    let mut s = format!(
+        r#"#usda 1.0
+(
+    defaultPrim = "Materials"
+    doc = "Material Picker picker-extract {version}: the materials of one run, each referenced from its own layer"
+    metersPerUnit = 1
+    upAxis = "Y"
+)
+
+def Scope "Materials"
+{{
+"#
+    );
+    let mut used = std::collections::HashSet::new();
+    for (name, layer) in entries {
+        if layer.contains("@@@") {
+            continue;
+        }
+        let base = usd_identifier(name);
+        let mut prim = base.clone();
+        let mut k = 2;
+        while !used.insert(prim.clone()) {
+            prim = format!("{base}_{k}");
+            k += 1;
+        }
+        let quoted = if layer.contains('@') {
+            format!("@@@{layer}@@@")
+        } else {
+            format!("@{layer}@")
+        };
+        s.push_str(&format!(
+            "    def \"{prim}\" (\n        prepend references = {quoted}\n    )\n    {{\n    }}\n"
+        ));
+    }
+    s.push_str("}\n");
+    s
+}
+
 /// `name` as a USD prim name: letters, digits and `_`, not starting with a
 /// digit, never empty (every other character becomes `_`).
 fn usd_identifier(name: &str) -> String {
@@ -754,5 +806,32 @@ mod tests {
         ] {
             assert_eq!(usd_identifier(name), want, "{name:?}");
         }
+    }
+
+    /// The library layer: one referencing prim per entry, names made unique,
+    /// paths quoted as USD asks, an unquotable path left out.
+    #[test]
+    fn usda_library_references_each_layer_once() {
+        let e = |n: &str, l: &str| (n.to_string(), l.to_string());
+        let text = usda_library_text(&[
+            e("material_0", "material_0/material.usda"),
+            e("a b", "a b/material.usda"),
+            e("a_b", "a_b/material.usda"),
+            e("odd", "x@y/material.usda"),
+            e("bad", "x@@@y/material.usda"),
+        ]);
+        assert!(text.starts_with("#usda 1.0\n") && text.contains("defaultPrim = \"Materials\""));
+        for (prim, path) in [
+            ("material_0", "@material_0/material.usda@"),
+            ("a_b", "@a b/material.usda@"),
+            ("a_b_2", "@a_b/material.usda@"),
+            ("odd", "@@@x@y/material.usda@@@"),
+        ] {
+            let def = format!("def \"{prim}\" (\n        prepend references = {path}\n    )");
+            assert!(text.contains(&def), "{def}\n{text}");
+        }
+        assert!(!text.contains("bad") && !text.contains("x@@@y"));
+        assert_eq!(text.matches('{').count(), text.matches('}').count());
+        assert_eq!(text.matches("prepend references").count(), 4);
     }
 }
