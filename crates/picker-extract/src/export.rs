@@ -609,7 +609,6 @@ pub fn usda_text(m: &Material) -> String {
         let c = v.map(|x| short(finite(x)).clamp(0.0, 1.0));
         format!("({}, {}, {})", c[0], c[1], c[2])
     };
-    let version = env!("CARGO_PKG_VERSION");
     let diffuse = match m.texture {
         Some(_) => {
             format!("color3f inputs:diffuseColor.connect = </{name}/DiffuseTexture.outputs:rgb>")
@@ -618,18 +617,12 @@ pub fn usda_text(m: &Material) -> String {
     };
     let specular = colour(p.specular);
     let roughness = conv.perceptual_roughness as f32;
-    // The stage metadata USD's validators ask for, though there is no
-    // geometry here (a layer referenced into a scene takes the scene's).
-    let mut s = format!(
-        r#"#usda 1.0
-(
-    defaultPrim = "{name}"
-    doc = "Material Picker picker-extract {version}: Phong material as UsdPreviewSurface (specular workflow), linear colours"
-    metersPerUnit = 1
-    upAxis = "Y"
-)
-
-def Material "{name}"
+    let mut s = usda_header(
+        &name,
+        "Phong material as UsdPreviewSurface (specular workflow), linear colours",
+    );
+    s.push_str(&format!(
+        r#"def Material "{name}"
 {{
     token outputs:surface.connect = </{name}/PreviewSurface.outputs:surface>
 
@@ -645,7 +638,7 @@ def Material "{name}"
         token outputs:surface
     }}
 "#
-    );
+    ));
     if m.texture.is_some() {
         s.push_str(&format!(
             r#"
@@ -686,20 +679,11 @@ pub const MATERIALS_USDA: &str = "materials.usda";
 /// holds an `@`; an entry whose path holds `@@@` (no USD quoting admits
 /// it) is left out.
 pub fn usda_library_text(entries: &[(String, String)]) -> String {
-    let version = env!("CARGO_PKG_VERSION");
-    let mut s = format!(
-        r#"#usda 1.0
-(
-    defaultPrim = "Materials"
-    doc = "Material Picker picker-extract {version}: the materials of one run, each referenced from its own layer"
-    metersPerUnit = 1
-    upAxis = "Y"
-)
-
-def Scope "Materials"
-{{
-"#
+    let mut s = usda_header(
+        "Materials",
+        "the materials of one run, each referenced from its own layer",
     );
+    s.push_str("def Scope \"Materials\"\n{\n");
     let mut used = std::collections::HashSet::new();
     for (name, layer) in entries {
         if layer.contains("@@@") {
@@ -723,6 +707,25 @@ def Scope "Materials"
     }
     s.push_str("}\n");
     s
+}
+
+/// The start of a `.usda` layer whose default prim is `default_prim`, with
+/// `doc` and the stage metadata USD's validators ask for (there is no
+/// geometry here; a layer referenced into a scene takes the scene's), and a
+/// blank line.
+fn usda_header(default_prim: &str, doc: &str) -> String {
+    let version = env!("CARGO_PKG_VERSION");
+    format!(
+        r#"#usda 1.0
+(
+    defaultPrim = "{default_prim}"
+    doc = "Material Picker picker-extract {version}: {doc}"
+    metersPerUnit = 1
+    upAxis = "Y"
+)
+
+"#
+    )
 }
 
 /// `name` as a USD prim name: letters, digits and `_`, not starting with a

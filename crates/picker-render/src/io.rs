@@ -290,21 +290,42 @@ pub fn encode_png_mapped(
     h: usize,
     map: impl Fn(f32) -> f32 + Sync,
 ) -> Result<Vec<u8>> {
+    encode_png_as(planes, c, w, h, |v| to_u8(map(v)))
+}
+
+/// The PNG of planar values quantised by `q` to samples of type `T` (8 or
+/// 16 bits), 1, 3 or 4 channels.
+fn encode_png_as<T>(
+    planes: &[f32],
+    c: usize,
+    w: usize,
+    h: usize,
+    q: impl Fn(f32) -> T + Sync,
+) -> Result<Vec<u8>>
+where
+    T: image::Primitive + Default + Send,
+    image::Luma<T>: image::Pixel<Subpixel = T>,
+    image::Rgb<T>: image::Pixel<Subpixel = T>,
+    image::Rgba<T>: image::Pixel<Subpixel = T>,
+    image::ImageBuffer<image::Luma<T>, Vec<T>>: Into<image::DynamicImage>,
+    image::ImageBuffer<image::Rgb<T>, Vec<T>>: Into<image::DynamicImage>,
+    image::ImageBuffer<image::Rgba<T>, Vec<T>>: Into<image::DynamicImage>,
+{
     check_png(planes, c, w, h)?;
     let (wu, hu) = png_dims(w, h)?;
-    let px = interleave(planes, c, w * h, |v| to_u8(map(v)));
+    let px = interleave(planes, c, w * h, q);
     let mismatch = || Error::Encode {
         format: "PNG",
         reason: "buffer size mismatch".into(),
     };
     let img: image::DynamicImage = match c {
-        1 => image::GrayImage::from_raw(wu, hu, px)
+        1 => image::ImageBuffer::<image::Luma<T>, _>::from_raw(wu, hu, px)
             .ok_or_else(mismatch)?
             .into(),
-        3 => image::RgbImage::from_raw(wu, hu, px)
+        3 => image::ImageBuffer::<image::Rgb<T>, _>::from_raw(wu, hu, px)
             .ok_or_else(mismatch)?
             .into(),
-        _ => image::RgbaImage::from_raw(wu, hu, px)
+        _ => image::ImageBuffer::<image::Rgba<T>, _>::from_raw(wu, hu, px)
             .ok_or_else(mismatch)?
             .into(),
     };
@@ -325,25 +346,7 @@ pub fn encode_png16_mapped(
     h: usize,
     map: impl Fn(f32) -> f32 + Sync,
 ) -> Result<Vec<u8>> {
-    check_png(planes, c, w, h)?;
-    let (wu, hu) = png_dims(w, h)?;
-    let px = interleave(planes, c, w * h, |v| to_u16(map(v)));
-    let mismatch = || Error::Encode {
-        format: "PNG",
-        reason: "buffer size mismatch".into(),
-    };
-    let img: image::DynamicImage = match c {
-        1 => image::ImageBuffer::<image::Luma<u16>, _>::from_raw(wu, hu, px)
-            .ok_or_else(mismatch)?
-            .into(),
-        3 => image::ImageBuffer::<image::Rgb<u16>, _>::from_raw(wu, hu, px)
-            .ok_or_else(mismatch)?
-            .into(),
-        _ => image::ImageBuffer::<image::Rgba<u16>, _>::from_raw(wu, hu, px)
-            .ok_or_else(mismatch)?
-            .into(),
-    };
-    png_bytes(img)
+    encode_png_as(planes, c, w, h, |v| to_u16(map(v)))
 }
 
 /// Writes `img` as a 32-bit float EXR ([`encode_exr`]), atomically.
