@@ -672,6 +672,7 @@ pub fn run(a: Args) -> Result<ExitCode> {
             let req = Request {
                 picks: picks.get(&p.rel).cloned().unwrap_or_default(),
                 all: a.all,
+                quad: None,
             };
             (p, req)
         })

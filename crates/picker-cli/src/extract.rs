@@ -18,7 +18,7 @@ use anyhow::{anyhow, bail, Context, Result};
 use picker_extract::export::{self, ExportOptions};
 use picker_extract::mask::MaskOptions;
 use picker_extract::report::{self, Tile};
-use picker_extract::{pipeline, Inputs, Material, Prepared, UvChoice};
+use picker_extract::{pipeline, Inputs, Material, Prepared, Quad, UserPlane, UvChoice};
 use picker_inpaint::{DiffusionInpainter, Inpainter, LearnedInpainter, PatchMatchInpainter};
 use picker_nets::conventions as conv;
 use picker_nets::{Net, NetKind};
@@ -82,6 +82,12 @@ pub struct Flags {
     /// Vertical field of view in degrees for --uv plane (default: from the view vectors).
     #[arg(long)]
     pub fov: Option<f32>,
+    /// The surface's orientation instead of the predicted one: `front` (facing the camera: a
+    /// scan, a head-on photo of a floor, a wall or a fabric) or `X,Y,Z`, its normal in camera
+    /// space (x right, y up, z towards the camera). That plane is rectified as --uv plane
+    /// rectifies the predicted one, without refining it by the photo's lines.
+    #[arg(long, value_name = "front|X,Y,Z", value_parser = parse_normal, allow_hyphen_values = true)]
+    pub normal: Option<UserPlane>,
     /// Keep the predicted normals' plane for --uv plane: do not refine it with the vanishing
     /// directions of the photo's straight lines in the picked region.
     #[arg(long)]
@@ -155,6 +161,9 @@ impl Flags {
                 bail!("--tolerance {t} must be in (0, 1]");
             }
         }
+        if self.normal.is_some() && self.uv == UvArg::Net {
+            bail!("--normal gives the plane to rectify: it cannot be used with --uv net");
+        }
         if let Some(f) = self.fov {
             if !(1.0..=179.0).contains(&f) {
                 bail!("--fov {f} must be between 1 and 179 degrees");
@@ -180,6 +189,7 @@ impl Flags {
             size: self.size.map(|s| s as usize),
             max_size: self.max_size as usize,
             fov_deg: self.fov,
+            plane: self.normal,
             line_refine: !self.no_lines,
             align_grain: !self.no_grain,
             fold_period: !self.no_fold,
@@ -222,6 +232,10 @@ impl Flags {
             "tolerance": self.tolerance,
             "uv": format!("{:?}", self.uv).to_lowercase(),
             "fov": self.fov,
+            "normal": self.normal.map(|p| match p {
+                UserPlane::Normal(n) => json!(n.to_array()),
+                UserPlane::Quad(q) => json!(q.0),
+            }),
             "size": self.size,
             "max_size": self.max_size,
             "tileable": !self.no_tile,
@@ -249,6 +263,14 @@ pub struct Args {
     /// Extract every material covering at least --min-area of the image (a palette).
     #[arg(long)]
     pub all: bool,
+    /// Four corners of a rectangle on the picked surface (a tile, a board, a sheet of paper or a
+    /// book lying on it), `X1,Y1,X2,Y2,X3,Y3,X4,Y4` in photo pixels (as --pick; fractions
+    /// allowed), in order around it. Its plane is rectified instead of the predicted one (not
+    /// refined by the photo's lines), the texture's axes along its sides; the focal length comes from it when it tells it (a rectangle seen at an
+    /// angle), else from --fov or the photo as usual. Without --pick it picks the quad's
+    /// centre. One material: not with several picks, --all or --normal.
+    #[arg(long, value_name = "X1,Y1,..,X4,Y4", value_parser = parse_quad, allow_hyphen_values = true, conflicts_with_all = ["all", "normal"])]
+    pub quad: Option<Quad>,
     /// Render elements instead of the networks: a folder with diffuse_albedo.exr,
     /// specular_albedo.exr, glossiness.exr, normals.exr, view_vector.exr, uv.exr,
     /// segmentation.exr and optionally embedding.exr and envmap.exr (as `picker synth` or
@@ -279,6 +301,50 @@ pub fn check_even_out(s: f64) -> Result<()> {
         bail!("--even-out {s} must be in (0, 1] (a fraction of the texture's side)");
     }
     Ok(())
+}
+
+/// Parses `--normal`: `front`, or `X,Y,Z` (any length but zero).
+pub fn parse_normal(s: &str) -> std::result::Result<UserPlane, String> {
+    if s.trim().eq_ignore_ascii_case("front") {
+        return Ok(UserPlane::FRONT);
+    }
+    let v = parse_numbers::<3>(s, "front or X,Y,Z (e.g. 0,0.7,0.7)")?;
+    UserPlane::normal(v)
+}
+
+/// Parses `--quad`: eight pixel coordinates `X1,Y1,X2,Y2,X3,Y3,X4,Y4`.
+pub fn parse_quad(s: &str) -> std::result::Result<Quad, String> {
+    let v = parse_numbers::<8>(
+        s,
+        "X1,Y1,X2,Y2,X3,Y3,X4,Y4 (e.g. 10,20,200,30,190,150,15,140)",
+    )?;
+    Ok(Quad([
+        [v[0], v[1]],
+        [v[2], v[3]],
+        [v[4], v[5]],
+        [v[6], v[7]],
+    ]))
+}
+
+/// `N` comma-separated finite numbers.
+fn parse_numbers<const N: usize>(s: &str, expected: &str) -> std::result::Result<[f32; N], String> {
+    let parts: Vec<&str> = s.split(',').collect();
+    if parts.len() != N {
+        return Err(format!(
+            "expected {expected}, got {s:?} ({} values)",
+            parts.len()
+        ));
+    }
+    let mut out = [0.0f32; N];
+    for (o, v) in out.iter_mut().zip(&parts) {
+        *o = v
+            .trim()
+            .parse::<f32>()
+            .ok()
+            .filter(|x| x.is_finite())
+            .ok_or_else(|| format!("{v:?} in {s:?} is not a finite number"))?;
+    }
+    Ok(out)
 }
 
 /// Parses `X,Y` pixel coordinates.
@@ -789,6 +855,8 @@ pub struct Request {
     pub picks: Vec<(String, [u32; 2])>,
     /// Also every material covering at least `--min-area` (a palette).
     pub all: bool,
+    /// The plane of the one pick given by a rectangle's corners (`--quad`).
+    pub quad: Option<Quad>,
 }
 
 /// How [`write_materials`] lays out and annotates its files.
@@ -822,6 +890,14 @@ pub fn write_materials(
         .to_string();
     for (_, pk) in &req.picks {
         prepared.check_pick(*pk).with_context(|| label.clone())?;
+    }
+    if let Some(q) = &req.quad {
+        if req.picks.len() > 1 || req.all {
+            bail!("--quad gives the plane of one material: use it with at most one --pick and without --all");
+        }
+        let (fw, fh) = prepared.photo_size();
+        q.check(fw, fh)
+            .map_err(|e| anyhow!("{label}: --quad: {e}"))?;
     }
     std::fs::create_dir_all(out_dir)
         .with_context(|| format!("creating output directory {}", out_dir.display()))?;
@@ -858,7 +934,10 @@ pub fn write_materials(
     if jobs.is_empty() {
         bail!("{label}: nothing to extract (no pick and no --all)");
     }
-    let opts = flags.options(inpainter);
+    let mut opts = flags.options(inpainter);
+    if let Some(q) = req.quad {
+        opts.plane = Some(UserPlane::Quad(q));
+    }
     let env = prepared.inputs.envmap.clone();
     let preview_env = env
         .clone()
@@ -1018,8 +1097,11 @@ fn photo_path(a: &Args) -> Result<PathBuf> {
 pub fn run(a: Args) -> Result<()> {
     let t_total = Instant::now();
     crate::threads::init(a.threads)?;
-    if a.pick.is_empty() && !a.all {
-        bail!("nothing to extract: give --pick X,Y (may be repeated) or --all");
+    if a.pick.is_empty() && !a.all && a.quad.is_none() {
+        bail!("nothing to extract: give --pick X,Y (may be repeated), --all or --quad");
+    }
+    if a.quad.is_some() && a.flags.uv == UvArg::Net {
+        bail!("--quad gives the plane to rectify: it cannot be used with --uv net");
     }
     a.flags.validate()?;
     let photo_path = photo_path(&a)?;
@@ -1048,14 +1130,18 @@ pub fn run(a: Args) -> Result<()> {
         &photo_path.display().to_string(),
         &a.flags,
     )?;
+    let mut picks: Vec<[u32; 2]> = a.pick.clone();
+    if let (Some(q), true) = (&a.quad, picks.is_empty()) {
+        picks.push(q.centre_pixel());
+    }
     let req = Request {
-        picks: a
-            .pick
+        picks: picks
             .iter()
             .enumerate()
             .map(|(k, &p)| (format!("material_{k}"), p))
             .collect(),
         all: a.all,
+        quad: a.quad,
     };
     let layout = Layout {
         always_subdirs: false,

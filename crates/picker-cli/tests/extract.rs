@@ -767,6 +767,196 @@ fn bad_picks_and_inputs_fail_clearly_and_write_nothing() {
     );
 }
 
+/// `--quad` and `--normal` refuse what they cannot use, clearly and before
+/// writing anything: a corner outside the photo (named), corners not around
+/// a convex quadrilateral, a quad with several picks or `--all`, either
+/// with `--uv net`, a normal of no length, one facing away from the camera.
+#[test]
+fn bad_planes_fail_clearly_and_write_nothing() {
+    let tmp = tempfile::tempdir().unwrap();
+    let photo = repo().join("fixtures/examples/coffee.jpg");
+    let w = repo().join("fixtures/weights/tiny");
+    let out = tmp.path().join("x");
+    let base = [
+        "extract",
+        photo.to_str().unwrap(),
+        "--weights",
+        w.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    let fails = |extra: &[&str], code: i32, wanted: &[&str]| {
+        let mut args = base.to_vec();
+        args.extend_from_slice(extra);
+        let o = run(&args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(code), "{extra:?}: {err}");
+        for w in wanted {
+            assert!(err.contains(w), "{extra:?}: {w:?} not in {err}");
+        }
+        assert!(!out.exists(), "{extra:?} wrote {}", out.display());
+    };
+    let quad = "10,20,200,30,190,150,15,140";
+    fails(
+        &["--quad", "10,20,330,30,190,150,15,140"],
+        1,
+        &[
+            "coffee.jpg",
+            "--quad",
+            "corner 2",
+            "outside the 320×213 photo",
+        ],
+    );
+    fails(
+        &["--quad", "10,20,190,150,200,30,15,140"],
+        1,
+        &["convex quadrilateral"],
+    );
+    fails(&["--quad", "10,20,200,30"], 2, &["X1,Y1,X2,Y2,X3,Y3,X4,Y4"]);
+    fails(
+        &["--quad", quad, "--pick", "50,50", "--pick", "60,60"],
+        1,
+        &["at most one --pick"],
+    );
+    fails(&["--quad", quad, "--all"], 2, &["--all"]);
+    fails(&["--quad", quad, "--uv", "net"], 1, &["--uv net"]);
+    fails(&["--quad", quad, "--normal", "front"], 2, &["--normal"]);
+    fails(
+        &["--pick", "50,50", "--normal", "0,0,0"],
+        2,
+        &["no direction"],
+    );
+    fails(
+        &["--pick", "50,50", "--normal", "up"],
+        2,
+        &["front or X,Y,Z"],
+    );
+    fails(
+        &["--pick", "50,50", "--normal", "front", "--uv", "net"],
+        1,
+        &["--uv net"],
+    );
+    fails(
+        &["--pick", "20,190", "--normal", "0,0,-1"],
+        1,
+        &["seen edge-on or from behind"],
+    );
+}
+
+/// `[x, y]` as material.json writes a pick.
+fn json_pick(x: f64, y: f64) -> Value {
+    serde_json::json!([x as u64, y as u64])
+}
+
+/// A rectangle drawn on the README example's brick wall, its corners the
+/// projections of a 0.8 × 0.44 rectangle (at depth 1) on the wall's true
+/// plane, upright (normal, focal length and the world's up, the ceiling's
+/// normal, from `fixtures/examples/README.md`), gives that plane and
+/// focal length back (the quad's corners name them exactly, up to the
+/// truth's three decimals), the bricks' true period ratio (1.6), and with
+/// no `--pick` the quad's centre as the pick. `--normal` with the true
+/// normal and field of view rectifies the same plane.
+#[test]
+fn a_quad_on_the_readme_wall_gives_its_true_plane() {
+    let (w, h, f) = (320.0f64, 240.0f64, 163.2f64);
+    let n = [-0.632f64, 0.192, 0.750];
+    let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+    let n = n.map(|v| v / len);
+    let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    let cross = |a: [f64; 3], b: [f64; 3]| {
+        [
+            a[1] * b[2] - a[2] * b[1],
+            a[2] * b[0] - a[0] * b[2],
+            a[0] * b[1] - a[1] * b[0],
+        ]
+    };
+    // The point of the wall seen at pixel (200, 150), at depth 1.
+    let o = [(200.5 - w / 2.0) / f, -(150.5 - h / 2.0) / f, -1.0];
+    // The wall's axes: the world's up (the ceiling's true normal reversed)
+    // on the wall, and across it, along the brick courses.
+    let up = {
+        let v = [0.035, 0.976, -0.216];
+        let k = dot(v, n);
+        let u = [v[0] - k * n[0], v[1] - k * n[1], v[2] - k * n[2]];
+        let l = dot(u, u).sqrt();
+        u.map(|v| v / l)
+    };
+    let across = cross(up, n);
+    let corner = |s: f64, t: f64| {
+        let q: Vec<f64> = (0..3).map(|k| o[k] + across[k] * s + up[k] * t).collect();
+        format!(
+            "{:.3},{:.3}",
+            w / 2.0 + f * q[0] / -q[2] - 0.5,
+            h / 2.0 - f * q[1] / -q[2] - 0.5
+        )
+    };
+    let (a, b) = (0.4, 0.22);
+    let quad = [corner(-a, -b), corner(a, -b), corner(a, b), corner(-a, b)].join(",");
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("q");
+    let photo = repo().join("fixtures/examples/room.png");
+    ok(&[
+        "extract",
+        photo.to_str().unwrap(),
+        "--quad",
+        &quad,
+        "--out",
+        out.to_str().unwrap(),
+        "--threads",
+        "2",
+    ]);
+    let m = json_file(&out.join("material.json"));
+    let uv = &m["diagnostics"]["uv"];
+    assert_eq!(uv["mode"], "plane", "{uv}");
+    assert_eq!(uv["requested"], "plane", "{uv}");
+    let used = &uv["user_plane"];
+    assert_eq!(used["source"], "quad", "{uv}");
+    let got: Vec<f64> = used["normal"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    let off = dot([got[0], got[1], got[2]], n)
+        .clamp(-1.0, 1.0)
+        .acos()
+        .to_degrees();
+    assert!(off < 0.5, "quad normal {off:.2}° from the truth: {used}");
+    assert_eq!(uv["focal_source"], "quad", "{uv}");
+    let focal = uv["focal_px"].as_f64().unwrap();
+    assert!((focal / f - 1.0).abs() < 0.01, "focal {focal} (true {f})");
+    let period = &uv["period"];
+    let ratio = period["period"][0].as_f64().unwrap() / period["period"][1].as_f64().unwrap();
+    assert!(
+        (ratio / 1.6 - 1.0).abs() < 0.1,
+        "period ratio {ratio}: {period}"
+    );
+    // The pick is the pixel nearest the corners' mean.
+    let c: Vec<f64> = quad.split(',').map(|v| v.parse().unwrap()).collect();
+    let mean = |k: usize| (c[k] + c[k + 2] + c[k + 4] + c[k + 6]) / 4.0;
+    assert_eq!(
+        m["pick"],
+        json_pick(mean(0).round(), mean(1).round()),
+        "{quad}"
+    );
+
+    let fov = format!("{}", 2.0 * (h / 2.0 / f).atan().to_degrees());
+    let normal = format!("{},{},{}", n[0], n[1], n[2]);
+    let (_tmp2, out2) =
+        extract_example_embedded_with("room.png", "200,150", &["--normal", &normal, "--fov", &fov]);
+    let m = json_file(&out2.join("material.json"));
+    let uv = &m["diagnostics"]["uv"];
+    assert_eq!(uv["user_plane"]["source"], "normal", "{uv}");
+    // The texture's axes follow the courses' vanishing direction.
+    assert!(uv["user_plane"]["texture_axis"].is_array(), "{uv}");
+    let period = &uv["period"];
+    let ratio = period["period"][0].as_f64().unwrap() / period["period"][1].as_f64().unwrap();
+    assert!(
+        (ratio / 1.6 - 1.0).abs() < 0.1,
+        "period ratio {ratio}: {period}"
+    );
+}
+
 /// The same bytes with 1 and 2 threads, for a texture made at its observed
 /// size (capped at 64) and for one made at `--size 300` (below the photo's
 /// density of ~340 texels here; the enlargement's thread independence is

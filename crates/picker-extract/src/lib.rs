@@ -8,7 +8,8 @@
 //! - [`smooth`], [`mask`]: the segmentation smoothed along the photo; pick → mask
 //!   from its colour.
 //! - [`plane`], [`period`], [`reproject`]: texture coordinates (predicted UVs or a
-//!   rectified plane) and the scatter into the texture square with coverage.
+//!   rectified plane) and the scatter into the texture square with coverage;
+//!   [`quad`]: a plane the user gives (a normal, a rectangle's corners).
 //! - inpainting ([`picker_inpaint`]) fills the unobserved texels, tileably;
 //!   [`equalize`] evens out broad light and dark patches on request.
 //! - [`select`]: order statistics (quantiles, medians) of photo-resolution
@@ -31,6 +32,7 @@ pub mod period;
 pub mod photo;
 pub mod pipeline;
 pub mod plane;
+pub mod quad;
 pub mod report;
 pub mod reproject;
 pub mod resample;
@@ -40,3 +42,4 @@ pub mod smooth;
 pub use error::{Error, Result};
 pub use material::{Material, MaterialParams, TextureResult, UvMode};
 pub use pipeline::{extract, Inputs, Options, Prepared, UvChoice};
+pub use quad::{Quad, UserPlane};

@@ -458,6 +458,30 @@ pub fn refine_normal(n: Vec3, vanishing: &[Vanishing], view: Vec3) -> Option<Vec
     (refined.dot(view.normalize_or_zero()) < -0.05).then_some(refined)
 }
 
+/// The best-supported of `vanishing` within
+/// [`crate::plane::MAX_AXIS_TILT_DEG`] of the plane of normal `n` (ties: the
+/// first): the direction the plane's texture runs along, if any.
+pub fn texture_axis(vanishing: &[Vanishing], n: Vec3) -> Option<[f32; 3]> {
+    let max_out = crate::plane::MAX_AXIS_TILT_DEG.to_radians().sin();
+    vanishing
+        .iter()
+        .filter(|v| Vec3::from(v.direction).dot(n).abs() <= max_out)
+        .fold(None::<&Vanishing>, |best, v| match best {
+            Some(b) if b.support >= v.support => Some(b),
+            _ => Some(v),
+        })
+        .map(|v| v.direction)
+}
+
+/// The vanishing directions of the straight lines of the photo's region
+/// `mask` (photo resolution, read through `small`) under focal `focal`
+/// (photo pixels), as [`refine_plane_normal`] finds them.
+pub fn region_vanishing(small: &SmallLuma, mask: &[bool], focal: f32) -> Vec<Vanishing> {
+    let m = small.mask(mask);
+    let segs = segments(&small.luma, &m, small.w, small.h);
+    vanishing_directions(&segs, small.centre(), focal / small.k as f32, 0x11ae5)
+}
+
 /// The focal length found by [`focal_from_lines`], and from what.
 #[derive(Clone, Debug, Serialize)]
 pub struct LineFocal {
@@ -751,15 +775,7 @@ pub fn refine_plane_normal(
         _ => None,
     };
     let used = snapped.or(refined).unwrap_or(n);
-    let max_out = crate::plane::MAX_AXIS_TILT_DEG.to_radians().sin();
-    let texture_axis = vanishing
-        .iter()
-        .filter(|v| Vec3::from(v.direction).dot(used).abs() <= max_out)
-        .fold(None::<&Vanishing>, |best, v| match best {
-            Some(b) if b.support >= v.support => Some(b),
-            _ => Some(v),
-        })
-        .map(|v| v.direction);
+    let texture_axis = texture_axis(&vanishing, used);
     (
         used,
         LineRefinement {

@@ -50,7 +50,8 @@ use serde::Serialize;
 use crate::mask::{Mask, MaskOptions, PickMask};
 use crate::reproject::{self, Coords};
 use crate::{
-    mask, plane, resample, Error, Material, MaterialParams, Result, TextureResult, UvMode,
+    mask, plane, resample, Error, Material, MaterialParams, Result, TextureResult, UserPlane,
+    UvMode,
 };
 
 /// [`Prepared::palette`]: a segmentation-colour bin seeds a material while it
@@ -135,6 +136,15 @@ pub struct Options<'a> {
     pub max_size: usize,
     /// Vertical field of view (degrees) for the plane mode (else from the view vectors).
     pub fov_deg: Option<f32>,
+    /// The plane to rectify instead of the predicted one: a normal, or a
+    /// rectangle's four corners ([`UserPlane`]). Implies the plane mode
+    /// ([`Options::uv_choice`]), whose texture comes from the part of the
+    /// mask the predicted normals put on the pick's plane, as ever (they
+    /// tell surfaces apart even where their orientation is off); the
+    /// photo's lines do not refine it. A quad also gives the texture's axes
+    /// (along its sides) and, without `fov_deg`, the focal length when it
+    /// tells it ([`crate::quad::Quad::focal`]).
+    pub plane: Option<UserPlane>,
     /// Refine the plane mode's normal with the vanishing directions of the
     /// photo's straight lines in the mask ([`crate::lines`]).
     pub line_refine: bool,
@@ -186,6 +196,18 @@ pub struct Options<'a> {
     pub seed: u64,
     /// The inpainter.
     pub inpainter: &'a dyn Inpainter,
+}
+
+impl Options<'_> {
+    /// The texture coordinates' source in effect: [`UvChoice::Plane`] when a
+    /// plane is given ([`Options::plane`]), else [`Options::uv`].
+    pub fn uv_choice(&self) -> UvChoice {
+        if self.plane.is_some() {
+            UvChoice::Plane
+        } else {
+            self.uv
+        }
+    }
 }
 
 /// The inputs prepared once for any number of picks.
@@ -584,6 +606,11 @@ pub struct UvDecision {
     pub plane_spread_deg: Option<f32>,
     /// Focal length used by the plane mode (photo pixels).
     pub focal_px: Option<f32>,
+    /// Where `focal_px` came from: `"fov"` (given), `"quad"` (the given
+    /// quadrilateral, [`crate::quad::Quad::focal`]), `"lines"` (the photo's
+    /// vanishing points), `"view vectors"` (the predicted ones) or
+    /// `"default"` ([`plane::DEFAULT_FOV_Y_DEG`]).
+    pub focal_source: Option<&'static str>,
     /// The plane mode's line refinement, when it ran.
     pub lines: Option<crate::lines::LineRefinement>,
     /// The plane mode's grain ([`crate::grain`]), when it was measured (no
@@ -603,8 +630,33 @@ pub struct UvDecision {
     /// of the (sure) mask ([`plane::coplanar_part`], [`PLANAR_PART_MIN_SHARE`]).
     pub plane_part_share: Option<f64>,
     /// Plane mode: the plane's normal from the predicted normals (camera
-    /// space), before any refinement by the photo's lines.
+    /// space), before any refinement by the photo's lines (`None` when a
+    /// plane was given: see `user_plane`).
     pub plane_normal: Option<[f32; 3]>,
+    /// The plane given instead of the predicted one ([`Options::plane`]),
+    /// as it was used.
+    pub user_plane: Option<UserPlaneUsed>,
+}
+
+/// A given plane ([`Options::plane`]) as the extraction used it.
+#[derive(Clone, Debug, Serialize)]
+pub struct UserPlaneUsed {
+    /// `"normal"` or `"quad"`.
+    pub source: &'static str,
+    /// The plane's unit normal, camera space (from the quad under the focal
+    /// length used, for a quad).
+    pub normal: [f32; 3],
+    /// The quadrilateral's corners (photo pixels), for a quad.
+    pub quad: Option<[[f32; 2]; 4]>,
+    /// For a quad: the angle between its two pairs of sides on the surface
+    /// under the focal length used (90° for a rectangle seen with the right
+    /// focal length; far from it, the focal length or the corners are off).
+    pub corner_angle_deg: Option<f32>,
+    /// The direction (camera space) the texture's axes were turned to: the
+    /// quad's first side, or for a normal the best-supported vanishing
+    /// direction of the region's lines in the plane
+    /// ([`crate::lines::texture_axis`]; none without line refinement).
+    pub texture_axis: Option<[f32; 3]>,
 }
 
 /// A `--size` above the observed texel density is kept when the picked
@@ -754,7 +806,7 @@ pub fn extract(
 ) -> Result<(Material, Diagnostics)> {
     check_request(p, pm, opts)?;
     match extract_as(p, name, pick, pm, opts, false) {
-        Err(Error::NoTexture(why)) if opts.uv == UvChoice::Auto => {
+        Err(Error::NoTexture(why)) if opts.uv_choice() == UvChoice::Auto => {
             let (m, mut diag) = extract_as(p, name, pick, pm, opts, true)?;
             diag.texture_fallback = Some(why);
             Ok((m, diag))
@@ -777,6 +829,19 @@ fn check_request(p: &Prepared, pm: &PickMask, opts: &Options) -> Result<()> {
                 "texture {what} {v} must be between 1 and {MAX_TEXTURE_SIDE}"
             )));
         }
+    }
+    match opts.plane {
+        Some(UserPlane::Quad(q)) => {
+            let (fw, fh) = p.photo_size();
+            q.check(fw, fh)
+                .map_err(|e| Error::Invalid(format!("the plane's quadrilateral: {e}")))?;
+        }
+        Some(UserPlane::Normal(n)) if !(n.is_finite() && (n.length() - 1.0).abs() < 1e-3) => {
+            return Err(Error::Invalid(format!(
+                "the plane's normal {n} is not a unit vector (UserPlane::normal makes one)"
+            )));
+        }
+        _ => {}
     }
     let (w, h) = p.work_size();
     let m = &pm.mask;
@@ -831,6 +896,7 @@ fn extract_as(
     opts: &Options,
     plain: bool,
 ) -> Result<(Material, Diagnostics)> {
+    let uv_choice = opts.uv_choice();
     let mut timings = std::collections::BTreeMap::new();
     let mut lap = {
         let mut t = Instant::now();
@@ -929,7 +995,7 @@ fn extract_as(
     lap("delight", &mut timings);
 
     let textured_by_flag = t_flag >= conv::TEXTURED_THRESHOLD && el.uv.is_some();
-    let textured = !plain && (textured_by_flag || opts.uv == UvChoice::Plane);
+    let textured = !plain && (textured_by_flag || uv_choice == UvChoice::Plane);
     let mut diag = Diagnostics {
         segmentation_colour: p.segmentation_colour(pm),
         tolerance: pm.tolerance,
@@ -982,7 +1048,7 @@ fn extract_as(
         let planar = spread.is_some_and(|s| s <= AUTO_MAX_PLANE_SPREAD_DEG);
         // The footprint of the predicted UVs, measured on the working-resolution
         // mask; collapsed UVs on a usable plane are never upsampled.
-        let net_footprint = match (&el.uv, opts.uv) {
+        let net_footprint = match (&el.uv, uv_choice) {
             (Some(uv), UvChoice::Auto) => Coords {
                 width: w,
                 height: h,
@@ -998,12 +1064,13 @@ fn extract_as(
             .uv
             .as_ref()
             .filter(|_| {
-                opts.uv != UvChoice::Plane && !(opts.uv == UvChoice::Auto && collapsed && planar)
+                uv_choice != UvChoice::Plane
+                    && !(uv_choice == UvChoice::Auto && collapsed && planar)
             })
             .map(|uv| upsampled_uv(uv, mw, fw, fh, &full.data));
         let whole_cap = observed_cap(opts.max_size, full.count());
         // Collapsed UVs are not used whatever their consistency: skip measuring it.
-        let net_r2 = match (&net_coords, opts.uv) {
+        let net_r2 = match (&net_coords, uv_choice) {
             (Some(c), UvChoice::Auto) if !collapsed => {
                 let probe_size = reproject::texture_size(c.sizing_area(&full.data), whole_cap);
                 reproject::consistency(c, &full.data, &delit, probe_size).map(|r| r.0)
@@ -1017,7 +1084,7 @@ fn extract_as(
         // its texture from the part the user picked, and pixels of another
         // plane do not land at wrong places in it. The mask and parameters
         // stay whole.
-        let wants_plane = match opts.uv {
+        let wants_plane = match uv_choice {
             UvChoice::Net => false,
             UvChoice::Plane => true,
             UvChoice::Auto => !net_ok || net_coords.is_none(),
@@ -1067,47 +1134,94 @@ fn extract_as(
             let m = restrict_to_work(rest, &pp.mask, w, h);
             (m.count() > 0).then_some(m)
         };
-        let plane_coords = |diag_focal: &mut Option<f32>,
+        let plane_coords = |diag_focal: &mut Option<(f32, &'static str)>,
                             diag_lines: &mut Option<crate::lines::LineRefinement>,
                             diag_grain: &mut (Option<crate::grain::Grain>, bool),
+                            diag_user: &mut Option<UserPlaneUsed>,
                             rest_src: &mut Option<Mask>|
          -> Option<Coords> {
-            let n = normal?;
-            // --fov, else the photo's lines (when refining with them), else
-            // the predicted view vectors, else the default field of view.
-            let line_focal = (opts.fov_deg.is_none() && opts.line_refine)
+            let quad = match opts.plane {
+                Some(UserPlane::Quad(q)) => Some(q),
+                _ => None,
+            };
+            // --fov, else a given quad's (when it tells it), else the
+            // photo's lines (when refining with them), else the predicted
+            // view vectors, else the default field of view.
+            let quad_focal = quad
+                .filter(|_| opts.fov_deg.is_none())
+                .and_then(|q| q.focal(fw, fh));
+            let line_focal = (opts.fov_deg.is_none() && quad_focal.is_none() && opts.line_refine)
                 .then(|| p.line_focal().1)
                 .flatten();
-            let f = match (opts.fov_deg, line_focal) {
-                (Some(fov), _) => plane::focal_from_fov(fh, fov),
-                (None, Some(lf)) => lf.focal_px,
-                (None, None) => {
+            let (f, focal_source) = match (opts.fov_deg, quad_focal, line_focal) {
+                (Some(fov), _, _) => (plane::focal_from_fov(fh, fov), "fov"),
+                (None, Some(qf), _) => (qf, "quad"),
+                (None, None, Some(lf)) => (lf.focal_px, "lines"),
+                (None, None, None) => {
                     // The view vectors' focal, unless its field of view is
                     // implausible for a photo of a room (the default
                     // networks' view vectors often say ~20°).
                     let (lo, hi) = crate::lines::FOCAL_FOV_RANGE;
-                    plane::focal_from_view(&el.view, mw)
+                    match plane::focal_from_view(&el.view, mw)
                         .filter(|&f| (lo..=hi).contains(&plane::fov_from_focal(h, f)))
-                        .unwrap_or_else(|| plane::focal_from_fov(h, plane::DEFAULT_FOV_Y_DEG))
-                        * fh as f32
-                        / h as f32
+                    {
+                        Some(fv) => (fv * fh as f32 / h as f32, "view vectors"),
+                        None => (
+                            plane::focal_from_fov(h, plane::DEFAULT_FOV_Y_DEG) * fh as f32
+                                / h as f32,
+                            "default",
+                        ),
+                    }
                 }
             };
-            *diag_focal = Some(f);
-            let (n, along) = if opts.line_refine {
-                let (n, mut found) = crate::lines::refine_plane_normal(
-                    p.line_focal().0,
-                    &full.data,
-                    n,
-                    f,
-                    line_focal.map(|lf| &lf.axes),
-                );
-                found.focal = line_focal.cloned();
-                let along = found.texture_axis.map(Vec3::from);
-                *diag_lines = Some(found);
-                (n, along)
-            } else {
-                (n, None)
+            *diag_focal = Some((f, focal_source));
+            let (n, along) = match opts.plane {
+                Some(UserPlane::Normal(n)) => {
+                    // The texture's axes along the region's lines that lie
+                    // in the plane, when it has some (a floor's planks).
+                    let along = opts.line_refine.then(|| {
+                        let vanishing =
+                            crate::lines::region_vanishing(p.line_focal().0, &full.data, f);
+                        crate::lines::texture_axis(&vanishing, n)
+                    });
+                    *diag_user = Some(UserPlaneUsed {
+                        source: "normal",
+                        normal: n.to_array(),
+                        quad: None,
+                        corner_angle_deg: None,
+                        texture_axis: along.flatten(),
+                    });
+                    (n, along.flatten().map(Vec3::from))
+                }
+                Some(UserPlane::Quad(q)) => {
+                    let qp = q.plane(fw, fh, f).ok()?;
+                    *diag_user = Some(UserPlaneUsed {
+                        source: "quad",
+                        normal: qp.normal.to_array(),
+                        quad: Some(q.0),
+                        corner_angle_deg: Some(qp.corner_angle_deg),
+                        texture_axis: Some(qp.along.to_array()),
+                    });
+                    (qp.normal, Some(qp.along))
+                }
+                None => {
+                    let n = normal?;
+                    if opts.line_refine {
+                        let (n, mut found) = crate::lines::refine_plane_normal(
+                            p.line_focal().0,
+                            &full.data,
+                            n,
+                            f,
+                            line_focal.map(|lf| &lf.axes),
+                        );
+                        found.focal = line_focal.cloned();
+                        let along = found.texture_axis.map(Vec3::from);
+                        *diag_lines = Some(found);
+                        (n, along)
+                    } else {
+                        (n, None)
+                    }
+                }
             };
             // A plane seen edge-on or from behind at every picked pixel
             // gives no coordinates: no plane.
@@ -1151,8 +1265,9 @@ fn extract_as(
         let mut lines = None;
         let mut grain = (None, false);
         let mut plane_rest = None;
+        let mut user_plane = None;
         let (mode, coords) =
-            match opts.uv {
+            match uv_choice {
                 UvChoice::Net => match net_coords {
                     Some(c) => (UvMode::Net, c),
                     None => return Err(Error::Invalid(
@@ -1160,8 +1275,13 @@ fn extract_as(
                             .into(),
                     )),
                 },
-                UvChoice::Plane => match plane_coords(&mut focal, &mut lines, &mut grain, &mut plane_rest) {
+                UvChoice::Plane => match plane_coords(&mut focal, &mut lines, &mut grain, &mut user_plane, &mut plane_rest) {
                     Some(c) => (UvMode::Plane, c),
+                    None if opts.plane.is_some() => {
+                        return Err(Error::Invalid(
+                            "the given plane is seen edge-on or from behind at every picked pixel (a normal must face the camera: z > 0 for a surface in front of it)".into(),
+                        ))
+                    }
                     None => {
                         return Err(Error::Invalid(
                             "--uv plane: no usable plane (the picked pixels have no normals, or the fitted plane is seen edge-on or from behind)".into(),
@@ -1180,11 +1300,11 @@ fn extract_as(
                             Some(c) => (UvMode::Net, c),
                             None => (
                                 UvMode::Plane,
-                                plane_coords(&mut focal, &mut lines, &mut grain, &mut plane_rest).ok_or_else(neither)?,
+                                plane_coords(&mut focal, &mut lines, &mut grain, &mut user_plane, &mut plane_rest).ok_or_else(neither)?,
                             ),
                         }
                     } else {
-                        match plane_coords(&mut focal, &mut lines, &mut grain, &mut plane_rest) {
+                        match plane_coords(&mut focal, &mut lines, &mut grain, &mut user_plane, &mut plane_rest) {
                             Some(c) => (UvMode::Plane, c),
                             None => (
                                 UvMode::Net,
@@ -1278,11 +1398,12 @@ fn extract_as(
         };
         diag.uv = Some(UvDecision {
             mode,
-            requested: opts.uv,
+            requested: uv_choice,
             net_r2,
             net_uv_footprint: net_footprint,
             plane_spread_deg: spread,
-            focal_px: focal,
+            focal_px: focal.map(|f| f.0),
+            focal_source: focal.map(|f| f.1),
             lines,
             grain: grain.0,
             grain_applied: grain.1,
@@ -1290,8 +1411,9 @@ fn extract_as(
             repeats: None,
             plane_part_share: part.as_ref().map(|pp| pp.share),
             plane_normal: normal
-                .filter(|_| mode == UvMode::Plane)
+                .filter(|_| mode == UvMode::Plane && opts.plane.is_none())
                 .map(|n| n.to_array()),
+            user_plane,
         });
         lap("coordinates", &mut timings);
         // A folded tile sees each texel in every repeat, so the observed-
@@ -1797,6 +1919,7 @@ mod tests {
             size: None,
             max_size: 256,
             fov_deg: None,
+            plane: None,
             line_refine: false,
             align_grain: false,
             fold_period: true,
@@ -2549,6 +2672,182 @@ mod tests {
         assert_eq!(sizes(&d3), (Some(small), Some(s), Some(small)));
         let t3 = m3.texture.unwrap();
         assert_eq!((t3.texture.width, t3.coverage.width), (small, small));
+    }
+
+    /// A `w × h` photo (focal `f`, principal point at the centre) of an
+    /// endless chessboard of `cell`-sided squares on the plane of unit
+    /// normal `n` through `(0, 0, −3)`, squares along `e1` (the camera's x
+    /// axis on the plane, turned by `turn_deg` about `n`) and `n × e1`, 4×4
+    /// supersampled; with the networks' normals saying `predicted`
+    /// everywhere (a wrong plane). Returns the prepared inputs and the
+    /// plane's point at `(s, t)` along the squares' axes.
+    fn chessboard_photo(
+        w: usize,
+        h: usize,
+        f: f32,
+        (n, turn_deg): (Vec3, f32),
+        cell: f32,
+        predicted: Vec3,
+    ) -> (Prepared, impl Fn(f32, f32) -> Vec3) {
+        let (x, y) = plane::plane_basis(n, None);
+        let turn = turn_deg.to_radians();
+        let e1 = x * turn.cos() + y * turn.sin();
+        let e2 = n.cross(e1);
+        let o = Vec3::new(0.0, 0.0, -3.0);
+        let (cx, cy) = (w as f32 / 2.0, h as f32 / 2.0);
+        let shade = |x: f32, y: f32| {
+            let d = Vec3::new((x - cx) / f, -(y - cy) / f, -1.0);
+            let q = d * (n.dot(o) / n.dot(d)) - o;
+            let (s, t) = ((q.dot(e1) / cell).floor(), (q.dot(e2) / cell).floor());
+            if (s + t).rem_euclid(2.0) == 0.0 {
+                0.8
+            } else {
+                0.2
+            }
+        };
+        let photo: Vec<f32> = (0..w * h)
+            .map(|i| {
+                let (x, y) = ((i % w) as f32, (i / w) as f32);
+                let mut acc = 0.0;
+                for k in 0..16 {
+                    acc += shade(
+                        x + (k % 4) as f32 / 4.0 + 0.125,
+                        y + (k / 4) as f32 / 4.0 + 0.125,
+                    );
+                }
+                acc / 16.0
+            })
+            .collect();
+        let mut p = frontal_plane(w, h, &|i| photo[i]);
+        for (c, v) in predicted.to_array().into_iter().enumerate() {
+            p.inputs.elements.normals.data[c * w * h..(c + 1) * w * h].fill(v);
+        }
+        (p, move |s: f32, t: f32| o + e1 * s + e2 * t)
+    }
+
+    /// The photo pixel (pick convention) of camera-space point `q`.
+    fn pixel_of(q: Vec3, w: usize, h: usize, f: f32) -> [f32; 2] {
+        [
+            w as f32 / 2.0 + f * q.x / -q.z - 0.5,
+            h as f32 / 2.0 - f * q.y / -q.z - 0.5,
+        ]
+    }
+
+    /// The fold's two periods on the plane (their ratio is 1 for a
+    /// chessboard of squares rectified right), when a period was found.
+    fn period_ratio(d: &Diagnostics) -> Option<f32> {
+        let f = d.uv.as_ref()?.period.as_ref()?;
+        Some(f.period[0] / f.period[1])
+    }
+
+    /// A chessboard on a floor seen at 50°, turned 30° on it, whose
+    /// predicted normals face the camera (a wrong plane): rectifying the
+    /// predicted plane leaves the squares in perspective (no square period
+    /// is found); the corners of a 4 × 4-square block given as a quad give
+    /// the true plane (within 0.5°), the focal length (within 1 %), squares
+    /// of equal periods, the texture's axes along the board, whatever `uv`
+    /// asks. The true normal with the field of view given does the same
+    /// for the board unturned.
+    #[test]
+    fn a_given_plane_replaces_the_predicted_one() {
+        let (w, h, f) = (240, 180, 180.0f32);
+        let tilt = 50f32.to_radians();
+        let n = Vec3::new(0.0, tilt.sin(), tilt.cos());
+        let cell = 0.25;
+        let (p, at) = chessboard_photo(w, h, f, (n, 30.0), cell, Vec3::Z);
+        let pick = [120, 90];
+        let pm = p.pick_mask(pick, &MaskOptions::default()).unwrap();
+        let inpainter = picker_inpaint::DiffusionInpainter::default();
+        let run = |plane: Option<UserPlane>, fov_deg: Option<f32>| {
+            let opts = Options {
+                plane,
+                fov_deg,
+                ..test_options(&inpainter, UvChoice::Auto)
+            };
+            extract(&p, "board", Some(pick), &pm, &opts).unwrap().1
+        };
+
+        let predicted = Options {
+            fov_deg: Some(plane::fov_from_focal(h, f)),
+            ..test_options(&inpainter, UvChoice::Plane)
+        };
+        let d0 = extract(&p, "board", Some(pick), &pm, &predicted).unwrap().1;
+        assert!(
+            period_ratio(&d0).is_none_or(|r| (r - 1.0).abs() > 0.15),
+            "the predicted (wrong) plane gave square periods: {:?}",
+            d0.uv.as_ref().unwrap().period
+        );
+        assert!(d0.uv.as_ref().unwrap().user_plane.is_none());
+
+        let a = 3.0 * cell;
+        let corners =
+            [(-a, -a), (a, -a), (a, a), (-a, a)].map(|(s, t)| pixel_of(at(s, t), w, h, f));
+        let d1 = run(Some(UserPlane::Quad(crate::quad::Quad(corners))), None);
+        let uv = d1.uv.as_ref().unwrap();
+        assert_eq!((uv.mode, uv.requested), (UvMode::Plane, UvChoice::Plane));
+        let used = uv.user_plane.as_ref().unwrap();
+        assert_eq!(used.source, "quad");
+        let angle = Vec3::from(used.normal).angle_between(n).to_degrees();
+        assert!(angle < 0.5, "quad normal {:?} is {angle}° off", used.normal);
+        assert_eq!(uv.focal_source, Some("quad"));
+        let focal = uv.focal_px.unwrap();
+        assert!((focal / f - 1.0).abs() < 0.01, "focal {focal}");
+        assert!(
+            (used.corner_angle_deg.unwrap() - 90.0).abs() < 1.0,
+            "{used:?}"
+        );
+        assert!(uv.plane_normal.is_none() && uv.lines.is_none());
+        let r = period_ratio(&d1).expect("the board's period");
+        assert!((r - 1.0).abs() < 0.05, "periods {:?}", uv.period);
+
+        let (p, _) = chessboard_photo(w, h, f, (n, 0.0), cell, Vec3::Z);
+        let pm = p.pick_mask(pick, &MaskOptions::default()).unwrap();
+        let opts = Options {
+            plane: Some(UserPlane::Normal(n)),
+            fov_deg: Some(plane::fov_from_focal(h, f)),
+            ..test_options(&inpainter, UvChoice::Auto)
+        };
+        let d2 = extract(&p, "board", Some(pick), &pm, &opts).unwrap().1;
+        let uv = d2.uv.as_ref().unwrap();
+        assert_eq!(uv.user_plane.as_ref().unwrap().source, "normal");
+        assert_eq!(uv.focal_source, Some("fov"));
+        let r = period_ratio(&d2).expect("the board's period");
+        assert!((r - 1.0).abs() < 0.05, "periods {:?}", uv.period);
+    }
+
+    /// A head-on photo of a chessboard whose predicted normals say a floor
+    /// seen at 60°: `UserPlane::FRONT` rectifies it as the plane it is
+    /// (square periods); a normal facing away is refused with a clear error.
+    #[test]
+    fn the_front_plane_rectifies_a_head_on_photo() {
+        let (w, h, f) = (96, 72, 90.0f32);
+        let wrong = Vec3::new(0.0, 60f32.to_radians().sin(), 60f32.to_radians().cos());
+        let (p, _) = chessboard_photo(w, h, f, (Vec3::Z, 0.0), 0.3, wrong);
+        let pick = [48, 36];
+        let pm = p.pick_mask(pick, &MaskOptions::default()).unwrap();
+        let inpainter = picker_inpaint::DiffusionInpainter::default();
+        let run = |plane| {
+            let opts = Options {
+                plane: Some(plane),
+                ..test_options(&inpainter, UvChoice::Auto)
+            };
+            extract(&p, "board", Some(pick), &pm, &opts)
+        };
+        let d = run(UserPlane::FRONT).unwrap().1;
+        let r = period_ratio(&d).expect("the board's period");
+        assert!((r - 1.0).abs() < 0.05, "periods {:?}", d.uv.unwrap().period);
+        let e = run(UserPlane::Normal(-Vec3::Z)).unwrap_err().to_string();
+        assert!(
+            e.contains("the given plane is seen edge-on or from behind"),
+            "{e}"
+        );
+        let e = run(UserPlane::Normal(Vec3::new(0.0, 0.0, 2.0)))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("not a unit vector"), "{e}");
+        let bad = crate::quad::Quad([[0.0, 0.0], [90.0, 0.0], [200.0, 60.0], [0.0, 60.0]]);
+        let e = run(UserPlane::Quad(bad)).unwrap_err().to_string();
+        assert!(e.contains("corner 3") && e.contains("outside"), "{e}");
     }
 
     /// The extraction of `pm` in `p` (diffusion inpainting, seed 1,
