@@ -84,6 +84,25 @@ pub const AUTO_MAX_PLANE_SPREAD_DEG: f32 = 20.0;
 /// 27.30 / 27.08 (4242), 27.34 / 27.34 / 27.32 / 27.12 (9191) and 26.48 for
 /// all but 0.5 (26.46; 5151).
 pub const PLANAR_PART_MIN_SHARE: f64 = 0.2;
+
+/// With a given plane ([`Options::plane`]), the texture comes from the
+/// part of the mask whose predicted normals are within this many degrees of
+/// those at the pick ([`plane::coplanar_part`]): the other walls of a room
+/// papered alike stay out (rectified through the picked wall's plane they
+/// would smear its texture), while normals as noisy as the default
+/// networks' on photos unlike their training rooms keep most of one
+/// surface. Measured on 7 picks (the README wall by a quad and by its
+/// normal, opencv-doc's chessboard by a quad and its table from above,
+/// three head-on texture photos by `front`): 20° kept 6–75 % of the head-on
+/// surfaces, 40° 29–98 %, and every share below
+/// [`USER_PLANE_PART_MIN_SHARE`] was a surface that is one plane.
+pub const USER_PLANE_MAX_DEV_DEG: f32 = 40.0;
+
+/// With a given plane, the part of [`USER_PLANE_MAX_DEV_DEG`] is used only
+/// when it holds at least this share of the mask; else the whole mask is
+/// (the predicted normals are too noisy to tell surfaces apart: `--connected`
+/// keeps the region at the pick).
+pub const USER_PLANE_PART_MIN_SHARE: f64 = 0.5;
 /// Default cap of the texture side.
 pub const DEFAULT_MAX_SIZE: usize = 1024;
 /// sRGB value from which a photo pixel counts as clipped.
@@ -1093,7 +1112,14 @@ fn extract_as(
             Some(k) => p.to_work(k[0] as usize, k[1] as usize),
             None => central_pixel(mw, w),
         };
-        let part = if wants_plane {
+        let part = if opts.plane.is_some() {
+            // A given plane: the predicted normals only tell surfaces apart
+            // (their orientation is what the user overrode), so the part
+            // is taken with a wide tolerance and only when it holds most of
+            // the mask; a smaller one says they are too noisy to tell.
+            plane::coplanar_part(&el.normals, mw, w, h, anchor, USER_PLANE_MAX_DEV_DEG)
+                .filter(|pp| pp.share >= USER_PLANE_PART_MIN_SHARE)
+        } else if wants_plane {
             plane::coplanar_part(&el.normals, mw, w, h, anchor, AUTO_MAX_PLANE_SPREAD_DEG)
                 .filter(|pp| plane::faces_camera(pp.normal, anchor, w, h))
                 // A material that is one plane by its median normal keeps
@@ -1123,13 +1149,21 @@ fn extract_as(
         // outside the texture's pixels.
         let rest_plane = || {
             let rest = rest_full.as_ref()?;
+            if opts.plane.is_some() && part.is_none() {
+                // A given plane that holds the whole mask holds its rest.
+                return Some(rest.clone());
+            }
             let pp = plane::coplanar_part(
                 &el.normals,
                 whole_mw,
                 w,
                 h,
                 anchor,
-                AUTO_MAX_PLANE_SPREAD_DEG,
+                if opts.plane.is_some() {
+                    USER_PLANE_MAX_DEV_DEG
+                } else {
+                    AUTO_MAX_PLANE_SPREAD_DEG
+                },
             )?;
             let m = restrict_to_work(rest, &pp.mask, w, h);
             (m.count() > 0).then_some(m)
