@@ -780,7 +780,8 @@ fn direction_colours(img: &Image) -> Image {
 /// (photo + pick, mask overlay) and the 2×2 tiling are made row by row at
 /// the tile size ([`report::LazyTile`]): the same sheet as resizing copies of
 /// the whole pictures.
-fn report_sheet(p: &Prepared, m: &Material, preview: &Image) -> Image {
+/// A given quadrilateral (`--quad`, pick convention) is outlined on the photo.
+fn report_sheet(p: &Prepared, m: &Material, preview: &Image, quad: Option<[[f32; 2]; 4]>) -> Image {
     let el = &p.inputs.elements;
     let photo = &p.inputs.photo;
     let shown = |label: &str, image: Image| {
@@ -801,6 +802,10 @@ fn report_sheet(p: &Prepared, m: &Material, preview: &Image) -> Image {
             )
         }
         None => report::borrowed_tile("photo + pick".into(), photo),
+    };
+    let photo_tile = match quad {
+        Some(q) => report::outlined(photo_tile, q.map(|[x, y]| [x + 0.5, y + 0.5]).to_vec()),
+        None => photo_tile,
     };
     // Linear pictures are shown sRGB-encoded per value, row by row as the
     // tiles are made (no displayed copy of them), from at most
@@ -975,7 +980,12 @@ pub fn write_materials(
                 rio::write_png(&dir.join("preview.png"), &preview)?;
                 let preview_ms = ms(t);
                 let t_sheet = Instant::now();
-                let sheet = report_sheet(prepared, &m, &preview);
+                let quad = diag
+                    .uv
+                    .as_ref()
+                    .and_then(|u| u.user_plane.as_ref())
+                    .and_then(|u| u.quad);
+                let sheet = report_sheet(prepared, &m, &preview, quad);
                 rio::write_png(&dir.join("report.png"), &sheet)?;
                 Ok((preview_ms, ms(t_sheet), ms(t)))
             },

@@ -1,5 +1,6 @@
-//! Contact sheets for reports: labelled tiles on a grid ([`compose_sheet`]) and
-//! a pick marker ([`draw_marker`]).
+//! Contact sheets for reports: labelled tiles on a grid ([`compose_sheet`]), a
+//! pick marker ([`draw_marker`]) and a given quadrilateral's outline
+//! ([`draw_polygon`], [`outlined`]).
 //!
 //! Every image here holds **display values** (sRGB-encoded, `[0, 1]`), with 1
 //! (grey) or 3 (RGB) channels; sheets are always RGB. Labels are drawn by a
@@ -441,6 +442,76 @@ pub fn marked_tile(label: String, img: &Image, x: f32, y: f32, radius: f32) -> L
     }
 }
 
+/// Draws the closed polygon through `points` (pixels, as [`draw_marker`])
+/// on `img`: every pixel whose centre is within 0.75 px of a side white
+/// (1.0 in each channel), those within 1.75 px and not white black, so the
+/// outline shows on any background. Sides with a point that is not finite
+/// are left out; clipped to the image. Works on any channel count.
+pub fn draw_polygon(img: &mut Image, points: &[[f32; 2]]) {
+    let (h, w, n) = (img.height, img.width, img.plane_len());
+    if points.len() < 2 || w == 0 || h == 0 {
+        return;
+    }
+    let (inner, outer) = (0.75f32, 1.75f32);
+    // 0: untouched, 1: outline, 2: line.
+    let mut ink = vec![0u8; w * h];
+    for k in 0..points.len() {
+        let (a, b) = (points[k], points[(k + 1) % points.len()]);
+        if !a.iter().chain(&b).all(|v| v.is_finite()) {
+            continue;
+        }
+        let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+        let len2 = dx * dx + dy * dy;
+        let lo = |u: f32, v: f32| (u.min(v) - outer - 1.0).floor().max(0.0) as usize;
+        let hi =
+            |u: f32, v: f32, n: usize| ((u.max(v) + outer + 1.0).ceil().max(0.0) as usize).min(n);
+        for y in lo(a[1], b[1]).min(h)..hi(a[1], b[1], h) {
+            for x in lo(a[0], b[0]).min(w)..hi(a[0], b[0], w) {
+                let (px, py) = (x as f32 + 0.5 - a[0], y as f32 + 0.5 - a[1]);
+                let t = if len2 > 0.0 {
+                    ((px * dx + py * dy) / len2).clamp(0.0, 1.0)
+                } else {
+                    0.0
+                };
+                let d = (px - t * dx).hypot(py - t * dy);
+                let i = y * w + x;
+                if d <= inner {
+                    ink[i] = 2;
+                } else if d <= outer {
+                    ink[i] = ink[i].max(1);
+                }
+            }
+        }
+    }
+    for (i, &k) in ink.iter().enumerate() {
+        if k > 0 {
+            let v = if k == 2 { 1.0 } else { 0.0 };
+            for c in 0..img.channels {
+                img.data[c * n + i] = v;
+            }
+        }
+    }
+}
+
+/// `tile` with the closed polygon `points` (pixels of the full-size
+/// picture, as [`draw_marker`]) drawn over each rendering at its size
+/// ([`draw_polygon`] with the points scaled to it), so the outline is as
+/// thin on a 12-megapixel photo's tile as on a small one's.
+pub fn outlined(tile: LazyTile<'_>, points: Vec<[f32; 2]>) -> LazyTile<'_> {
+    let (w, h) = (tile.width.max(1) as f32, tile.height.max(1) as f32);
+    let inner = tile.render;
+    LazyTile {
+        render: Box::new(move |th, tw| {
+            let mut img = inner(th, tw);
+            let (sx, sy) = (tw as f32 / w, th as f32 / h);
+            let scaled: Vec<[f32; 2]> = points.iter().map(|p| [p[0] * sx, p[1] * sy]).collect();
+            draw_polygon(&mut img, &scaled);
+            img
+        }),
+        ..tile
+    }
+}
+
 /// Share of a pixel's own colour kept outside the mask by [`dimmed_tile`]
 /// (the rest is its grey), so the masked part stands out by colour as well
 /// as by brightness, also in dark photos.
@@ -689,6 +760,63 @@ mod tests {
             width,
             data: out,
         }
+    }
+
+    /// The outline: pixels on a side white, their neighbours black, the
+    /// inside untouched; sides with a non-finite point left out; points far
+    /// outside clipped; on a lazy tile, drawn at the rendering's size.
+    #[test]
+    fn polygons_are_outlined_and_clipped() {
+        let (h, w) = (30, 40);
+        let grey = Image::new(1, h, w, vec![0.5; h * w]).unwrap();
+        let at = |img: &Image, x: usize, y: usize| img.data[y * w + x];
+        let square = [[10.5, 10.5], [30.5, 10.5], [30.5, 20.5], [10.5, 20.5]];
+        let mut img = grey.clone();
+        draw_polygon(&mut img, &square);
+        for x in 10..=30 {
+            assert_eq!((at(&img, x, 10), at(&img, x, 20)), (1.0, 1.0), "x {x}");
+        }
+        for y in 10..=20 {
+            assert_eq!((at(&img, 10, y), at(&img, 30, y)), (1.0, 1.0), "y {y}");
+        }
+        assert_eq!(at(&img, 20, 9), 0.0, "outline above the top side");
+        assert_eq!(at(&img, 20, 11), 0.0, "outline below it");
+        assert_eq!(at(&img, 20, 8), 0.5, "two pixels off: untouched");
+        assert_eq!(at(&img, 20, 15), 0.5, "inside: untouched");
+        // A NaN corner drops its two sides, the others stay.
+        let mut img = grey.clone();
+        draw_polygon(
+            &mut img,
+            &[[10.5, 10.5], [30.5, 10.5], [f32::NAN, 0.0], [10.5, 20.5]],
+        );
+        assert_eq!(at(&img, 20, 10), 1.0);
+        assert_eq!(at(&img, 10, 15), 1.0);
+        assert_eq!(at(&img, 30, 15), 0.5);
+        // Far outside: clipped, no panic; a side crossing the picture shows.
+        let mut img = grey.clone();
+        draw_polygon(&mut img, &[[-1e6, 15.5], [1e6, 15.5], [1e6, 1e6]]);
+        assert_eq!(at(&img, 0, 15), 1.0);
+        let mut rgb = Image::new(3, h, w, vec![0.25; 3 * h * w]).unwrap();
+        draw_polygon(&mut rgb, &square);
+        assert_eq!(
+            [0, 1, 2].map(|c| rgb.data[c * h * w + 10 * w + 20]),
+            [1.0; 3]
+        );
+        // Lazily: at the full size as drawn on the picture, at half size
+        // with the points halved.
+        let tile = outlined(
+            LazyTile::from(Tile {
+                label: "q".into(),
+                image: grey.clone(),
+            }),
+            square.to_vec(),
+        );
+        let mut want = grey.clone();
+        draw_polygon(&mut want, &square);
+        assert_eq!((tile.render)(h, w).data, want.data);
+        let mut half = resize(&grey, h / 2, w / 2, false);
+        draw_polygon(&mut half, &square.map(|p| [p[0] / 2.0, p[1] / 2.0]));
+        assert_eq!((tile.render)(h / 2, w / 2).data, half.data);
     }
 
     #[test]
