@@ -893,9 +893,7 @@ pub fn write_materials(
         .as_str()
         .unwrap_or("photo")
         .to_string();
-    for (_, pk) in &req.picks {
-        prepared.check_pick(*pk).with_context(|| label.clone())?;
-    }
+    // The quad first: without --pick the pick is its centre.
     if let Some(q) = &req.quad {
         if req.picks.len() > 1 || req.all {
             bail!("--quad gives the plane of one material: use it with at most one --pick and without --all");
@@ -903,6 +901,9 @@ pub fn write_materials(
         let (fw, fh) = prepared.photo_size();
         q.check(fw, fh)
             .map_err(|e| anyhow!("{label}: --quad: {e}"))?;
+    }
+    for (_, pk) in &req.picks {
+        prepared.check_pick(*pk).with_context(|| label.clone())?;
     }
     std::fs::create_dir_all(out_dir)
         .with_context(|| format!("creating output directory {}", out_dir.display()))?;

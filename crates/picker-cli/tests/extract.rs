@@ -804,7 +804,7 @@ fn bad_planes_fail_clearly_and_write_nothing() {
             "coffee.jpg",
             "--quad",
             "corner 2",
-            "outside the 320×213 photo",
+            "outside the 320x213 photo",
         ],
     );
     fails(

@@ -105,7 +105,7 @@ impl Quad {
             let inside = |v: f32, n: usize| v >= -0.5 && f64::from(v) <= n as f64 - 0.5;
             if !(inside(x, w) && inside(y, h)) {
                 return Err(format!(
-                    "corner {} ({x},{y}) is outside the {w}×{h} photo",
+                    "corner {} ({x},{y}) is outside the {w}x{h} photo",
                     k + 1
                 ));
             }
