@@ -17,6 +17,9 @@ fn example_photo() -> PathBuf {
     root().join("fixtures/examples/coffee.jpg")
 }
 
+/// A convex quadrilateral on `example_photo()`.
+const QUAD: &str = "10,20,200,30,190,150,15,140";
+
 fn tiny_weights() -> PathBuf {
     root().join("fixtures/weights/tiny")
 }
@@ -857,9 +860,47 @@ fn out_of_range_values_are_refused_before_anything_is_written() {
             &["--pick", "10,10", "--max-megapixels", "inf"][..],
             "finite",
         ),
+        // A plane given by a quad or a normal that cannot be used.
+        (
+            &["--quad", "10,20,330,30,190,150,15,140"][..],
+            "--quad: corner 2 (330,30) is outside the 320x213 photo",
+        ),
+        (
+            &["--quad", "10,20,190,150,200,30,15,140"][..],
+            "convex quadrilateral",
+        ),
+        (
+            &["--quad", QUAD, "--pick", "50,50", "--pick", "60,60"][..],
+            "at most one --pick",
+        ),
+        (&["--quad", QUAD, "--uv", "net"][..], "--uv net"),
+        (
+            &["--pick", "50,50", "--normal", "front", "--uv", "net"][..],
+            "--uv net",
+        ),
+        (
+            &["--pick", "20,190", "--normal", "0,0,-1"][..],
+            "seen edge-on or from behind",
+        ),
     ] {
         let o = extract(extra);
         assert_error_names(&o, needle);
+        assert!(!out.exists(), "{extra:?} wrote {}", out.display());
+    }
+    // Usage errors of the plane flags (exit status 2, clap's).
+    for (extra, needle) in [
+        (&["--quad", "10,20,200,30"][..], "X1,Y1,X2,Y2,X3,Y3,X4,Y4"),
+        (&["--quad", QUAD, "--all"][..], "--all"),
+        (&["--quad", QUAD, "--normal", "front"][..], "--normal"),
+        (
+            &["--pick", "50,50", "--normal", "0,0,0"][..],
+            "no direction",
+        ),
+        (&["--pick", "50,50", "--normal", "up"][..], "front or X,Y,Z"),
+    ] {
+        let o = extract(extra);
+        assert_eq!(o.status.code(), Some(2), "{extra:?}: {}", stderr(&o));
+        assert!(stderr(&o).contains(needle), "{extra:?}: {}", stderr(&o));
         assert!(!out.exists(), "{extra:?} wrote {}", out.display());
     }
     // A negative coordinate reaches the pick's own parser (clap would
