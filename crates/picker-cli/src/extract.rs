@@ -1035,6 +1035,10 @@ pub fn write_materials(
             if let Some(why) = &diag.texture_fallback {
                 o.insert("texture_fallback".into(), json!(why));
             }
+            let hints = hints(&diag);
+            if !hints.is_empty() {
+                o.insert("hints".into(), json!(hints));
+            }
             let mut names: Vec<String> = files
                 .iter()
                 .filter_map(|f| f.file_name().map(|n| n.to_string_lossy().into_owned()))
@@ -1102,6 +1106,24 @@ fn photo_path(a: &Args) -> Result<PathBuf> {
         }
         (None, None) => bail!("give a PHOTO (or --elements DIR holding image.png)"),
     })
+}
+
+/// Advice for the user from what the extraction found (`summary.json`,
+/// `materials[].hints`; printed by `picker extract`).
+fn hints(diag: &pipeline::Diagnostics) -> Vec<String> {
+    let mut out = Vec::new();
+    let uv = diag.uv.as_ref();
+    if let Some(turn) = uv
+        .and_then(|u| u.lines.as_ref())
+        .and_then(|l| l.refused_turn_deg)
+    {
+        out.push(format!(
+            "the photo's lines in the picked region disagree with the predicted plane by {turn:.0}°; \
+             if the texture is streaky or in perspective, give the plane: --normal front for a \
+             head-on photo, or --quad with the corners of a rectangle on the surface"
+        ));
+    }
+    out
 }
 
 /// Runs `picker extract`.
@@ -1186,6 +1208,13 @@ pub fn run(a: Args) -> Result<()> {
                 s["name"].as_str().unwrap_or("?"),
                 s["dir"].as_str().unwrap_or("?")
             );
+            for h in s["hints"].as_array().into_iter().flatten() {
+                eprintln!(
+                    "hint: {}: {}",
+                    s["name"].as_str().unwrap_or("?"),
+                    h.as_str().unwrap_or("?")
+                );
+            }
         }
         println!("done in {:.2} s", t_total.elapsed().as_secs_f64());
     }

@@ -943,6 +943,71 @@ fn write_rgb_exr(path: &Path, w: usize, h: usize, f: impl Fn(usize, usize) -> [f
     .unwrap();
 }
 
+/// A photo whose lines contradict the plane the elements give (vertical
+/// stripes seen head-on, normals saying a floor): the refused turn is in
+/// `material.json`, and `picker extract` suggests giving the plane, in
+/// `summary.json` and on stderr; the README's wall gets no such hint.
+#[test]
+fn a_plane_the_lines_contradict_brings_a_hint() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = tmp.path().join("scene");
+    std::fs::create_dir_all(&scene).unwrap();
+    let fixture = root().join("fixtures/synth/scene_000000");
+    for e in std::fs::read_dir(&fixture).unwrap() {
+        let e = e.unwrap();
+        std::fs::copy(e.path(), scene.join(e.file_name())).unwrap();
+    }
+    let (w, h) = (32, 24);
+    write_rgb_exr(&scene.join("normals.exr"), w, h, |_, _| [0.0, 1.0, 0.05]);
+    write_rgb_exr(&scene.join("segmentation.exr"), w, h, |_, _| [0.5; 3]);
+    let stripes = image::RgbImage::from_fn(320, 240, |x, _| {
+        image::Rgb([if (x / 16) % 2 == 0 { 200 } else { 50 }; 3])
+    });
+    stripes.save(scene.join("image.png")).unwrap();
+    let out = tmp.path().join("o");
+    let o = picker([
+        "extract",
+        "--elements",
+        scene.to_str().unwrap(),
+        "--pick",
+        "160,120",
+        "--uv",
+        "plane",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_ok(&o);
+    let m: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("material.json")).unwrap()).unwrap();
+    let turn = m["diagnostics"]["uv"]["lines"]["refused_turn_deg"]
+        .as_f64()
+        .unwrap_or_else(|| panic!("{}", m["diagnostics"]["uv"]));
+    assert!(turn > 80.0, "{turn}");
+    let s: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+    let hint = s["materials"][0]["hints"][0].as_str().unwrap_or_default();
+    assert!(
+        hint.contains("--normal front") && hint.contains("--quad"),
+        "{s}"
+    );
+    assert!(
+        stderr(&o).contains("hint: material_0: the photo's lines"),
+        "{}",
+        stderr(&o)
+    );
+
+    let o = picker([
+        "extract",
+        root().join("fixtures/examples/room.png").to_str().unwrap(),
+        "--pick",
+        "200,150",
+        "--out",
+        tmp.path().join("room").to_str().unwrap(),
+    ]);
+    assert_ok(&o);
+    assert!(!stderr(&o).contains("hint"), "{}", stderr(&o));
+}
+
 /// Float images with no finite value, segmentations with NaN and
 /// environment maps without any light are refused, naming the file; nothing is written.
 #[test]

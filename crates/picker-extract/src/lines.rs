@@ -74,6 +74,13 @@ pub struct LineRefinement {
     pub snapped_to_axis: bool,
     /// True when the refined normal was used.
     pub applied: bool,
+    /// When the region's one family of lines asked to turn the predicted
+    /// normal by more than [`MAX_ONE_DIRECTION_TURN_DEG`] and was refused:
+    /// that turn, degrees. The photo's lines and the predicted plane then
+    /// disagree, and one of them is wrong: a pattern's strokes that are not
+    /// in the plane, or a predicted plane far off (a head-on photo taken
+    /// for a floor); the CLI then suggests giving the plane.
+    pub refused_turn_deg: Option<f32>,
     /// The best-supported vanishing direction of the region that lies in the
     /// plane used (within [`crate::plane::MAX_AXIS_TILT_DEG`]): the
     /// rectified texture's axes are turned to follow it
@@ -426,6 +433,24 @@ fn smallest_eigenvector(m: glam::Mat3) -> Vec3 {
 /// card's photos turned more than this.
 pub const MAX_ONE_DIRECTION_TURN_DEG: f32 = 45.0;
 
+/// The turn, degrees, that [`refine_normal`] refuses: with exactly one
+/// vanishing direction that would turn `n` (unit) by more than
+/// [`MAX_ONE_DIRECTION_TURN_DEG`]; else `None`.
+pub fn refused_turn_deg(n: Vec3, vanishing: &[Vanishing]) -> Option<f32> {
+    match vanishing {
+        [a] => {
+            let turn = n
+                .dot(Vec3::from(a.direction))
+                .abs()
+                .min(1.0)
+                .asin()
+                .to_degrees();
+            (turn > MAX_ONE_DIRECTION_TURN_DEG).then_some(turn)
+        }
+        _ => None,
+    }
+}
+
 /// The plane normal given the predicted one (`n`, unit) and the vanishing
 /// directions in the plane: the cross product of two, or `n` without its
 /// component along one (when that turns `n` by at most
@@ -776,6 +801,7 @@ pub fn refine_plane_normal(
     };
     let used = snapped.or(refined).unwrap_or(n);
     let texture_axis = texture_axis(&vanishing, used);
+    let refused = refused_turn_deg(n, &vanishing);
     (
         used,
         LineRefinement {
@@ -785,6 +811,7 @@ pub fn refine_plane_normal(
             normal: used.to_array(),
             normal_change_deg: n.dot(used).clamp(-1.0, 1.0).acos().to_degrees(),
             applied: refined.is_some(),
+            refused_turn_deg: refused,
             texture_axis,
             snapped_to_axis: snapped.is_some(),
             focal: None,
@@ -955,6 +982,16 @@ mod tests {
         assert!((43.0..45.0).contains(&turn(d44)), "{}", turn(d44));
         let r44 = refine_normal(n, &[v(d44)], view).unwrap();
         assert!((angle_deg(r44, n) - turn(d44)).abs() < 1e-2);
+        // The refused turn is reported (the 54° one), the made ones not.
+        let d54 = Vec3::new(0.8, 0.0, 0.6);
+        let refused = refused_turn_deg(n, &[v(d54)]).unwrap();
+        assert!(
+            (refused - turn(d54)).abs() < 1e-3 && refused > 50.0,
+            "{refused}"
+        );
+        assert_eq!(refused_turn_deg(n, &[v(d44)]), None);
+        assert_eq!(refused_turn_deg(n, &[v(d), v(d2)]), None);
+        assert_eq!(refused_turn_deg(n, &[]), None);
     }
 
     #[test]
@@ -1076,5 +1113,24 @@ mod tests {
         let (kept, diag) = refine_plane_normal(&small, &vec![false; w * h], wrong, f, None);
         assert_eq!(kept, wrong);
         assert!(!diag.applied && diag.segments == 0);
+        assert_eq!(diag.refused_turn_deg, None);
+    }
+
+    /// Vertical stripes seen head-on, with a predicted normal saying a floor
+    /// (up): their one family (vertical, parallel in the photo) would turn
+    /// the normal by 90°; refused, and the refused turn reported.
+    #[test]
+    fn a_family_that_contradicts_the_predicted_plane_is_reported() {
+        let (w, h, f) = (320, 240, 230.0);
+        let luma: Vec<f32> = (0..w * h)
+            .map(|i| if (i % w / 16) % 2 == 0 { 0.8 } else { 0.2 })
+            .collect();
+        let small = SmallLuma::new(&luma, w, h);
+        let up = Vec3::new(0.0, 1.0, 0.05).normalize();
+        let (kept, diag) = refine_plane_normal(&small, &vec![true; w * h], up, f, None);
+        assert_eq!(kept, up, "{diag:?}");
+        assert!(!diag.applied && diag.vanishing.len() == 1, "{diag:?}");
+        let turn = diag.refused_turn_deg.expect("a refused turn");
+        assert!(turn > 80.0, "{turn}");
     }
 }
