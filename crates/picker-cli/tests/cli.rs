@@ -934,6 +934,18 @@ fn out_of_range_values_are_refused_before_anything_is_written() {
     );
 }
 
+/// A copy of the committed synthetic scene `fixtures/synth/scene_000000`
+/// (image and render elements) in `dir`, to alter.
+fn copy_fixture_scene(dir: &Path) {
+    let scene = root().join("fixtures/synth/scene_000000");
+    std::fs::create_dir_all(dir).unwrap();
+    for e in std::fs::read_dir(&scene).unwrap().flatten() {
+        if e.path().is_file() {
+            std::fs::copy(e.path(), dir.join(e.file_name())).unwrap();
+        }
+    }
+}
+
 fn write_rgb_exr(path: &Path, w: usize, h: usize, f: impl Fn(usize, usize) -> [f32; 3] + Sync) {
     use exr::prelude::*;
     write_rgb_file(path, w, h, |x, y| {
@@ -951,13 +963,9 @@ fn write_rgb_exr(path: &Path, w: usize, h: usize, f: impl Fn(usize, usize) -> [f
 fn a_plane_the_lines_contradict_brings_a_hint() {
     let tmp = tempfile::tempdir().unwrap();
     let scene = tmp.path().join("scene");
-    std::fs::create_dir_all(&scene).unwrap();
-    let fixture = root().join("fixtures/synth/scene_000000");
-    for e in std::fs::read_dir(&fixture).unwrap() {
-        let e = e.unwrap();
-        std::fs::copy(e.path(), scene.join(e.file_name())).unwrap();
-    }
-    let (w, h) = (32, 24);
+    copy_fixture_scene(&scene);
+    let (w, h) = png_size(&scene.join("image.png"));
+    let (w, h) = (w as usize, h as usize);
     write_rgb_exr(&scene.join("normals.exr"), w, h, |_, _| [0.0, 1.0, 0.05]);
     write_rgb_exr(&scene.join("segmentation.exr"), w, h, |_, _| [0.5; 3]);
     let stripes = image::RgbImage::from_fn(320, 240, |x, _| {
@@ -1051,13 +1059,7 @@ fn non_finite_and_lightless_float_inputs_are_refused() {
     ]));
     // Ground-truth elements whose segmentation is NaN.
     let el = tmp.path().join("el");
-    let scene = root().join("fixtures/synth/scene_000000");
-    std::fs::create_dir_all(&el).unwrap();
-    for e in std::fs::read_dir(&scene).unwrap().flatten() {
-        if e.path().is_file() {
-            std::fs::copy(e.path(), el.join(e.file_name())).unwrap();
-        }
-    }
+    copy_fixture_scene(&el);
     let (sw, sh) = png_size(&el.join("image.png"));
     write_rgb_exr(
         &el.join("segmentation.exr"),
