@@ -1035,7 +1035,7 @@ pub fn write_materials(
             if let Some(why) = &diag.texture_fallback {
                 o.insert("texture_fallback".into(), json!(why));
             }
-            let hints = hints(&diag);
+            let hints = hints(&m, &diag);
             if !hints.is_empty() {
                 o.insert("hints".into(), json!(hints));
             }
@@ -1108,10 +1108,25 @@ fn photo_path(a: &Args) -> Result<PathBuf> {
     })
 }
 
+/// Below this share of observed texels `picker extract` says that most of
+/// the texture was inpainted ([`hints`]).
+const LOW_COVERAGE: f64 = 0.25;
+
 /// Advice for the user from what the extraction found (`summary.json`,
 /// `materials[].hints`; printed by `picker extract`).
-fn hints(diag: &pipeline::Diagnostics) -> Vec<String> {
+fn hints(m: &Material, diag: &pipeline::Diagnostics) -> Vec<String> {
     let mut out = Vec::new();
+    if let Some(t) = m
+        .texture
+        .as_ref()
+        .filter(|t| t.coverage_fraction < LOW_COVERAGE)
+    {
+        out.push(format!(
+            "the photo shows {:.0} % of the texture; the rest was filled in by inpainting \
+             (coverage.png): a closer or more frontal photo of the material shows more of it",
+            100.0 * t.coverage_fraction
+        ));
+    }
     let uv = diag.uv.as_ref();
     if let Some(turn) = uv
         .and_then(|u| u.lines.as_ref())

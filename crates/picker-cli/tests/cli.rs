@@ -958,7 +958,8 @@ fn write_rgb_exr(path: &Path, w: usize, h: usize, f: impl Fn(usize, usize) -> [f
 /// A photo whose lines contradict the plane the elements give (vertical
 /// stripes seen head-on, normals saying a floor): the refused turn is in
 /// `material.json`, and `picker extract` suggests giving the plane, in
-/// `summary.json` and on stderr; the README's wall gets no such hint.
+/// `summary.json` and on stderr, and says how little of the texture the
+/// photo shows; the README's wall gets no hint.
 #[test]
 fn a_plane_the_lines_contradict_brings_a_hint() {
     let tmp = tempfile::tempdir().unwrap();
@@ -1003,6 +1004,41 @@ fn a_plane_the_lines_contradict_brings_a_hint() {
         "{}",
         stderr(&o)
     );
+    assert!(!stderr(&o).contains("the photo shows"), "{}", stderr(&o));
+
+    // A material that is a thin diagonal band, facing the camera: the
+    // square its box frames is mostly unseen, and that is said.
+    write_rgb_exr(&scene.join("normals.exr"), w, h, |_, _| [0.0, 0.0, 1.0]);
+    write_rgb_exr(&scene.join("segmentation.exr"), w, h, |x, y| {
+        let on = (x as f64 - y as f64 * w as f64 / h as f64).abs() < 1.5;
+        if on {
+            [0.9, 0.1, 0.1]
+        } else {
+            [0.1, 0.1, 0.9]
+        }
+    });
+    let band = tmp.path().join("band");
+    let o = picker([
+        "extract",
+        "--elements",
+        scene.to_str().unwrap(),
+        "--pick",
+        "160,120",
+        "--uv",
+        "plane",
+        "--out",
+        band.to_str().unwrap(),
+    ]);
+    assert_ok(&o);
+    let m: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(band.join("material.json")).unwrap()).unwrap();
+    let coverage = m["texture"]["coverage_fraction"].as_f64().unwrap();
+    assert!(coverage < 0.25, "{coverage}");
+    let said = format!(
+        "hint: material_0: the photo shows {:.0} % of the texture",
+        100.0 * coverage
+    );
+    assert!(stderr(&o).contains(&said), "{}", stderr(&o));
 
     let o = picker([
         "extract",
