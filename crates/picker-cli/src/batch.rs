@@ -371,7 +371,13 @@ fn up_to_date(dir: &Path, key: &Value) -> bool {
 /// How one photo ended.
 #[derive(Clone, Debug)]
 enum Outcome {
-    Ok { materials: usize, seconds: f64 },
+    Ok {
+        materials: usize,
+        seconds: f64,
+        /// Each material's hints (`summary.json`, `materials[].hints`),
+        /// prefixed with its name.
+        hints: Vec<String>,
+    },
     UpToDate,
     Skipped(String),
     Failed(String),
@@ -440,7 +446,7 @@ fn process(s: &Shared<'_>, photo: &Photo, req: &Request) -> Result<Outcome> {
     }
     remove_dir_if_exists(&partial)?;
     s.in_flight.lock().unwrap().insert(partial.clone());
-    let result = (|| -> Result<usize> {
+    let result = (|| -> Result<(usize, Vec<String>)> {
         let loaded = extract::load_inputs_from(
             &Source::Nets(s.models),
             &photo.path,
@@ -456,6 +462,7 @@ fn process(s: &Shared<'_>, photo: &Photo, req: &Request) -> Result<Outcome> {
         let summary =
             extract::write_materials(&loaded, req, s.flags, s.inpainter, &partial, layout)?;
         let materials = summary["materials"].as_array().map_or(0, Vec::len);
+        let hints = summary_hints(&summary);
         let files = list_files(&partial)?;
         let manifest = json!({
             "format": "material-picker-batch-manifest",
@@ -475,19 +482,38 @@ fn process(s: &Shared<'_>, photo: &Photo, req: &Request) -> Result<Outcome> {
                 let _ = d.sync_all();
             }
         }
-        Ok(materials)
+        Ok((materials, hints))
     })();
     s.in_flight.lock().unwrap().remove(&partial);
     match result {
-        Ok(materials) => Ok(Outcome::Ok {
+        Ok((materials, hints)) => Ok(Outcome::Ok {
             materials,
             seconds: t.elapsed().as_secs_f64(),
+            hints,
         }),
         Err(e) => {
             let _ = remove_dir_if_exists(&partial);
             Err(e)
         }
     }
+}
+
+/// Every material's hints in a photo's `summary.json`
+/// (`materials[].hints`), each prefixed with the material's name.
+fn summary_hints(summary: &Value) -> Vec<String> {
+    summary["materials"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .flat_map(|m| {
+            let name = m["name"].as_str().unwrap_or("?").to_string();
+            m["hints"]
+                .as_array()
+                .into_iter()
+                .flatten()
+                .map(move |h| format!("{name}: {}", h.as_str().unwrap_or("?")))
+        })
+        .collect()
 }
 
 /// True when an error comes from a full disk (or quota), where every later
@@ -578,8 +604,16 @@ impl Progress {
     fn done(&self, rel: &str, o: &Outcome) {
         let k = self.count.fetch_add(1, Ordering::SeqCst) + 1;
         let what = match o {
-            Outcome::Ok { materials, seconds } => {
-                format!("ok      {rel} (materials: {materials}, {seconds:.1} s)")
+            Outcome::Ok {
+                materials,
+                seconds,
+                hints,
+            } => {
+                let mut line = format!("ok      {rel} (materials: {materials}, {seconds:.1} s)");
+                for h in hints {
+                    line.push_str(&format!("\n        hint: {rel}: {h}"));
+                }
+                line
             }
             Outcome::UpToDate => format!("done    {rel} (up to date)"),
             Outcome::Skipped(r) => format!("skipped {rel}: {r}"),
@@ -782,9 +816,17 @@ pub fn run(a: Args) -> Result<ExitCode> {
     let (mut ok, mut fresh, mut failed, mut skipped, mut not_started) = (0, 0, 0, 0, 0);
     for ((photo, _), r) in shared.photos.iter().zip(&results) {
         let (status, extra) = match r {
-            Some(Outcome::Ok { materials, seconds }) => {
+            Some(Outcome::Ok {
+                materials,
+                seconds,
+                hints,
+            }) => {
                 ok += 1;
-                ("ok", json!({"materials": materials, "seconds": seconds}))
+                let mut extra = json!({"materials": materials, "seconds": seconds});
+                if !hints.is_empty() {
+                    extra["hints"] = json!(hints);
+                }
+                ("ok", extra)
             }
             Some(Outcome::UpToDate) => {
                 fresh += 1;
@@ -874,6 +916,21 @@ pub fn run(a: Args) -> Result<ExitCode> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn hints_are_gathered_from_the_summary_with_their_material() {
+        let summary = json!({"materials": [
+            {"name": "material_0"},
+            {"name": "material_1", "hints": ["a", "b"]},
+            {"name": "material_2", "hints": []},
+            {"name": "material_3", "hints": ["c"]},
+        ]});
+        assert_eq!(
+            summary_hints(&summary),
+            ["material_1: a", "material_1: b", "material_3: c"]
+        );
+        assert!(summary_hints(&json!({})).is_empty());
+    }
 
     #[test]
     fn earlier_results_inside_the_input_are_not_photos() {
