@@ -620,7 +620,8 @@ impl Progress {
             Outcome::Failed(r) => format!("FAILED  {rel}: {r}"),
         };
         if let Some(b) = &self.bar {
-            if matches!(o, Outcome::Failed(_)) {
+            let hinted = matches!(o, Outcome::Ok { hints, .. } if !hints.is_empty());
+            if matches!(o, Outcome::Failed(_)) || hinted {
                 b.println(what);
             }
             b.set_message(rel.to_string());
