@@ -708,6 +708,7 @@ pub fn run(a: Args) -> Result<ExitCode> {
                 picks: picks.get(&p.rel).cloned().unwrap_or_default(),
                 all: a.all,
                 quad: None,
+                quad_size_m: None,
             };
             (p, req)
         })

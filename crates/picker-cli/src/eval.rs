@@ -495,6 +495,7 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
         max_size: pipeline::DEFAULT_MAX_SIZE,
         fov_deg: None,
         plane: None,
+        quad_size_m: None,
         line_refine: !a.no_lines,
         align_grain: !a.no_grain,
         fold_period: !a.no_fold,

@@ -190,6 +190,7 @@ impl Flags {
             max_size: self.max_size as usize,
             fov_deg: self.fov,
             plane: self.normal,
+            quad_size_m: None,
             line_refine: !self.no_lines,
             align_grain: !self.no_grain,
             fold_period: !self.no_fold,
@@ -271,6 +272,12 @@ pub struct Args {
     /// centre. One material: not with several picks, --all or --normal.
     #[arg(long, value_name = "X1,Y1,..,X4,Y4", value_parser = parse_quad, allow_hyphen_values = true, conflicts_with_all = ["all", "normal"])]
     pub quad: Option<Quad>,
+    /// The real size of the --quad's rectangle, `WxH` (first side, corner 1 to 2, by the second,
+    /// 2 to 3) in metres, or with a unit: `210x297mm` (a sheet of A4), `30x30cm` (a floor tile),
+    /// `8.5x11in`. It gives the rectified plane its scale, so material.json gives the texture's
+    /// size on the surface (`texture.size_m`: repeat it every that many metres).
+    #[arg(long, value_name = "WxH[mm|cm|m|in]", value_parser = parse_size_m, requires = "quad")]
+    pub quad_size: Option<[f32; 2]>,
     /// Render elements instead of the networks: a folder with diffuse_albedo.exr,
     /// specular_albedo.exr, glossiness.exr, normals.exr, view_vector.exr, uv.exr,
     /// segmentation.exr and optionally embedding.exr and envmap.exr (as `picker synth` or
@@ -324,6 +331,29 @@ pub fn parse_quad(s: &str) -> std::result::Result<Quad, String> {
         [v[4], v[5]],
         [v[6], v[7]],
     ]))
+}
+
+/// Parses `--quad-size`: `WxH` in metres, or with a unit suffix (`mm`,
+/// `cm`, `m`, `in`) for both; positive, finite.
+pub fn parse_size_m(s: &str) -> std::result::Result<[f32; 2], String> {
+    let t = s.trim();
+    let (num, scale) = [("mm", 1e-3), ("cm", 1e-2), ("in", 0.0254), ("m", 1.0)]
+        .iter()
+        .find_map(|&(u, k)| t.strip_suffix(u).map(|n| (n, k)))
+        .unwrap_or((t, 1.0));
+    let (w, h) = num.split_once(['x', 'X', '×']).ok_or_else(|| {
+        format!("expected WxH with an optional unit (e.g. 210x297mm, 0.3x0.3), got {s:?}")
+    })?;
+    let v = |x: &str| {
+        x.trim()
+            .parse::<f64>()
+            .ok()
+            .filter(|v| v.is_finite() && *v > 0.0)
+            .map(|v| (v * scale) as f32)
+            .filter(|v| v.is_finite() && *v > 0.0)
+            .ok_or_else(|| format!("{x:?} in {s:?} is not a positive size"))
+    };
+    Ok([v(w)?, v(h)?])
 }
 
 /// `N` comma-separated finite numbers.
@@ -862,6 +892,8 @@ pub struct Request {
     pub all: bool,
     /// The plane of the one pick given by a rectangle's corners (`--quad`).
     pub quad: Option<Quad>,
+    /// The quad's real size in metres (`--quad-size`).
+    pub quad_size_m: Option<[f32; 2]>,
 }
 
 /// How [`write_materials`] lays out and annotates its files.
@@ -943,6 +975,7 @@ pub fn write_materials(
     let mut opts = flags.options(inpainter);
     if let Some(q) = req.quad {
         opts.plane = Some(UserPlane::Quad(q));
+        opts.quad_size_m = req.quad_size_m;
     }
     let env = prepared.inputs.envmap.clone();
     let preview_env = env
@@ -1138,8 +1171,24 @@ fn hints(m: &Material, diag: &pipeline::Diagnostics) -> Vec<String> {
              head-on photo, or --quad with the corners of a rectangle on the surface"
         ));
     }
+    if let Some(r) = uv
+        .and_then(|u| u.user_plane.as_ref())
+        .and_then(|u| u.size_ratio)
+        .filter(|r| !(1.0 / SIZE_RATIO_HINT..=SIZE_RATIO_HINT).contains(r))
+    {
+        out.push(format!(
+            "the quad's sides, rectified, are in proportion {r:.2} to the --quad-size given \
+             (1 when they agree), so texture.size_m is uncertain: check that W is the side from \
+             corner 1 to 2 and H from 2 to 3, that the corners lie on the rectangle's corners, \
+             or give the camera's --fov"
+        ));
+    }
     out
 }
+
+/// A `--quad-size` whose proportions the rectified quad's differ from by
+/// more than this factor (either way) brings a hint.
+pub const SIZE_RATIO_HINT: f64 = 1.15;
 
 /// Runs `picker extract`.
 pub fn run(a: Args) -> Result<()> {
@@ -1190,6 +1239,7 @@ pub fn run(a: Args) -> Result<()> {
             .collect(),
         all: a.all,
         quad: a.quad,
+        quad_size_m: a.quad_size,
     };
     let layout = Layout {
         always_subdirs: false,
@@ -1218,8 +1268,16 @@ pub fn run(a: Args) -> Result<()> {
                 (_, Some(why)) => format!("single colour (its texture could not be taken: {why})"),
                 _ => "single colour".to_string(),
             };
+            let size = match s["texture"]["size_m"].as_array().map(|a| a.as_slice()) {
+                Some([w, h]) => format!(
+                    ", repeats every {:.3} x {:.3} m",
+                    w.as_f64().unwrap_or(f64::NAN),
+                    h.as_f64().unwrap_or(f64::NAN)
+                ),
+                _ => String::new(),
+            };
             println!(
-                "{}: {kind} -> {}",
+                "{}: {kind}{size} -> {}",
                 s["name"].as_str().unwrap_or("?"),
                 s["dir"].as_str().unwrap_or("?")
             );
@@ -1253,4 +1311,32 @@ pub fn infer_inputs(models: &Models, photo_path: &Path, work_size: u32) -> Resul
         segmentation_estimated: true,
         envmap,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn quad_sizes_parse_in_every_unit() {
+        let close = |s: &str, want: [f32; 2]| {
+            let got = parse_size_m(s).unwrap_or_else(|e| panic!("{s}: {e}"));
+            for k in 0..2 {
+                assert!((got[k] / want[k] - 1.0).abs() < 1e-6, "{s}: {got:?}");
+            }
+        };
+        close("210x297mm", [0.21, 0.297]);
+        close("30x30cm", [0.3, 0.3]);
+        close("8.5x11in", [0.2159, 0.2794]);
+        close("0.3X0.45", [0.3, 0.45]);
+        close("2×3m", [2.0, 3.0]);
+        close(" 1.5 x 2 m ", [1.5, 2.0]);
+        close("1e-3x2e-3", [1e-3, 2e-3]);
+        for bad in [
+            "", "x", "1x", "x1", "1", "1x2x3", "0x1", "-1x1", "1xnan", "infx1", "1x1ft",
+            "1x1 mm m", "1e-50x1", "1e39x1",
+        ] {
+            assert!(parse_size_m(bad).is_err(), "{bad:?} accepted");
+        }
+    }
 }

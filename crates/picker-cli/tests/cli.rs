@@ -897,6 +897,28 @@ fn out_of_range_values_are_refused_before_anything_is_written() {
             "no direction",
         ),
         (&["--pick", "50,50", "--normal", "up"][..], "front or X,Y,Z"),
+        (&["--pick", "50,50", "--quad-size", "1x1"][..], "--quad"),
+        (&["--quad", QUAD, "--quad-size", "30cm"][..], "expected WxH"),
+        (
+            &["--quad", QUAD, "--quad-size", "0x1m"][..],
+            "not a positive size",
+        ),
+        (
+            &["--quad", QUAD, "--quad-size", "1x-2"][..],
+            "not a positive size",
+        ),
+        (
+            &["--quad", QUAD, "--quad-size", "ax1"][..],
+            "not a positive size",
+        ),
+        (
+            &["--quad", QUAD, "--quad-size", "1x1ft"][..],
+            "not a positive size",
+        ),
+        (
+            &["--quad", QUAD, "--quad-size", "1e39x1"][..],
+            "not a positive size",
+        ),
     ] {
         let o = extract(extra);
         assert_eq!(o.status.code(), Some(2), "{extra:?}: {}", stderr(&o));

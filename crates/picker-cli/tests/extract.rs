@@ -778,7 +778,9 @@ fn json_pick(x: f64, y: f64) -> Value {
 /// normal, from `fixtures/examples/README.md`), gives that plane and
 /// focal length back (the quad's corners name them exactly, up to the
 /// truth's three decimals), the bricks' true period ratio (1.6), and with
-/// no `--pick` the quad's centre as the pick. `--normal` with the true
+/// no `--pick` the quad's centre as the pick; with its real size
+/// (`--quad-size`), the wall's distance as the plane's scale, and a hint
+/// when the size is given with its sides swapped. `--normal` with the true
 /// normal and field of view rectifies the same plane.
 #[test]
 fn a_quad_on_the_readme_wall_gives_its_true_plane() {
@@ -819,11 +821,14 @@ fn a_quad_on_the_readme_wall_gives_its_true_plane() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("q");
     let photo = repo().join("fixtures/examples/room.png");
-    ok(&[
+    // Its real size in metres makes a camera-space unit a metre.
+    let o1 = ok(&[
         "extract",
         photo.to_str().unwrap(),
         "--quad",
         &quad,
+        "--quad-size",
+        "800x440mm",
         "--out",
         out.to_str().unwrap(),
         "--threads",
@@ -831,6 +836,26 @@ fn a_quad_on_the_readme_wall_gives_its_true_plane() {
     ]);
     let m = json_file(&out.join("material.json"));
     let uv = &m["diagnostics"]["uv"];
+    let used = &uv["user_plane"];
+    let ratio = used["size_ratio"].as_f64().unwrap();
+    assert!((ratio - 1.0).abs() < 0.01, "{used}");
+    // Metres per unit of the plane through N·P = −1: the wall's distance.
+    let unit = used["unit_m"].as_f64().unwrap();
+    assert!((unit / dot(n, o).abs() - 1.0).abs() < 0.01, "{used}");
+    let size = &m["texture"]["size_m"];
+    let side: Vec<f64> = size
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    assert!(side.iter().all(|&s| s > 0.0 && s < 10.0), "{size}");
+    let said = String::from_utf8_lossy(&o1.stdout).into_owned();
+    assert!(
+        said.contains(&format!("repeats every {:.3} x {:.3} m", side[0], side[1])),
+        "{said}"
+    );
+    assert!(m.get("hints").is_none_or(Value::is_null), "{m}");
     assert_eq!(uv["mode"], "plane", "{uv}");
     assert_eq!(uv["requested"], "plane", "{uv}");
     let used = &uv["user_plane"];
@@ -862,6 +887,31 @@ fn a_quad_on_the_readme_wall_gives_its_true_plane() {
         m["pick"],
         json_pick(mean(0).round(), mean(1).round()),
         "{quad}"
+    );
+
+    // The sides given the wrong way round: the same plane, and a hint.
+    let out3 = tmp.path().join("swapped");
+    let o3 = ok(&[
+        "extract",
+        photo.to_str().unwrap(),
+        "--quad",
+        &quad,
+        "--quad-size",
+        "44x80cm",
+        "--max-size",
+        "64",
+        "--out",
+        out3.to_str().unwrap(),
+    ]);
+    let m3 = json_file(&out3.join("material.json"));
+    let r3 = m3["diagnostics"]["uv"]["user_plane"]["size_ratio"]
+        .as_f64()
+        .unwrap();
+    assert!((r3 / (0.44f64 / 0.8).powi(2) - 1.0).abs() < 0.02, "{r3}");
+    let told = String::from_utf8_lossy(&o3.stderr).into_owned();
+    assert!(
+        told.contains("hint: ") && told.contains("in proportion 0.30"),
+        "{told}"
     );
 
     let fov = format!("{}", 2.0 * (h / 2.0 / f).atan().to_degrees());

@@ -292,6 +292,7 @@ pub fn material_json(m: &Material, extra: &Value, opts: &ExportOptions) -> Resul
             "height": t.texture.height,
             "coverage_fraction": t.coverage_fraction,
             "observed_size": t.observed_size,
+            "size_m": t.size_m,
             "seam": {
                 "wrap": t.seam.wrap,
                 "interior": t.seam.interior,
@@ -413,6 +414,10 @@ fn conventions() -> Value {
     put(
         "texture.observed_size",
         "texels per unit of texture square at the photo's density: the automatic side; a larger --size than the photo covers is made at this side and enlarged (bicubic), a smaller one is made at its own",
+    );
+    put(
+        "texture.size_m",
+        "the texture's size on the surface in metres [along u, along v] (its width and height: repeat it every that many metres), when known: a --quad with its real --quad-size gives the rectified plane its scale; null otherwise",
     );
     put(
         "texture.seam",

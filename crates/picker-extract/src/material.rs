@@ -61,6 +61,10 @@ pub struct TextureResult {
     /// the material had in the photo (the preview sphere wraps the texture
     /// by it).
     pub observed_size: usize,
+    /// The texture's size on the surface, metres `[along u, along v]`, when
+    /// it is known: a quad's real size was given
+    /// ([`crate::pipeline::Options::quad_size_m`]).
+    pub size_m: Option<[f64; 2]>,
     /// How the coordinates were obtained.
     pub uv_mode: UvMode,
     /// Seam score of the final texture (wrap-edge difference vs interior).

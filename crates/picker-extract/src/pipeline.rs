@@ -164,6 +164,11 @@ pub struct Options<'a> {
     /// (along its sides) and, without `fov_deg`, the focal length when it
     /// tells it ([`crate::quad::Quad::focal`]).
     pub plane: Option<UserPlane>,
+    /// With a quad ([`UserPlane::Quad`]): the real size of its rectangle in
+    /// metres, `[first side (corner 1 to 2), second side (2 to 3)]` (a sheet
+    /// of A4 paper, a 30 cm tile). It gives the plane its scale, and the
+    /// texture its size on the surface ([`TextureResult::size_m`]).
+    pub quad_size_m: Option<[f32; 2]>,
     /// Refine the plane mode's normal with the vanishing directions of the
     /// photo's straight lines in the mask ([`crate::lines`]).
     pub line_refine: bool,
@@ -676,6 +681,15 @@ pub struct UserPlaneUsed {
     /// direction of the region's lines in the plane
     /// ([`crate::lines::texture_axis`]; none without line refinement).
     pub texture_axis: Option<[f32; 3]>,
+    /// The quad's real size given ([`Options::quad_size_m`]), metres.
+    pub size_m: Option<[f32; 2]>,
+    /// With `size_m`: metres per unit of the rectified plane (the plane
+    /// through `N·P = −1`), the geometric mean of the two sides'.
+    pub unit_m: Option<f64>,
+    /// With `size_m`: the first side's metres per unit over the second's
+    /// (1 when the quad's proportions on the rectified plane are the given
+    /// ones; far from 1, the focal length, the corners or the size are off).
+    pub size_ratio: Option<f64>,
 }
 
 /// A `--size` above the observed texel density is kept when the picked
@@ -854,6 +868,18 @@ fn check_request(p: &Prepared, pm: &PickMask, opts: &Options) -> Result<()> {
             let (fw, fh) = p.photo_size();
             q.check(fw, fh)
                 .map_err(|e| Error::Invalid(format!("the plane's quadrilateral: {e}")))?;
+            if let Some([a, b]) = opts.quad_size_m {
+                if !(a.is_finite() && b.is_finite() && a > 0.0 && b > 0.0) {
+                    return Err(Error::Invalid(format!(
+                        "the quadrilateral's size {a} x {b} m must be positive and finite"
+                    )));
+                }
+            }
+        }
+        Some(UserPlane::Normal(_)) | None if opts.quad_size_m.is_some() => {
+            return Err(Error::Invalid(
+                "a quadrilateral's size needs the quadrilateral (UserPlane::Quad)".into(),
+            ));
         }
         Some(UserPlane::Normal(n)) if !(n.is_finite() && (n.length() - 1.0).abs() < 1e-3) => {
             return Err(Error::Invalid(format!(
@@ -1172,6 +1198,7 @@ fn extract_as(
                             diag_lines: &mut Option<crate::lines::LineRefinement>,
                             diag_grain: &mut (Option<crate::grain::Grain>, bool),
                             diag_user: &mut Option<UserPlaneUsed>,
+                            frame_out: &mut Option<plane::Frame>,
                             rest_src: &mut Option<Mask>|
          -> Option<Coords> {
             let quad = match opts.plane {
@@ -1224,17 +1251,34 @@ fn extract_as(
                         quad: None,
                         corner_angle_deg: None,
                         texture_axis: along.flatten(),
+                        size_m: None,
+                        unit_m: None,
+                        size_ratio: None,
                     });
                     (n, along.flatten().map(Vec3::from))
                 }
                 Some(UserPlane::Quad(q)) => {
                     let qp = q.plane(fw, fh, f).ok()?;
+                    // Metres per plane unit from the quad's real size: the
+                    // geometric mean of its two sides' (they agree when the
+                    // plane and focal length are right).
+                    let scale = opts.quad_size_m.and_then(|[a, b]| {
+                        let s = q.sides_on_plane(fw, fh, f, qp.normal)?;
+                        let (ma, mb) = (
+                            f64::from(a) / ((s[0] + s[2]) / 2.0),
+                            f64::from(b) / ((s[1] + s[3]) / 2.0),
+                        );
+                        (ma.is_finite() && mb.is_finite()).then(|| ((ma * mb).sqrt(), ma / mb))
+                    });
                     *diag_user = Some(UserPlaneUsed {
                         source: "quad",
                         normal: qp.normal.to_array(),
                         quad: Some(q.0),
                         corner_angle_deg: Some(qp.corner_angle_deg),
                         texture_axis: Some(qp.along.to_array()),
+                        size_m: opts.quad_size_m,
+                        unit_m: scale.map(|s| s.0),
+                        size_ratio: scale.map(|s| s.1),
                     });
                     (qp.normal, Some(qp.along))
                 }
@@ -1261,7 +1305,7 @@ fn extract_as(
             // gives no coordinates: no plane.
             let rest = rest_plane();
             let coords_along = |along: Option<Vec3>| {
-                plane::plane_coords_with(
+                plane::plane_coords_framed(
                     fw,
                     fh,
                     &full.data,
@@ -1271,20 +1315,21 @@ fn extract_as(
                     along,
                 )
             };
-            let mut c = coords_along(along);
+            let (mut c, mut frame) = coords_along(along);
             // No axis from the lines: the pattern's own direction, if clear.
             if along.is_none() && opts.align_grain {
                 let g = crate::grain::measure(&c, &full.data, &p.luma);
                 if let Some(g) = g.filter(crate::grain::Grain::decisive) {
                     let (e1, e2) = plane::plane_basis(n, None);
                     // Texture direction (du, dv) is e1·du − e2·dv on the plane.
-                    c = coords_along(Some(e1 * g.along[0] - e2 * g.along[1]));
+                    (c, frame) = coords_along(Some(e1 * g.along[0] - e2 * g.along[1]));
                     diag_grain.1 = true;
                 }
                 diag_grain.0 = g;
             }
             let usable = c.u.iter().zip(&full.data).any(|(u, &m)| m && u.is_finite());
             *rest_src = rest;
+            *frame_out = frame;
             usable.then_some(c)
         };
         // Why auto finds no coordinates, if it finds none.
@@ -1300,6 +1345,7 @@ fn extract_as(
         let mut grain = (None, false);
         let mut plane_rest = None;
         let mut user_plane = None;
+        let mut frame = None;
         let (mode, coords) =
             match uv_choice {
                 UvChoice::Net => match net_coords {
@@ -1309,7 +1355,7 @@ fn extract_as(
                             .into(),
                     )),
                 },
-                UvChoice::Plane => match plane_coords(&mut focal, &mut lines, &mut grain, &mut user_plane, &mut plane_rest) {
+                UvChoice::Plane => match plane_coords(&mut focal, &mut lines, &mut grain, &mut user_plane, &mut frame, &mut plane_rest) {
                     Some(c) => (UvMode::Plane, c),
                     None if opts.plane.is_some() => {
                         return Err(Error::Invalid(
@@ -1334,11 +1380,11 @@ fn extract_as(
                             Some(c) => (UvMode::Net, c),
                             None => (
                                 UvMode::Plane,
-                                plane_coords(&mut focal, &mut lines, &mut grain, &mut user_plane, &mut plane_rest).ok_or_else(neither)?,
+                                plane_coords(&mut focal, &mut lines, &mut grain, &mut user_plane, &mut frame, &mut plane_rest).ok_or_else(neither)?,
                             ),
                         }
                     } else {
-                        match plane_coords(&mut focal, &mut lines, &mut grain, &mut user_plane, &mut plane_rest) {
+                        match plane_coords(&mut focal, &mut lines, &mut grain, &mut user_plane, &mut frame, &mut plane_rest) {
                             Some(c) => (UvMode::Plane, c),
                             None => (
                                 UvMode::Net,
@@ -1429,6 +1475,16 @@ fn extract_as(
             }
         } else {
             (coords, None, None)
+        };
+        // The texture's size on the surface, when a quad's real size gave
+        // the plane its scale: the square (or the folded tile) in metres.
+        let size_m = match (user_plane.as_ref().and_then(|u| u.unit_m), frame) {
+            (Some(unit), Some(fr)) if mode == UvMode::Plane => {
+                let side = f64::from(fr.side()) * unit;
+                let t = fold.map_or([1.0, 1.0], |f| f.tile);
+                Some([side * f64::from(t[0]), side * f64::from(t[1])])
+            }
+            _ => None,
         };
         diag.uv = Some(UvDecision {
             mode,
@@ -1697,6 +1753,7 @@ fn extract_as(
             coverage,
             coverage_fraction: known_fraction,
             observed_size: observed,
+            size_m,
             uv_mode: mode,
             inpainter: opts.inpainter.name().to_string(),
         });
@@ -1954,6 +2011,7 @@ mod tests {
             max_size: 256,
             fov_deg: None,
             plane: None,
+            quad_size_m: None,
             line_refine: false,
             align_grain: false,
             fold_period: true,
@@ -2119,6 +2177,7 @@ mod tests {
             coverage: Image::zeros(1, tex.height, tex.width),
             coverage_fraction: 1.0,
             observed_size: tex.width.max(tex.height),
+            size_m: None,
             uv_mode: UvMode::Plane,
             inpainter: "test".into(),
         });
@@ -2833,6 +2892,36 @@ mod tests {
         assert!(uv.plane_normal.is_none() && uv.lines.is_none());
         let r = period_ratio(&d1).expect("the board's period");
         assert!((r - 1.0).abs() < 0.05, "periods {:?}", uv.period);
+        // With the quad's real size (6 squares of 0.25 a side), the
+        // texture's size on the board: its tile of 2 × 2 squares.
+        let opts = Options {
+            plane: Some(UserPlane::Quad(crate::quad::Quad(corners))),
+            quad_size_m: Some([6.0 * cell, 6.0 * cell]),
+            ..test_options(&inpainter, UvChoice::Auto)
+        };
+        let (m, d) = extract(&p, "board", Some(pick), &pm, &opts).unwrap();
+        let used = d.uv.as_ref().unwrap().user_plane.as_ref().unwrap();
+        assert!((used.size_ratio.unwrap() - 1.0).abs() < 0.01, "{used:?}");
+        // The plane through N·P = −1 is 1/(3 cos 50°) of the true one's distance.
+        let unit = 3.0 * f64::from(tilt.cos());
+        assert!((used.unit_m.unwrap() / unit - 1.0).abs() < 0.01, "{used:?}");
+        let size = m.texture.unwrap().size_m.expect("a size");
+        for s in size {
+            assert!((s / (2.0 * f64::from(cell)) - 1.0).abs() < 0.03, "{size:?}");
+        }
+        assert_eq!(
+            d1.uv.as_ref().unwrap().user_plane.as_ref().unwrap().unit_m,
+            None
+        );
+        let bad = Options {
+            plane: Some(UserPlane::FRONT),
+            quad_size_m: Some([1.0, 1.0]),
+            ..test_options(&inpainter, UvChoice::Auto)
+        };
+        let e = extract(&p, "board", Some(pick), &pm, &bad)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("needs the quadrilateral"), "{e}");
 
         let (p, _) = chessboard_photo(w, h, f, (n, 0.0), cell, Vec3::Z);
         let pm = p.pick_mask(pick, &MaskOptions::default()).unwrap();

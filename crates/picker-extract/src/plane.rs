@@ -315,6 +315,69 @@ pub fn plane_coords_with(
     focal: f32,
     along: Option<Vec3>,
 ) -> Coords {
+    plane_coords_framed(w, h, mask, extra, n, focal, along).0
+}
+
+/// How [`plane_coords`] maps the photo onto the texture square: the plane
+/// (normal, in-plane axes), the camera (focal, centre) and the square's
+/// corner and side in plane units.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Frame {
+    n: Vec3,
+    e1: Vec3,
+    e2: Vec3,
+    focal: f32,
+    centre: [f32; 2],
+    corner: [f32; 2],
+    side: f32,
+}
+
+impl Frame {
+    /// The texture square's side in plane units (the plane through
+    /// `N·P = −1`, camera space: units of the plane's distance from the
+    /// camera).
+    pub fn side(&self) -> f32 {
+        self.side
+    }
+
+    /// The texture-square coordinates of the photo point `(x, y)`
+    /// (continuous pixels: pixel `(col, row)` is centred at
+    /// `(col + ½, row + ½)`), not restricted to the square (a point beyond
+    /// it gives values outside `[0, 1)`); `None` where its ray misses the
+    /// plane's front. Pixel centres get the values [`plane_coords`] gives
+    /// them inside the square.
+    pub fn square_point(&self, x: f32, y: f32) -> Option<[f32; 2]> {
+        let d = Vec3::new(
+            (x - self.centre[0]) / self.focal,
+            -(y - self.centre[1]) / self.focal,
+            -1.0,
+        );
+        let nd = self.n.dot(d);
+        if nd.is_nan() || nd >= -1e-4 {
+            return None;
+        }
+        let p = -d / nd;
+        Some([
+            (p.dot(self.e1) - self.corner[0]) / self.side,
+            (-p.dot(self.e2) - self.corner[1]) / self.side,
+        ])
+    }
+}
+
+/// [`plane_coords_with`], and the [`Frame`] it used (`None` when no picked
+/// pixel sees the plane's front: every coordinate is then NaN).
+///
+/// # Panics
+/// If `mask` or `extra` does not hold `w·h` values.
+pub fn plane_coords_framed(
+    w: usize,
+    h: usize,
+    mask: &[bool],
+    extra: Option<&[bool]>,
+    n: Vec3,
+    focal: f32,
+    along: Option<Vec3>,
+) -> (Coords, Option<Frame>) {
     assert_eq!(mask.len(), w * h, "mask size");
     assert!(extra.is_none_or(|e| e.len() == w * h), "extra size");
     let wanted = |i: usize| mask[i] || extra.is_some_and(|e| e[i]);
@@ -361,13 +424,14 @@ pub fn plane_coords_with(
     let (Some((s0, s1)), Some((t0, t1))) =
         rayon::join(|| pct2(&s, 0.02, 0.98), || pct2(&t, 0.02, 0.98))
     else {
-        return Coords {
+        let none = Coords {
             width: w,
             height: h,
             u: vec![f32::NAN; w * h],
             v: vec![f32::NAN; w * h],
             wrap: false,
         };
+        return (none, None);
     };
     let side = ((s1 - s0).max(1e-9) * (t1 - t0).max(1e-9)).sqrt();
     let (mut sc, mut tc) = ((s0 + s1) / 2.0 - side / 2.0, (t0 + t1) / 2.0 - side / 2.0);
@@ -409,13 +473,23 @@ pub fn plane_coords_with(
                 (*ps, *pt) = (u, v);
             }
         });
-    Coords {
+    let frame = Frame {
+        n,
+        e1,
+        e2,
+        focal,
+        centre: [cx, cy],
+        corner: [sc, tc],
+        side,
+    };
+    let coords = Coords {
         width: w,
         height: h,
         u: s,
         v: t,
         wrap: false,
-    }
+    };
+    (coords, Some(frame))
 }
 
 /// The plain, sequential implementation of [`plane_coords`] (the reference
@@ -518,6 +592,22 @@ mod tests {
                 });
                 let a = plane_coords(w, h, &mask, n, focal, along);
                 let b = plane_coords_reference(w, h, &mask, None, n, focal, along);
+                // The frame maps each pixel centre to its coordinates.
+                let (fa, frame) = plane_coords_framed(w, h, &mask, None, n, focal, along);
+                assert_eq!(fa.u.len(), a.u.len());
+                match frame {
+                    None => assert!(a.u.iter().all(|u| u.is_nan()), "{w}x{h} k{k}"),
+                    Some(fr) => {
+                        assert!(fr.side() > 0.0);
+                        for i in (0..w * h).filter(|&i| a.u[i].is_finite()) {
+                            let (x, y) = ((i % w) as f32 + 0.5, (i / w) as f32 + 0.5);
+                            let q = fr.square_point(x, y).expect("a point on the plane");
+                            let tol = 1e-4 * (1.0 + q[0].abs() + q[1].abs());
+                            assert!((q[0] - a.u[i]).abs() < tol, "{w}x{h} k{k} @{i}");
+                            assert!((q[1] - a.v[i]).abs() < tol, "{w}x{h} k{k} @{i}");
+                        }
+                    }
+                }
                 let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
                 assert_eq!(bits(&a.u), bits(&b.u), "{w}x{h} k{k}");
                 assert_eq!(bits(&a.v), bits(&b.v), "{w}x{h} k{k}");

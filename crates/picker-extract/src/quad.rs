@@ -148,6 +148,26 @@ impl Quad {
         Ok(())
     }
 
+    /// The lengths of the four sides (1–2, 2–3, 3–4, 4–1) on the plane of
+    /// unit normal `n` (camera space) through `N·P = −1`, the plane
+    /// [`crate::plane::plane_coords`] measures in, under focal `focal` for a
+    /// `w × h` photo: each corner's ray met with the plane. `None` when a
+    /// ray misses the plane's front.
+    pub fn sides_on_plane(&self, w: usize, h: usize, focal: f32, n: Vec3) -> Option<[f64; 4]> {
+        let (c, f) = (DVec2::new(w as f64 / 2.0, h as f64 / 2.0), f64::from(focal));
+        let n = n.as_dvec3();
+        let mut p = [DVec3::ZERO; 4];
+        for (q, out) in self.points().iter().zip(&mut p) {
+            let d = DVec3::new((q.x - c.x) / f, -(q.y - c.y) / f, -1.0);
+            let nd = n.dot(d);
+            if nd.is_nan() || nd >= -1e-9 {
+                return None;
+            }
+            *out = -d / nd;
+        }
+        Some(std::array::from_fn(|k| (p[(k + 1) % 4] - p[k]).length()))
+    }
+
     /// The pixel nearest the corners' mean (the pick when none is given).
     pub fn centre_pixel(&self) -> [u32; 2] {
         let m = self.0.iter().fold([0.0f64; 2], |a, c| {
@@ -307,7 +327,8 @@ mod tests {
             let n = DVec3::new(tilt.sin() * az.cos(), tilt.sin() * az.sin(), tilt.cos());
             let o = DVec3::new(0.3 * (next() - 0.5), 0.3 * (next() - 0.5), -3.0);
             let e1 = DVec3::new(next() - 0.5, next() - 0.5, next() - 0.5);
-            let q = rect_quad((n, e1, o), (0.8 + next(), 0.8 + next()), (w, h, f));
+            let (a, b) = (0.8 + next(), 0.8 + next());
+            let q = rect_quad((n, e1, o), (a, b), (w, h, f));
             if q.check(w, h).is_err() {
                 continue;
             }
@@ -327,6 +348,17 @@ mod tests {
                 angle_deg(p.along, e1p) < 0.05,
                 "case {case}: along {:?} vs {e1p}",
                 p.along
+            );
+            // The sides' lengths keep the rectangle's proportions.
+            let sides = q.sides_on_plane(w, h, f as f32, n.as_vec3()).unwrap();
+            let (sa, sb) = ((sides[0] + sides[2]) / 2.0, (sides[1] + sides[3]) / 2.0);
+            assert!(
+                (sides[0] / sides[2] - 1.0).abs() < 1e-4,
+                "case {case}: {sides:?}"
+            );
+            assert!(
+                (sa / sb - a / b).abs() < 1e-3 * a / b,
+                "case {case}: {sides:?} vs {a}x{b}"
             );
             if let Some(g) = q.focal(w, h) {
                 with_focal += 1;

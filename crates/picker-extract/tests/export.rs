@@ -47,6 +47,7 @@ fn textured() -> Material {
             coverage,
             coverage_fraction: 0.66,
             observed_size: s,
+            size_m: None,
             uv_mode: UvMode::Plane,
             seam: picker_inpaint::SeamScore {
                 wrap: 0.1,
