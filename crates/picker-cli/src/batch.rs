@@ -9,13 +9,16 @@
 //!   `manifest.json` or `summary.json` (`picker batch` / `picker extract`
 //!   output).
 //! - **Work**: `--picks picks.csv` (`file,x,y[,name]`, file relative to
-//!   `IN_DIR`) and/or `--all`. The networks are loaded once.
+//!   `IN_DIR`) and/or `--all`; `--quads quads.csv`
+//!   (`file,X1,Y1,X2,Y2,X3,Y3,X4,Y4[,WxH]`) gives a photo's plane by a
+//!   rectangle's corners, as `picker extract --quad` (and `--quad-size`).
+//!   The networks are loaded once.
 //! - **Outputs**: `OUT_DIR/<relative path>.material/` per photo, one folder
 //!   per material inside it, `summary.json`, `envmap.exr` and `manifest.json`.
 //!   A photo's folder appears whole: it is written as a hidden `.partial`
 //!   folder and renamed into place after its manifest.
 //! - **Resume**: the manifest holds the input's SHA-256, the weights' SHA-256,
-//!   every output-changing setting, the picks, the version and each file's
+//!   every output-changing setting, the picks, the quad, the version and each file's
 //!   size; a re-run skips photos whose manifest matches and redoes the rest.
 //!   Batch outputs hold no timings, thread counts or absolute paths, so a
 //!   resumed run ends with the same bytes as an uninterrupted one.
@@ -48,6 +51,7 @@ use sha2::{Digest, Sha256};
 
 use crate::extract::{self, Flags, Layout, Models, Request, Source};
 use crate::UsageError;
+use picker_extract::quad::Quad;
 
 /// Arguments of `picker batch`.
 #[derive(Debug, clap::Args)]
@@ -62,6 +66,12 @@ pub struct Args {
     /// header row is allowed). Photos without a row are skipped unless --all.
     #[arg(long, value_name = "CSV")]
     pub picks: Option<PathBuf>,
+    /// Planes: a CSV file with rows `file,X1,Y1,X2,Y2,X3,Y3,X4,Y4[,WxH]`, the corners
+    /// of a rectangle on the surface to extract (as `picker extract --quad`) and
+    /// optionally its real size (as `--quad-size`: `210x297mm`). One row per photo;
+    /// the photo's one pick in --picks, else the quad's centre, is the material.
+    #[arg(long, value_name = "CSV", conflicts_with = "all")]
+    pub quads: Option<PathBuf>,
     /// Extract every material covering at least --min-area of each photo.
     #[arg(long)]
     pub all: bool,
@@ -205,18 +215,81 @@ fn same_file(a: &Path, b: &Path) -> bool {
 /// Named picks per photo (relative path → `(name, [x, y])` in file order).
 type Picks = BTreeMap<String, Vec<(String, [u32; 2])>>;
 
-/// Reads `picks.csv`: rows `file,x,y[,name]`, an optional header row.
-fn read_picks(path: &Path) -> Result<Picks> {
-    let usage = |msg: String| anyhow::Error::new(UsageError(msg));
-    let mut rdr = csv::ReaderBuilder::new()
+/// A photo's plane per photo (relative path → the quad and its real size in
+/// metres, if given).
+type Quads = BTreeMap<String, (Quad, Option<[f32; 2]>)>;
+
+/// The CSV reader both `--picks` and `--quads` use: no required header,
+/// rows of varying length, fields trimmed, `#` comments.
+fn csv_reader(path: &Path, flag: &str) -> Result<csv::Reader<std::fs::File>> {
+    csv::ReaderBuilder::new()
         .has_headers(false)
         .flexible(true)
         .trim(csv::Trim::All)
         .comment(Some(b'#'))
         .from_path(path)
-        .map_err(|e| usage(format!("reading --picks {}: {e}", path.display())))?;
+        .map_err(|e| UsageError(format!("reading {flag} {}: {e}", path.display())).into())
+}
+
+/// A CSV row's photo, `/`-separated and relative to `IN_DIR`, or why not.
+fn photo_field(field: &str) -> std::result::Result<String, String> {
+    let file = field.replace('\\', "/");
+    let file = file.trim_start_matches("./").to_string();
+    if file.is_empty()
+        || file.starts_with('/')
+        || Path::new(&file).is_absolute()
+        || file.split('/').any(|c| c == "..")
+    {
+        return Err(format!(
+            "{field:?} must be a path inside IN_DIR (relative, no `..`)"
+        ));
+    }
+    Ok(file)
+}
+
+/// Reads `quads.csv`: rows `file,X1,Y1,X2,Y2,X3,Y3,X4,Y4[,WxH]`, an
+/// optional header row, one row per photo.
+fn read_quads(path: &Path) -> Result<Quads> {
+    let usage = |msg: String| anyhow::Error::new(UsageError(msg));
+    let mut out = Quads::new();
+    for (i, rec) in csv_reader(path, "--quads")?.records().enumerate() {
+        let rec = rec.map_err(|e| usage(format!("{}: {e}", path.display())))?;
+        let line = rec.position().map(|p| p.line()).unwrap_or(i as u64 + 1);
+        if rec.iter().all(|f| f.is_empty()) {
+            continue;
+        }
+        let at = |msg: String| usage(format!("{} line {line}: {msg}", path.display()));
+        if i == 0 && rec.len() > 1 && rec[1].parse::<f64>().is_err() {
+            continue; // a header row
+        }
+        if !(9..=10).contains(&rec.len()) {
+            return Err(at(format!(
+                "expected file,X1,Y1,X2,Y2,X3,Y3,X4,Y4[,WxH], got {} fields",
+                rec.len()
+            )));
+        }
+        let file = photo_field(&rec[0]).map_err(at)?;
+        let corners: Vec<&str> = rec.iter().skip(1).take(8).collect();
+        let quad = crate::extract::parse_quad(&corners.join(",")).map_err(at)?;
+        let size = match rec.get(9).filter(|f| !f.is_empty()) {
+            Some(f) => Some(crate::extract::parse_size_m(f).map_err(at)?),
+            None => None,
+        };
+        if out.insert(file, (quad, size)).is_some() {
+            return Err(at(format!(
+                "{:?} has a quad already (one plane per photo)",
+                &rec[0]
+            )));
+        }
+    }
+    Ok(out)
+}
+
+/// Reads `picks.csv`: rows `file,x,y[,name]`, an optional header row.
+fn read_picks(path: &Path) -> Result<Picks> {
+    let usage = |msg: String| anyhow::Error::new(UsageError(msg));
     let mut out = Picks::new();
-    for (i, rec) in rdr.records().enumerate() {
+    for (i, rec) in csv_reader(path, "--picks")?.records().enumerate() {
         let rec = rec.map_err(|e| usage(format!("{}: {e}", path.display())))?;
         let line = rec.position().map(|p| p.line()).unwrap_or(i as u64 + 1);
         if rec.iter().all(|f| f.is_empty()) {
@@ -241,18 +314,7 @@ fn read_picks(path: &Path) -> Result<Picks> {
             })
         };
         let (x, y) = (coord(x, &rec[1])?, coord(y, &rec[2])?);
-        let file = rec[0].replace('\\', "/");
-        let file = file.trim_start_matches("./").to_string();
-        if file.is_empty()
-            || file.starts_with('/')
-            || Path::new(&file).is_absolute()
-            || file.split('/').any(|c| c == "..")
-        {
-            return Err(at(format!(
-                "{:?} must be a path inside IN_DIR (relative, no `..`)",
-                &rec[0]
-            )));
-        }
+        let file = photo_field(&rec[0]).map_err(at)?;
         let entry = out.entry(file).or_default();
         let name = match rec.get(3).filter(|n| !n.is_empty()) {
             Some(n) => {
@@ -341,6 +403,8 @@ fn manifest_key(
         "settings": flags.output_settings(),
         "picks": req.picks.iter().map(|(n, p)| json!([n, p[0], p[1]])).collect::<Vec<_>>(),
         "all": req.all,
+        "quad": req.quad.map(|q| q.0),
+        "quad_size_m": req.quad_size_m,
     })
 }
 
@@ -539,7 +603,7 @@ fn worker(s: &Shared<'_>) {
             return;
         };
         let outcome = if req.picks.is_empty() && !req.all {
-            Outcome::Skipped("no picks for this photo in --picks".into())
+            Outcome::Skipped("no picks for this photo in --picks or --quads".into())
         } else {
             match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| process(s, photo, req)))
             {
@@ -657,18 +721,41 @@ pub fn run(a: Args) -> Result<ExitCode> {
     let t0 = Instant::now();
     let usage = |msg: String| anyhow::Error::new(UsageError(msg));
     a.flags.validate().map_err(|e| usage(e.to_string()))?;
-    if a.picks.is_none() && !a.all {
+    if a.picks.is_none() && !a.all && a.quads.is_none() {
         return Err(usage(
-            "nothing to extract: give --picks picks.csv and/or --all".into(),
+            "nothing to extract: give --picks picks.csv, --quads quads.csv and/or --all".into(),
+        ));
+    }
+    if a.quads.is_some() && a.flags.uv == crate::extract::UvArg::Net {
+        return Err(usage(
+            "--quads gives the planes to rectify: it cannot be used with --uv net".into(),
         ));
     }
     if !a.in_dir.is_dir() {
         return Err(usage(format!("{}: not a folder", a.in_dir.display())));
     }
-    let picks = match &a.picks {
+    let mut picks = match &a.picks {
         Some(p) => read_picks(p)?,
         None => BTreeMap::new(),
     };
+    let quads = match &a.quads {
+        Some(p) => read_quads(p)?,
+        None => BTreeMap::new(),
+    };
+    let in_picks_csv: BTreeSet<String> = picks.keys().cloned().collect();
+    // A quad gives one material's plane: its photo's one pick, or its centre.
+    for (file, (q, _)) in &quads {
+        let entry = picks.entry(file.clone()).or_default();
+        match entry.len() {
+            0 => entry.push(("material_0".into(), q.centre_pixel())),
+            1 => {}
+            n => {
+                return Err(usage(format!(
+                    "{file}: a quad in --quads gives the plane of one material, but --picks has {n} picks for it"
+                )))
+            }
+        }
+    }
     // The report is written last: refuse a path it cannot go to now, not
     // after every photo.
     if let Some(r) = &a.report {
@@ -691,10 +778,15 @@ pub fn run(a: Args) -> Result<ExitCode> {
         .filter(|f| a.shard.is_none_or(|(k, n)| shard_of(f, n) == k))
         .map(|f| {
             let p = a.in_dir.join(f);
-            let why = if p.exists() {
-                "listed in --picks but not a supported image (by extension) under IN_DIR"
+            let list = if in_picks_csv.contains(f) {
+                "--picks"
             } else {
-                "listed in --picks but not found under IN_DIR"
+                "--quads"
+            };
+            let why = if p.exists() {
+                format!("listed in {list} but not a supported image (by extension) under IN_DIR")
+            } else {
+                format!("listed in {list} but not found under IN_DIR")
             };
             (f.clone(), format!("{}: {why}", p.display()))
         })
@@ -707,8 +799,8 @@ pub fn run(a: Args) -> Result<ExitCode> {
             let req = Request {
                 picks: picks.get(&p.rel).cloned().unwrap_or_default(),
                 all: a.all,
-                quad: None,
-                quad_size_m: None,
+                quad: quads.get(&p.rel).map(|q| q.0),
+                quad_size_m: quads.get(&p.rel).and_then(|q| q.1),
             };
             (p, req)
         })
@@ -997,6 +1089,47 @@ mod tests {
         assert_eq!(split_threads(16, Some(16)), (16, 1));
         assert_eq!(split_threads(4, Some(8)), (8, 1));
         assert_eq!(split_threads(0, None), (1, 1));
+    }
+
+    #[test]
+    fn quads_csv() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("quads.csv");
+        std::fs::write(
+            &p,
+            "file,x1,y1,x2,y2,x3,y3,x4,y4,size\n# a comment\na.jpg,10,20,200,30,190,150,15,140\n\
+             sub/b.png, 1.5,2,50,2,50,40,1.5,40 ,210x297mm\n\"c,d.jpg\",0,0,9,0,9,9,0,9,\n",
+        )
+        .unwrap();
+        let m = read_quads(&p).unwrap();
+        assert_eq!(m.len(), 3);
+        assert_eq!(m["a.jpg"].0 .0[1], [200.0, 30.0]);
+        assert_eq!(m["a.jpg"].1, None);
+        assert_eq!(m["sub/b.png"].0 .0[0], [1.5, 2.0]);
+        assert_eq!(m["sub/b.png"].1, Some([0.21, 0.297]));
+        assert_eq!(m["c,d.jpg"].1, None);
+        for (bad, want) in [
+            ("a.jpg,1,2,3,4,5,6,7\n", "got 8 fields"),
+            ("a.jpg,1,2,3,4,5,6,7,8,1x1,extra\n", "11 fields"),
+            ("a.jpg,0,0,9,0,9,9,0,9\nb.jpg,0,0,9,0,9,x,0,9\n", "line 2"),
+            ("a.jpg,0,0,9,0,9,nan,0,9\n", "line 1"),
+            ("a.jpg,0,0,9,0,9,9,0,9,30cm\n", "expected WxH"),
+            ("a.jpg,0,0,9,0,9,9,0,9,0x1\n", "not a positive size"),
+            ("../a.jpg,0,0,9,0,9,9,0,9\n", "inside IN_DIR"),
+            (
+                "a.jpg,0,0,9,0,9,9,0,9\n./a.jpg,0,0,8,0,8,8,0,8\n",
+                "one plane per photo",
+            ),
+        ] {
+            std::fs::write(&p, bad).unwrap();
+            let e = read_quads(&p).unwrap_err();
+            assert!(e.downcast_ref::<UsageError>().is_some());
+            let msg = format!("{e:#}");
+            assert!(
+                msg.contains(want) && msg.contains("quads.csv"),
+                "{bad:?}: {msg}"
+            );
+        }
     }
 
     #[test]

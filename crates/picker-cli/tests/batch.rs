@@ -694,3 +694,127 @@ fn full_disk_stops_and_resumes() {
     run(batch_cmd(&input, &full, &[]));
     assert_same_tree(&full, &roomy);
 }
+
+/// `--quads`: each listed photo's material is rectified on the plane of its
+/// quad (the README example's wall: its true plane, the quad's centre as the
+/// pick, its size in metres), a photo the quad does not fit fails alone, the
+/// manifest holds the quad so changing its size redoes the photo, and a quad
+/// with several picks for its photo, with `--all` or `--uv net` is refused.
+#[test]
+fn quads_give_each_photo_its_plane() {
+    const WALL: &str = "150.060,180.020,287.172,202.513,275.140,104.832,152.810,121.572";
+    let tmp = tempfile::tempdir().unwrap();
+    let input = tmp.path().join("photos");
+    std::fs::create_dir_all(input.join("sub")).unwrap();
+    std::fs::copy(
+        repo().join("fixtures/examples/room.png"),
+        input.join("room.png"),
+    )
+    .unwrap();
+    photo(3, 64, 48).save(input.join("sub/small.png")).unwrap();
+    photo(4, 64, 48).save(input.join("other.png")).unwrap();
+    let quads = tmp.path().join("quads.csv");
+    let write_quads = |size: &str| {
+        std::fs::write(
+            &quads,
+            format!(
+                "file,x1,y1,x2,y2,x3,y3,x4,y4,size\nroom.png,{WALL},{size}\nsub/small.png,{WALL}\n"
+            ),
+        )
+        .unwrap();
+    };
+    write_quads("800x440mm");
+    let out = tmp.path().join("out");
+    let batch = |extra: &[&str]| {
+        picker()
+            .args(["batch", input.to_str().unwrap(), "--out"])
+            .arg(&out)
+            .args(["--quads", quads.to_str().unwrap()])
+            .args(["--weights", &weights(), "--max-size", "32", "--quiet"])
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    let o = batch(&[]);
+    assert_eq!(
+        o.status.code(),
+        Some(1),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let r = report(&out);
+    assert_eq!(r["counts"]["ok"], 1, "{r:#}");
+    assert_eq!(r["counts"]["failed"], 1, "{r:#}");
+    assert_eq!(r["counts"]["skipped"], 1, "{r:#}");
+    let text = r.to_string();
+    assert!(text.contains("outside the 64x48 photo"), "{r:#}");
+    let m: Value = serde_json::from_slice(
+        &std::fs::read(out.join("room.png.material/material_0/material.json")).unwrap(),
+    )
+    .unwrap();
+    let used = &m["diagnostics"]["uv"]["user_plane"];
+    assert_eq!(used["source"], "quad", "{used}");
+    let n: Vec<f64> = used["normal"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    let truth = [-0.632f64, 0.192, 0.750];
+    let len = truth.iter().map(|v| v * v).sum::<f64>().sqrt();
+    let cos: f64 = n.iter().zip(truth).map(|(a, b)| a * b / len).sum();
+    assert!(cos.clamp(-1.0, 1.0).acos().to_degrees() < 0.5, "{used}");
+    assert!(
+        (used["size_ratio"].as_f64().unwrap() - 1.0).abs() < 0.01,
+        "{used}"
+    );
+    assert!(m["texture"]["size_m"].is_array(), "{}", m["texture"]);
+    // The pick is the quad's centre.
+    let c: Vec<f64> = WALL.split(',').map(|v| v.parse().unwrap()).collect();
+    let mean = |k: usize| ((c[k] + c[k + 2] + c[k + 4] + c[k + 6]) / 4.0).round();
+    assert_eq!(
+        m["pick"],
+        serde_json::json!([mean(0) as u64, mean(1) as u64])
+    );
+
+    // Up to date; a new size redoes it.
+    batch(&[]);
+    assert_eq!(report(&out)["counts"]["up_to_date"], 1);
+    write_quads("0.8x0.5");
+    batch(&[]);
+    let r = report(&out);
+    assert_eq!(r["counts"]["ok"], 1, "{r:#}");
+    let m: Value = serde_json::from_slice(
+        &std::fs::read(out.join("room.png.material/material_0/material.json")).unwrap(),
+    )
+    .unwrap();
+    let ratio = m["diagnostics"]["uv"]["user_plane"]["size_ratio"]
+        .as_f64()
+        .unwrap();
+    assert!((ratio / (0.44 / 0.5) - 1.0).abs() < 0.02, "{ratio}");
+
+    // Refused before any photo is made.
+    let picks = tmp.path().join("picks.csv");
+    std::fs::write(&picks, "room.png,200,150\nroom.png,100,200\n").unwrap();
+    let fresh = tmp.path().join("fresh");
+    for (extra, want) in [
+        (
+            vec!["--picks", picks.to_str().unwrap()],
+            "--picks has 2 picks",
+        ),
+        (vec!["--all"], "--all"),
+        (vec!["--uv", "net"], "--uv net"),
+    ] {
+        let o = picker()
+            .args(["batch", input.to_str().unwrap(), "--out"])
+            .arg(&fresh)
+            .args(["--quads", quads.to_str().unwrap(), "--weights", &weights()])
+            .args(&extra)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{extra:?}: {err}");
+        assert!(err.contains(want), "{extra:?}: {err}");
+        assert!(!fresh.join("room.png.material").exists(), "{extra:?}");
+    }
+}
