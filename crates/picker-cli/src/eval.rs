@@ -94,6 +94,10 @@ pub struct Args {
     /// (`extract --no-fold`).
     #[arg(long)]
     pub no_fold: bool,
+    /// Do not fold a centred repeat a second time by its half-period shift
+    /// (`extract --no-centring`).
+    #[arg(long)]
+    pub no_centring: bool,
     /// Inpaint every texel the mask's surest part did not show, instead of first filling them
     /// from the rest of the mask (its less sure pixels) where it showed them.
     #[arg(long)]
@@ -180,6 +184,9 @@ pub struct Row {
     /// Plane mode: the periods per tile when the texture was folded into
     /// one tile (`diagnostics.uv.period`), else `None`.
     folded: Option<[usize; 2]>,
+    /// Plane mode, folded: the centring's agreement when the repeat was
+    /// centred and each pixel folded in twice (`diagnostics.uv.period.centred`).
+    centred: Option<f32>,
     /// Networks' UV mode: the whole repeats found inside the texture square
     /// (`diagnostics.uv.repeats`), else `None`.
     uv_repeats: Option<[usize; 2]>,
@@ -499,6 +506,7 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
         line_refine: !a.no_lines,
         align_grain: !a.no_grain,
         fold_period: !a.no_fold,
+        fold_centring: !a.no_centring,
         fill_from_mask: !a.no_mask_fill,
         heal_seams: !a.keep_seams,
         tileable: true,
@@ -587,6 +595,7 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
             plane_error_deg: None,
             focal_rel_error: None,
             folded: None,
+            centred: None,
             uv_repeats: None,
             repeat_filled: None,
             mask_filled: None,
@@ -607,6 +616,11 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
             .as_ref()
             .and_then(|u| u.period)
             .map(|f| f.periods_per_tile);
+        row.centred = diag
+            .uv
+            .as_ref()
+            .and_then(|u| u.period)
+            .and_then(|f| f.centred);
         row.uv_repeats = diag.uv.as_ref().and_then(|u| u.repeats).map(|r| r.repeats);
         row.repeat_filled = diag.uv.as_ref().and_then(|u| u.repeats).map(|r| r.filled);
         row.mask_filled = diag.filled_from_mask;
@@ -820,6 +834,7 @@ pub fn run(a: Args) -> Result<()> {
         "mean_colour_rmse_single_colour": mean(rows.iter().filter_map(|r| r.colour_rmse)),
         "plane_rows": rows.iter().filter(|r| r.plane_error_deg.is_some()).count(),
         "folded_rows": rows.iter().filter(|r| r.folded.is_some()).count(),
+        "centred_rows": rows.iter().filter(|r| r.centred.is_some()).count(),
         "uv_repeat_rows": rows.iter().filter(|r| r.uv_repeats.is_some()).count(),
         "mask_filled_rows": rows.iter().filter(|r| r.mask_filled.is_some()).count(),
         "seam_band_rows": rows.iter().filter(|r| r.seam_band.is_some()).count(),

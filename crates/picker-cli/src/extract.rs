@@ -102,6 +102,11 @@ pub struct Flags {
     /// repeats (the inpainter fills them all).
     #[arg(long)]
     pub no_fold: bool,
+    /// Fold a texture whose repeat is centred (a checkerboard, bricks in running bond: it also
+    /// repeats shifted by half a period along both axes) only by its periods, not a second time
+    /// by that shift (which pools twice the pixels into each texel).
+    #[arg(long)]
+    pub no_centring: bool,
     /// Inpaint every texel the mask's surest part did not show, instead of first filling them
     /// from the rest of the mask (its less sure pixels) where it showed them.
     #[arg(long)]
@@ -194,6 +199,7 @@ impl Flags {
             line_refine: !self.no_lines,
             align_grain: !self.no_grain,
             fold_period: !self.no_fold,
+            fold_centring: !self.no_centring,
             fill_from_mask: !self.no_mask_fill,
             heal_seams: !self.keep_seams,
             tileable: !self.no_tile,

@@ -38,6 +38,17 @@
 //! dB (22 of 78), seed 5151 (photographic textures) 25.38 → 26.16 dB (14 of
 //! 72), none worse by more than 0.1 dB; a folded brick wall went from 15.7
 //! to 33.3 dB.
+//!
+//! **Centred repeats.** A checkerboard, bricks in running bond, staggered
+//! planks and half-drop wallpapers also repeat when shifted by half a
+//! period along both axes at once ([`centring`], measured on the same
+//! luma, sRGB-encoded, by the agreement `R²` of the texture and its shifted
+//! self, which unlike a correlation also asks for equal values). Their
+//! tile then holds each element twice (a chessboard's 2 × 2-square tile,
+//! two black squares), and the fold splats every pixel at both places
+//! ([`crate::reproject::reproject_centred`], one robust fit), so a place
+//! no surest pixel showed (the chessboard's second black square, when the
+//! pick's colour took the first) is seen there too.
 
 use picker_render::io::Image;
 use rayon::prelude::*;
@@ -429,6 +440,133 @@ pub struct Fold {
     pub aspect: f32,
     /// The autocorrelation at each period ([`AxisPeriod::strength`]).
     pub strength: [f32; 2],
+    /// The correlation of the texture with itself shifted by half a period
+    /// along both axes at once, when that shift repeats it too
+    /// ([`centring`]: a checkerboard, bricks in running bond, a half-drop
+    /// wallpaper): every repeat is then folded into the tile twice, once
+    /// shifted ([`Fold::centring_shift`],
+    /// [`crate::reproject::reproject_centred`]), so each texel is seen by
+    /// twice the pixels. `None`: no such repeat (or not looked for).
+    pub centred: Option<f32>,
+}
+
+impl Fold {
+    /// With [`Fold::centred`]: the half-period shift along both axes, in
+    /// units of the tile (`1 / (2 · periods per tile)` each).
+    pub fn centring_shift(&self) -> Option<[f32; 2]> {
+        self.centred.map(|_| {
+            [
+                0.5 / self.periods_per_tile[0].max(1) as f32,
+                0.5 / self.periods_per_tile[1].max(1) as f32,
+            ]
+        })
+    }
+}
+
+/// A half-period shift along both axes counts as a repeat ([`centring`])
+/// when the texture's correlation with itself so shifted reaches this share
+/// of the weaker axis period's ([`AxisPeriod::strength`]), and at least
+/// [`MIN_WEAK_PEAK`].
+pub const CENTRE_SHARE: f32 = 0.8;
+
+/// Whether `tex` (its `known` texels), with periods `px` along `x` and `py`
+/// along `y` ([`detect`]), also repeats when shifted by half of each at
+/// once: the lattice of its repeats is centred (a checkerboard, whose
+/// squares of one colour repeat along the diagonals; bricks in running
+/// bond; a half-drop wallpaper). Measured as [`detect`] measures, on the
+/// box-downsampled luma (sRGB-encoded, as differences are seen): the agreement of the known texels `a` at
+/// `p − s/2` and `b` at `p + s/2` for `s = (px/2, py/2)`, both interpolated
+/// bilinearly (so the two sides are equally smooth),
+/// `R² = 1 − Σ(a − b)² / (Σ(a − ā)² + Σ(b − b̄)²)`: the Pearson correlation
+/// when both sides have the same mean and spread, lower when they differ
+/// (a pattern whose dark squares alternate between two darks correlates
+/// fully with itself so shifted but is not repeated by the shift). Returns
+/// it when it reaches [`CENTRE_SHARE`] of the weaker period's strength and
+/// [`MIN_WEAK_PEAK`]; `None` otherwise, or where too few texels pair up
+/// ([`MIN_PAIR_SHARE`]).
+///
+/// # Panics
+/// When `known` is not one flag per texel.
+pub fn centring(tex: &Image, known: &[bool], px: AxisPeriod, py: AxisPeriod) -> Option<f32> {
+    assert_eq!(
+        known.len(),
+        tex.width * tex.height,
+        "period::centring: one known flag per texel"
+    );
+    let mut g = LumaGrid::new(tex, known)?;
+    // Compared as seen (sRGB-encoded): in linear light two darks a pattern
+    // alternates (0.15 and 0.45 encoded) differ by a fifth of their gap
+    // to its white, and would pass for one.
+    for v in &mut g.luma {
+        *v = crate::photo::srgb_encode(*v);
+    }
+    let f = g.f as f32;
+    let r = half_shift_correlation(
+        &g,
+        px.texels / (2.0 * f),
+        py.texels / (2.0 * f),
+        least_pairs(&g.ok),
+    );
+    let least = MIN_WEAK_PEAK.max(CENTRE_SHARE * px.strength.min(py.strength));
+    (r.is_finite() && r >= least).then_some(r)
+}
+
+/// The agreement `R²` ([`centring`]) of the bilinearly interpolated values
+/// of `g` at `p − (sx, sy)/2` and `p + (sx, sy)/2` over the grid points `p`
+/// whose eight neighbours are all known; NaN with fewer than `least` of
+/// them, a shift the grid cannot hold or a constant side.
+fn half_shift_correlation(g: &LumaGrid, sx: f32, sy: f32, least: usize) -> f32 {
+    let (w, h) = (g.w, g.h);
+    if !(sx.is_finite() && sy.is_finite() && sx >= 0.0 && sy >= 0.0) {
+        return f32::NAN;
+    }
+    let (hx, hy) = (sx / 2.0, sy / 2.0);
+    // Bilinear sample at (x, y), `None` unless its four texels are known.
+    let at = |x: f32, y: f32| -> Option<f64> {
+        let (x0, y0) = (x.floor(), y.floor());
+        if x0 < 0.0 || y0 < 0.0 {
+            return None;
+        }
+        let (ix, iy) = (x0 as usize, y0 as usize);
+        let (tx, ty) = (x - x0, y - y0);
+        let ix1 = if tx > 0.0 { ix + 1 } else { ix };
+        let iy1 = if ty > 0.0 { iy + 1 } else { iy };
+        if ix1 >= w || iy1 >= h {
+            return None;
+        }
+        let k = |x: usize, y: usize| g.ok[y * w + x].then(|| f64::from(g.luma[y * w + x]));
+        let (a, b, c, d) = (k(ix, iy)?, k(ix1, iy)?, k(ix, iy1)?, k(ix1, iy1)?);
+        let (tx, ty) = (f64::from(tx), f64::from(ty));
+        Some((a * (1.0 - tx) + b * tx) * (1.0 - ty) + (c * (1.0 - tx) + d * tx) * ty)
+    };
+    let (mut cnt, mut sa, mut sb) = (0usize, 0.0f64, 0.0f64);
+    let (mut saa, mut sbb, mut sab) = (0.0f64, 0.0f64, 0.0f64);
+    for y in 0..h {
+        for x in 0..w {
+            let (px, py) = (x as f32, y as f32);
+            let (Some(a), Some(b)) = (at(px - hx, py - hy), at(px + hx, py + hy)) else {
+                continue;
+            };
+            cnt += 1;
+            sa += a;
+            sb += b;
+            saa += a * a;
+            sbb += b * b;
+            sab += a * b;
+        }
+    }
+    if cnt < least {
+        return f32::NAN;
+    }
+    let k = cnt as f64;
+    let (va, vb) = (saa - sa * sa / k, sbb - sb * sb / k);
+    let cov = sab - sa * sb / k;
+    if va <= 1e-12 * k || vb <= 1e-12 * k {
+        return f32::NAN;
+    }
+    // Σ(a − b)² = va + vb − 2 cov + k (ā − b̄)².
+    let mean_gap = (sa - sb) / k;
+    ((2.0 * cov - k * mean_gap * mean_gap) / (va + vb)) as f32
 }
 
 /// The tile for periods `px` and `py` measured on a texture of side `size`:
@@ -458,6 +596,7 @@ pub fn fold_tile(px: AxisPeriod, py: AxisPeriod, size: usize) -> Fold {
         tile: [kx as f32 * px.texels / s, ky as f32 * py.texels / s],
         aspect: (kx as f32 * px.texels) / (ky as f32 * py.texels),
         strength: [px.strength, py.strength],
+        centred: None,
     }
 }
 
@@ -488,19 +627,36 @@ fn wrap_by_tile(coords: &Coords, tile: [f32; 2]) -> Coords {
 /// tile when the picked pixels (`mask`, de-lit `colour`, `confidence`)
 /// splatted at `size` texels (at most [`MAX_SIDE`]; a quick splat without
 /// back-projection) repeat along both axes ([`detect`], [`fold_tile`],
-/// [`fold_coords`]); else `coords` unchanged and no fold.
+/// [`fold_coords`]), with its [`centring`] looked for in those pixels and,
+/// failing that, in `centring_mask`'s (a wider set of pixels of the same
+/// material: the pick's surest pixels may hold only one colour of a
+/// two-colour pattern, whose texels then never pair with the other's);
+/// else `coords` unchanged and no fold.
+///
+/// # Panics
+/// When a mask does not hold one flag per pixel of `coords`.
 pub fn fold_if_periodic(
     coords: Coords,
     mask: &[bool],
+    centring_mask: Option<&[bool]>,
     colour: &Image,
     confidence: &[f32],
     size: usize,
 ) -> (Coords, Option<Fold>) {
     let probe = size.clamp(1, MAX_SIDE);
-    let r = crate::reproject::reproject_unsharpened(&coords, mask, colour, confidence, probe);
+    let splat =
+        |m: &[bool]| crate::reproject::reproject_unsharpened(&coords, m, colour, confidence, probe);
+    let r = splat(mask);
     match detect(&r.texture, &r.known) {
         (Some(px), Some(py)) => {
-            let f = fold_tile(px, py, probe);
+            let centred = centring(&r.texture, &r.known, px, py).or_else(|| {
+                let wide = splat(centring_mask?);
+                centring(&wide.texture, &wide.known, px, py)
+            });
+            let f = Fold {
+                centred,
+                ..fold_tile(px, py, probe)
+            };
             (fold_coords(&coords, &f), Some(f))
         }
         _ => (coords, None),
@@ -969,6 +1125,131 @@ mod tests {
         assert!((y.unwrap().texels - 20.0).abs() < 0.3, "{y:?}");
     }
 
+    /// A checkerboard, running bond bricks and a half-drop pattern repeat
+    /// shifted by half a period along both axes, with holes too; a tile
+    /// grid, a repeated random motif, a checkerboard of four colours and one
+    /// whose dark squares alternate between two darks do not.
+    #[test]
+    fn centred_repeats_are_found_and_others_are_not() {
+        let (w, h) = (200usize, 180usize);
+        let checker = |x: f32, y: f32| {
+            if ((x / 9.5).floor() + (y / 9.5).floor()) as i64 % 2 == 0 {
+                0.8
+            } else {
+                0.2
+            }
+        };
+        let bond = |x: f32, y: f32| {
+            let course = (y / 10.0).floor();
+            let x = x + if course as i64 % 2 == 1 { 12.0 } else { 0.0 };
+            let (fx, fy) = (x.rem_euclid(24.0), y.rem_euclid(10.0));
+            if fx < 2.0 || fy < 2.0 {
+                0.85
+            } else {
+                0.35
+            }
+        };
+        // A motif of 13 × 11 repeated, every other column of motifs
+        // dropped by half its height.
+        let mut rng = picker_tensor::Rng::new(21);
+        let motif: Vec<f32> = (0..13 * 11).map(|_| rng.uniform(0.0, 1.0)).collect();
+        let motif2 = motif.clone();
+        let half_drop = move |x: f32, y: f32| {
+            let col = (x / 13.0).floor() as i64;
+            let y = y + if col % 2 == 1 { 5.5 } else { 0.0 };
+            let (mx, my) = (x.rem_euclid(13.0) as usize, y.rem_euclid(11.0) as usize);
+            motif2[my.min(10) * 13 + mx.min(12)]
+        };
+        let plain_motif = move |x: f32, y: f32| {
+            let (mx, my) = (x.rem_euclid(13.0) as usize, y.rem_euclid(11.0) as usize);
+            motif[my.min(10) * 13 + mx.min(12)]
+        };
+        // Four colours: the squares of one colour repeat only every two
+        // squares along each axis, not along the diagonal.
+        let four = |x: f32, y: f32| {
+            let (i, j) = ((x / 9.5).floor() as i64, (y / 9.5).floor() as i64);
+            [0.1, 0.4, 0.6, 0.9][(i.rem_euclid(2) + 2 * j.rem_euclid(2)) as usize]
+        };
+        // White and two darks: the dark squares alternate between 0.15
+        // and 0.45, so they repeat every two squares, not along the diagonal.
+        let two_darks = |x: f32, y: f32| {
+            let (i, j) = ((x / 9.5).floor() as i64, (y / 9.5).floor() as i64);
+            if (i + j).rem_euclid(2) == 0 {
+                0.9
+            } else if i.rem_euclid(2) == 0 {
+                0.15
+            } else {
+                0.45
+            }
+        };
+        let mut holes = vec![true; w * h];
+        let mut rng = picker_tensor::Rng::new(5);
+        for _ in 0..20 {
+            let (x0, y0) = (rng.range(0, w - 1), rng.range(0, h - 1));
+            for y in y0..(y0 + 15).min(h) {
+                for x in x0..(x0 + 15).min(w) {
+                    holes[y * w + x] = false;
+                }
+            }
+        }
+        let all = vec![true; w * h];
+        let centred = |t: &Image, known: &[bool]| {
+            let (x, y) = detect(t, known);
+            let (x, y) = (x.expect("an x period"), y.expect("a y period"));
+            (x, y, centring(t, known, x, y))
+        };
+        for (name, t, yes) in [
+            ("checker", texture(w, h, checker), true),
+            ("bond", texture(w, h, bond), true),
+            ("half-drop", texture(w, h, &half_drop), true),
+            ("tiles", texture(w, h, tiles(12.5, 20.0, 2.0)), false),
+            ("motif", texture(w, h, plain_motif), false),
+            ("four colours", texture(w, h, four), false),
+            ("two darks", texture(w, h, two_darks), false),
+        ] {
+            for known in [&all, &holes] {
+                let (x, y, c) = centred(&t, known);
+                assert_eq!(c.is_some(), yes, "{name}: {x:?} {y:?} {c:?}");
+                if let Some(c) = c {
+                    assert!(
+                        c >= CENTRE_SHARE * x.strength.min(y.strength),
+                        "{name}: {c}"
+                    );
+                }
+            }
+        }
+        // The periods the centring halves: 19 for the checker, 24 × 20 for
+        // the bond, 26 × 11 for the half-drop.
+        let (x, y, _) = centred(&texture(w, h, checker), &all);
+        assert!((x.texels - 19.0).abs() < 0.3 && (y.texels - 19.0).abs() < 0.3);
+        let (x, y, _) = centred(&texture(w, h, &half_drop), &all);
+        assert!(
+            (x.texels - 26.0).abs() < 0.3 && (y.texels - 11.0).abs() < 0.3,
+            "{x:?} {y:?}"
+        );
+        // Downsampled (larger than MAX_SIDE) the same.
+        let (w2, h2) = (600usize, 520usize);
+        let big = texture(w2, h2, |x, y| checker(x / 2.0, y / 2.0));
+        assert!(centred(&big, &vec![true; w2 * h2]).2.is_some());
+    }
+
+    #[test]
+    fn centring_shifts_by_half_a_period_in_tile_units() {
+        let p = |texels: f32| AxisPeriod {
+            texels,
+            strength: 0.9,
+            double: None,
+        };
+        let f = fold_tile(p(10.0), p(40.0), 200);
+        assert_eq!(f.centring_shift(), None);
+        let f = Fold {
+            centred: Some(0.95),
+            ..f
+        };
+        assert_eq!(f.periods_per_tile, [4, 1]);
+        assert_eq!(f.centring_shift(), Some([0.125, 0.5]));
+    }
+
     #[test]
     fn the_same_periods_on_any_number_of_threads() {
         let (w, h) = (150usize, 130usize);
@@ -1102,7 +1383,7 @@ mod tests {
         let img = texture(w, h, tiles(20.0, 16.0, 2.0));
         let coords = Coords::identity(w, h, false);
         let (mask, conf) = (vec![true; w * h], vec![1.0; w * h]);
-        let (folded, fold) = fold_if_periodic(coords, &mask, &img, &conf, 160);
+        let (folded, fold) = fold_if_periodic(coords, &mask, None, &img, &conf, 160);
         let fold = fold.expect("a fold");
         assert!((fold.period[0] - 20.0 / 160.0).abs() < 0.01, "{fold:?}");
         assert!((fold.period[1] - 16.0 / 160.0).abs() < 0.01, "{fold:?}");
@@ -1121,7 +1402,7 @@ mod tests {
             noise[(y as usize).min(h - 1) * w + (x as usize).min(w - 1)]
         });
         let c = folded.clone();
-        let (same, none) = fold_if_periodic(c, &mask, &img, &conf, 160);
+        let (same, none) = fold_if_periodic(c, &mask, None, &img, &conf, 160);
         assert!(none.is_none() && same.u == folded.u);
     }
 

@@ -585,7 +585,7 @@ pub fn expose_linear(rgb: &mut Rgb32FImage) {
 }
 
 /// The sRGB transfer function (IEC 61966-2-1), linear → encoded.
-fn srgb_encode(c: f32) -> f32 {
+pub(crate) fn srgb_encode(c: f32) -> f32 {
     if c <= 0.003_130_8 {
         12.92 * c
     } else {

@@ -181,6 +181,12 @@ pub struct Options<'a> {
     /// whole repeats inside the texture square into one tile and lay it over
     /// the square ([`crate::period`]).
     pub fold_period: bool,
+    /// With the plane mode's fold: when the texture also repeats shifted by
+    /// half a period along both axes at once (a checkerboard, bricks in
+    /// running bond: [`crate::period::centring`]), fold every pixel into the
+    /// tile a second time, so shifted, in one robust fit
+    /// ([`crate::reproject::reproject_centred`]).
+    pub fold_centring: bool,
     /// When the texture comes from the mask's surest part and repeats (the
     /// plane mode's fold, the networks' UV repeats: see `fold_period`), fill
     /// the texels that no repeat of that part showed from the rest of the
@@ -1413,9 +1419,18 @@ fn extract_as(
             let probe = reproject::texture_size(sizing_area, observed_cap);
             match mode {
                 UvMode::Plane => {
+                    // The surest part and the rest of the mask on the plane.
+                    let seen: Option<Vec<bool>> = plane_rest.as_ref().map(|rest| {
+                        full.data
+                            .iter()
+                            .zip(&rest.data)
+                            .map(|(&a, &b)| a || b)
+                            .collect()
+                    });
                     let (c, f) = crate::period::fold_if_periodic(
                         coords,
                         &full.data,
+                        seen.as_deref(),
                         &delit,
                         &confidence,
                         probe,
@@ -1426,17 +1441,12 @@ fn extract_as(
                     // part may hold one of them, whose texels are then all
                     // alike. Only then: over the whole mask, a far, blurred
                     // part of a floor can hide the period the near part shows.
-                    match (&f, &plane_rest) {
-                        (None, Some(rest)) => {
-                            let seen: Vec<bool> = full
-                                .data
-                                .iter()
-                                .zip(&rest.data)
-                                .map(|(&a, &b)| a || b)
-                                .collect();
+                    match (&f, &seen) {
+                        (None, Some(seen)) => {
                             let (c, f) = crate::period::fold_if_periodic(
                                 c,
-                                &seen,
+                                seen,
+                                None,
                                 &delit,
                                 &confidence,
                                 probe,
@@ -1476,6 +1486,11 @@ fn extract_as(
         } else {
             (coords, None, None)
         };
+        // The centring is only used when asked for.
+        let fold = fold.map(|f| crate::period::Fold {
+            centred: f.centred.filter(|_| opts.fold_centring),
+            ..f
+        });
         // The texture's size on the surface, when a quad's real size gave
         // the plane its scale: the square (or the folded tile) in metres.
         let size_m = match (user_plane.as_ref().and_then(|u| u.unit_m), frame) {
@@ -1523,6 +1538,8 @@ fn extract_as(
             };
             reproject::texture_size(area, cap)
         };
+        // A centred repeat: each pixel's second place in the tile.
+        let centring = fold.and_then(|f| f.centring_shift());
         let rest = match (mode, &rest_full) {
             (UvMode::Plane, _) if fold.is_some() => plane_rest.as_ref().map(|m| (m, None)),
             (UvMode::Net, Some(rest)) if uv_fold.is_some() => rest_uv().map(|c| (rest, Some(c))),
@@ -1531,14 +1548,22 @@ fn extract_as(
         // The picked pixels reprojected into a square of `size` texels a
         // side, completed from the rest of the mask and from other repeats.
         let observe = |size: usize| -> Observed {
-            let mut r = reproject::reproject(&coords, &full.data, &delit, &confidence, size);
+            // The pixels through `c`, and again shifted by the centring
+            // when the plane's fold has one.
+            let splat = |c: &Coords, shift: Option<[f32; 2]>, m: &[bool]| match shift {
+                Some(by) => reproject::reproject_centred(c, m, &delit, &confidence, size, by),
+                None => reproject::reproject(c, m, &delit, &confidence, size),
+            };
+            let mut r = splat(&coords, centring, &full.data);
             // A texture that repeats: the texels no repeat of the surest part
             // showed, from the rest of the mask where it showed them
             // (`Options::fill_from_mask`).
             let mut from_mask = None;
             if let Some((rest, rest_coords)) = rest {
-                let c = rest_coords.unwrap_or(&coords);
-                let o = reproject::reproject(c, &rest.data, &delit, &confidence, size);
+                let o = match rest_coords {
+                    Some(c) => splat(c, None, &rest.data),
+                    None => splat(&coords, centring, &rest.data),
+                };
                 let n = reproject::fill_unknown_from(&mut r, &o);
                 from_mask = Some(n as f64 / r.known.len().max(1) as f64);
             }
@@ -2015,6 +2040,7 @@ mod tests {
             line_refine: false,
             align_grain: false,
             fold_period: true,
+            fold_centring: true,
             fill_from_mask: true,
             tileable: true,
             heal_seams: true,
@@ -2605,6 +2631,7 @@ mod tests {
                 size: Some(64),
                 fov_deg: Some(60.0),
                 fold_period: false,
+                fold_centring: true,
                 align_grain,
                 ..test_options(&inpainter, UvChoice::Plane)
             };
@@ -3115,6 +3142,80 @@ mod tests {
         let (_, diag) = run(false, true);
         assert!(diag.uv.as_ref().unwrap().period.is_none());
         assert!(diag.filled_from_mask.is_none());
+    }
+
+    /// A frontal chessboard whose surest part is the white squares and the
+    /// black squares of one of the two places a black square has in its
+    /// 2 × 2-square tile (the rest of the mask holding the others): the
+    /// repeat is centred (a shift of one square along both axes repeats
+    /// it), found with the rest of the mask, and the fold then takes the
+    /// second place's squares from the surest pixels too, instead of from
+    /// the rest; `fold_centring: false` keeps the plain fold. A board whose
+    /// black squares alternate between two darks is not centred, and keeps
+    /// both darks.
+    #[test]
+    fn a_centred_fold_takes_both_places_from_the_surest_pixels() {
+        let (h, w) = (96, 128);
+        let (i, j) = (|k: usize| (k % w) / 8, |k: usize| (k / w) / 8);
+        let white = move |k: usize| (i(k) + j(k)).is_multiple_of(2);
+        let first_place = move |k: usize| !white(k) && i(k).is_multiple_of(2);
+        let inpainter = picker_inpaint::DiffusionInpainter::default();
+        let run = |p: &Prepared, centring: bool| {
+            let pm = whole_mask(w, h, &|k| white(k) || first_place(k));
+            let opts = Options {
+                fov_deg: Some(60.0),
+                fold_centring: centring,
+                ..test_options(&inpainter, UvChoice::Plane)
+            };
+            let (m, d) = extract(p, "board", Some([4, 4]), &pm, &opts).unwrap();
+            (m.texture.expect("textured").texture, d)
+        };
+        let p = frontal_plane(w, h, &|k| if white(k) { 0.9 } else { 0.15 });
+        let (t, d) = run(&p, true);
+        let fold = d.uv.as_ref().unwrap().period.expect("the board folds");
+        assert_eq!(fold.periods_per_tile, [1, 1], "{fold:?}");
+        let c = fold.centred.expect("a centred repeat");
+        assert!(c > 0.9, "{fold:?}");
+        let filled = d.filled_from_mask.expect("the rest of the mask looked at");
+        assert!(filled < 0.05, "filled {filled}");
+        let n = t.width * t.height;
+        let dark = (0..n).filter(|&k| t.rgb(k).x < 0.4).count() as f64 / n as f64;
+        assert!((0.3..0.6).contains(&dark), "dark share {dark}");
+        let (t0, d0) = run(&p, false);
+        let fold0 = d0.uv.as_ref().unwrap().period.expect("the board folds");
+        assert_eq!(fold0.centred, None);
+        let filled0 = d0.filled_from_mask.expect("filled from the mask");
+        assert!(filled0 > 0.1, "filled {filled0}");
+        let dark0 = (0..n).filter(|&k| t0.rgb(k).x < 0.4).count() as f64 / n as f64;
+        assert!((0.3..0.6).contains(&dark0), "dark share {dark0}");
+
+        // Two darks: the second place's squares are 0.45 (sRGB).
+        let p = frontal_plane(w, h, &|k| {
+            if white(k) {
+                0.9
+            } else if first_place(k) {
+                0.15
+            } else {
+                0.45
+            }
+        });
+        let (t, d) = run(&p, true);
+        let fold = d.uv.as_ref().unwrap().period.expect("the board folds");
+        assert_eq!(fold.centred, None, "{fold:?}");
+        // Both darks in the texture: texels near 0.15 and near 0.45 (sRGB),
+        // linear 0.02 and 0.17.
+        let lin = |v: f32| picker_render::io::srgb_decode(v);
+        let near = |v: f32| {
+            (0..n)
+                .filter(|&k| (t.rgb(k).x - lin(v)).abs() < 0.03)
+                .count()
+        };
+        assert!(
+            near(0.15) > n / 10 && near(0.45) > n / 10,
+            "{} {}",
+            near(0.15),
+            near(0.45)
+        );
     }
 
     /// A greyscale photo gives a grey material and grey lighting whatever

@@ -992,6 +992,7 @@ impl Fit {
         confidence: &[f32],
         size: usize,
         block: usize,
+        shift: Option<[f32; 2]>,
     ) -> Self {
         let src = Picked {
             coords,
@@ -1000,7 +1001,10 @@ impl Fit {
             confidence,
             size,
         };
-        let samples = samples(&src, block);
+        let mut samples = samples(&src, block);
+        if let Some(by) = shift {
+            samples = with_shifted_copies(samples, by);
+        }
         let members = band_members(&samples, size, coords.wrap);
         let (sum, wsum, seen) = splat(&samples, &members, size, coords.wrap, None, 1.0, None, true);
         let mean = texel_means(&sum, &wsum);
@@ -1127,9 +1131,77 @@ pub fn reproject(
         colour,
         confidence,
         size,
-        BACK_PROJECTIONS,
-        block,
+        Splatting {
+            rounds: BACK_PROJECTIONS,
+            block,
+            shift: None,
+        },
     )
+}
+
+/// [`reproject`] of a folded tile whose repeat is centred
+/// ([`crate::period::Fold::centring_shift`]): every picked pixel is splatted
+/// twice, at its coordinates and shifted by `shift` (units of the square,
+/// wrapped), so each texel is seen by the pixels of both its places in the
+/// pattern. Both copies go through one robust fit: a texel's colour is the
+/// robust mean of all of them, so a stray pixel at one place does not
+/// outweigh the repeats at the other.
+///
+/// # Panics
+/// When `coords` do not wrap (only a folded tile repeats by the shift), or
+/// as [`reproject`].
+pub fn reproject_centred(
+    coords: &Coords,
+    mask: &[bool],
+    colour: &Image,
+    confidence: &[f32],
+    size: usize,
+    shift: [f32; 2],
+) -> Reprojected {
+    assert!(
+        coords.wrap,
+        "reproject_centred: the coordinates must wrap (a folded tile)"
+    );
+    let block = merge_block(coords, mask, size);
+    reproject_rounds(
+        coords,
+        mask,
+        colour,
+        confidence,
+        size,
+        Splatting {
+            rounds: BACK_PROJECTIONS,
+            block,
+            shift: Some(shift),
+        },
+    )
+}
+
+/// `samples` followed by a copy of each moved by `by` (units of the square)
+/// and wrapped into `[0, 1)`; their footprints, relative to their centres,
+/// are unchanged.
+fn with_shifted_copies(mut samples: Vec<Sample>, by: [f32; 2]) -> Vec<Sample> {
+    let wrap = |t: f32, d: f32| {
+        let x = t + d;
+        let x = x - x.floor();
+        // `x − floor(x)` of a value just below an integer rounds to 1.
+        if x >= 1.0 {
+            0.0
+        } else {
+            x
+        }
+    };
+    let n = samples.len();
+    samples.reserve(n);
+    for k in 0..n {
+        let s = samples[k];
+        samples.push(Sample {
+            u: wrap(s.u, by[0]),
+            v: wrap(s.v, by[1]),
+            ..s
+        });
+    }
+    samples
 }
 
 /// The texels `own` did not observe that `other` (a reprojection of other
@@ -1173,20 +1245,47 @@ pub fn reproject_unsharpened(
     size: usize,
 ) -> Reprojected {
     let block = merge_block(coords, mask, size);
-    reproject_rounds(coords, mask, colour, confidence, size, 0, block)
+    reproject_rounds(
+        coords,
+        mask,
+        colour,
+        confidence,
+        size,
+        Splatting {
+            rounds: 0,
+            block,
+            shift: None,
+        },
+    )
 }
 
-/// [`reproject`] with `rounds` of back-projection and pixel blocks of side
-/// `block` merged where coherent ([`merge_block`]; 1: every pixel its own sample).
+/// How [`reproject_rounds`] splats.
+#[derive(Clone, Copy, Debug)]
+struct Splatting {
+    /// Rounds of back-projection.
+    rounds: usize,
+    /// Side of the pixel blocks merged where coherent ([`merge_block`]; 1:
+    /// every pixel its own sample).
+    block: usize,
+    /// Each sample splatted again, shifted by this (a centred fold:
+    /// [`reproject_centred`]).
+    shift: Option<[f32; 2]>,
+}
+
+/// [`reproject`] as `how` says.
 fn reproject_rounds(
     coords: &Coords,
     mask: &[bool],
     colour: &Image,
     confidence: &[f32],
     size: usize,
-    rounds: usize,
-    block: usize,
+    how: Splatting,
 ) -> Reprojected {
+    let Splatting {
+        rounds,
+        block,
+        shift,
+    } = how;
     let n = coords.width * coords.height;
     assert_eq!(mask.len(), n, "mask size");
     assert_eq!(colour.plane_len(), n, "colour size");
@@ -1199,7 +1298,7 @@ fn reproject_rounds(
             known: Vec::new(),
         };
     }
-    let mut fit = Fit::new(coords, mask, colour, confidence, size, block);
+    let mut fit = Fit::new(coords, mask, colour, confidence, size, block, shift);
     fit.back_project(rounds);
     let (tex, wsum, seen) = (&fit.tex, &fit.wsum, &fit.seen);
     let mut texture = Image::zeros(3, size, size);
@@ -1417,6 +1516,94 @@ mod tests {
         assert_eq!(g.known, a.known);
     }
 
+    /// A frontal chessboard (squares of 6 pixels, a 12-pixel period that
+    /// is the wrapped square): splatted again shifted by half the square,
+    /// the board lands on itself, so the texture is the plain one's; with
+    /// only one of the two black places in the mask, the shifted copy shows
+    /// the other place black, where the plain splat knows nothing.
+    #[test]
+    fn a_centred_splat_sees_both_places_of_a_chessboard() {
+        let board = |u: f32, v: f32| {
+            let k = (u * 2.0).floor() as i32 + (v * 2.0).floor() as i32;
+            Vec3::splat(if k % 2 == 0 { 0.9 } else { 0.1 })
+        };
+        let (w, h) = (48, 36);
+        let (coords, img) = frontal(w, h, 12.0, board);
+        let conf = vec![1.0; w * h];
+        let all = vec![true; w * h];
+        let size = 12;
+        let plain = reproject(&coords, &all, &img, &conf, size);
+        let centred = reproject_centred(&coords, &all, &img, &conf, size, [0.5, 0.5]);
+        assert_eq!(plain.known, centred.known);
+        for (a, b) in plain.texture.data.iter().zip(&centred.texture.data) {
+            assert!((a - b).abs() < 0.02, "{a} vs {b}");
+        }
+        for (a, b) in plain.weight.data.iter().zip(&centred.weight.data) {
+            assert!((b / a - 2.0).abs() < 1e-3, "weights {a} {b}");
+        }
+        // White squares and the black squares of one place: (even, odd).
+        let (sq_x, sq_y) = (|i: usize| (i % w) / 6, |i: usize| (i / w) / 6);
+        let half: Vec<bool> = (0..w * h)
+            .map(|i| (sq_x(i) + sq_y(i)) % 2 == 0 || sq_x(i) % 2 == 0)
+            .collect();
+        let plain = reproject(&coords, &half, &img, &conf, size);
+        let centred = reproject_centred(&coords, &half, &img, &conf, size, [0.5, 0.5]);
+        // The other black place's texels, away from the squares' edges.
+        let other = |t: usize| {
+            let (x, y) = (t % size, t / size);
+            (7..11).contains(&x) && (1..5).contains(&y)
+        };
+        for t in (0..size * size).filter(|&t| other(t)) {
+            assert!(!plain.known[t], "texel {t} known without the shift");
+            assert!(centred.known[t], "texel {t} unknown with the shift");
+            assert!(
+                centred.texture.rgb(t).x < 0.2,
+                "texel {t}: {}",
+                centred.texture.rgb(t)
+            );
+        }
+        // Every texel the plain splat knows, the centred one knows.
+        assert!(plain
+            .known
+            .iter()
+            .zip(&centred.known)
+            .all(|(&a, &b)| !a || b));
+    }
+
+    #[test]
+    fn shifted_copies_wrap_and_keep_their_footprints() {
+        let s = |u: f32, v: f32| Sample {
+            u,
+            v,
+            colour: Vec3::new(u, v, 1.0),
+            weight: 0.5,
+            fp: Footprint::isotropic(2.0),
+            count: 3.0,
+        };
+        let out = with_shifted_copies(vec![s(0.0, 0.75), s(0.6, 0.999_999_9)], [0.5, 0.25]);
+        assert_eq!(out.len(), 4);
+        assert_eq!(out[..2], [s(0.0, 0.75), s(0.6, 0.999_999_9)]);
+        assert_eq!((out[2].u, out[2].v), (0.5, 0.0));
+        assert!((out[3].u - 0.1).abs() < 1e-6 && (out[3].v - 0.25).abs() < 1e-6);
+        for c in &out[2..] {
+            assert!((0.0..1.0).contains(&c.u) && (0.0..1.0).contains(&c.v));
+            assert_eq!(
+                (c.weight, c.fp, c.count),
+                (0.5, Footprint::isotropic(2.0), 3.0)
+            );
+        }
+        assert_eq!(out[3].colour, Vec3::new(0.6, 0.999_999_9, 1.0));
+        assert!(with_shifted_copies(Vec::new(), [0.5, 0.5]).is_empty());
+    }
+
+    #[test]
+    #[should_panic(expected = "must wrap")]
+    fn a_centred_splat_needs_wrapping_coordinates() {
+        let (mut coords, img) = frontal(8, 8, 8.0, |u, v| Vec3::new(u, v, 0.0));
+        coords.wrap = false;
+        reproject_centred(&coords, &[true; 64], &img, &[1.0; 64], 8, [0.5, 0.5]);
+    }
+
     #[test]
     #[should_panic(expected = "sizes differ")]
     fn filling_from_another_size_is_refused() {
@@ -1530,7 +1717,18 @@ mod tests {
             (e / (3.0 * 576.0)).sqrt()
         };
         assert_eq!(merge_block(&coords, &mask, 24), 1);
-        let plain = reproject_rounds(&coords, &mask, &img, &conf, 24, 0, 1);
+        let plain = reproject_rounds(
+            &coords,
+            &mask,
+            &img,
+            &conf,
+            24,
+            Splatting {
+                rounds: 0,
+                block: 1,
+                shift: None,
+            },
+        );
         let sharp = reproject(&coords, &mask, &img, &conf, 24);
         let (a, b) = (rmse(&plain), rmse(&sharp));
         assert!(a > 0.02, "the splat should blur this texture: {a}");
@@ -1738,7 +1936,18 @@ mod tests {
             }
         }
         let conf = vec![1.0; w * h];
-        let r = reproject_rounds(&coords, &mask, &img, &conf, size, 0, 1);
+        let r = reproject_rounds(
+            &coords,
+            &mask,
+            &img,
+            &conf,
+            size,
+            Splatting {
+                rounds: 0,
+                block: 1,
+                shift: None,
+            },
+        );
         let mean = r.texture.data.iter().sum::<f32>() / r.texture.data.len() as f32;
         assert!(mean > 0.7 && mean <= 1.0, "{mean}");
         assert!(r.known.iter().all(|&k| k));
@@ -2002,7 +2211,18 @@ mod tests {
         assert!(merged.iter().filter(|s| s.count == 1.0).count() >= h);
         let count: f32 = merged.iter().map(|s| s.count).sum();
         assert_eq!(count as usize, all.len());
-        let a = reproject_rounds(&coords, &mask, &img, &conf, size, BACK_PROJECTIONS, 1);
+        let a = reproject_rounds(
+            &coords,
+            &mask,
+            &img,
+            &conf,
+            size,
+            Splatting {
+                rounds: BACK_PROJECTIONS,
+                block: 1,
+                shift: None,
+            },
+        );
         let b = reproject(&coords, &mask, &img, &conf, size);
         assert_eq!(a.known, b.known);
         let (mut d, mut ea, mut eb, mut k) = (0.0f64, 0.0f64, 0.0f64, 0usize);
