@@ -457,6 +457,19 @@ fn shards_jobs_and_staleness() {
     std::fs::remove_file(full.join("set0/photo_000.png.material/centre/material.json")).unwrap();
     run(batch_cmd(&input, &full, &["--seed", "5"]));
     assert_eq!(report(&full)["counts"]["ok"], 1);
+    // The extraction's switches are settings too: each redoes every photo.
+    for flag in [
+        "--no-lines",
+        "--no-grain",
+        "--no-fold",
+        "--no-centring",
+        "--no-mask-fill",
+        "--keep-seams",
+    ] {
+        run(batch_cmd(&input, &full, &["--seed", "5", flag]));
+        let r = report(&full);
+        assert_eq!(r["counts"]["up_to_date"], 0, "{flag}: {r:#}");
+    }
 }
 
 #[test]
