@@ -305,8 +305,7 @@ fn correlation_at(g: Grid<'_>, (dx, dy): (usize, usize), d: usize, least: usize)
     let step = dy * w + dx;
     let (x0, y0) = (frac * dx, frac * dy);
     let (x1, y1) = (w - span * dx, h - span * dy);
-    let (mut cnt, mut sa, mut sb) = (0usize, 0.0f64, 0.0f64);
-    let (mut saa, mut sbb, mut sab) = (0.0f64, 0.0f64, 0.0f64);
+    let mut sums = PairSums::default();
     for y in y0..y1 {
         for x in x0..x1 {
             let i = y * w + x;
@@ -325,25 +324,64 @@ fn correlation_at(g: Grid<'_>, (dx, dy): (usize, usize), d: usize, least: usize)
                     (1.0 - t) * v[j] + t * v[j + step],
                 )
             };
-            let (a, b) = (f64::from(a), f64::from(b));
-            cnt += 1;
-            sa += a;
-            sb += b;
-            saa += a * a;
-            sbb += b * b;
-            sab += a * b;
+            sums.add(f64::from(a), f64::from(b));
         }
     }
-    if cnt < least {
-        return f32::NAN;
+    sums.moments(least)
+        .map_or(f32::NAN, |m| (m.cov / (m.va * m.vb).sqrt()) as f32)
+}
+
+/// Sums over pairs `(a, b)` for their correlation or agreement.
+#[derive(Clone, Copy, Debug, Default)]
+struct PairSums {
+    n: usize,
+    a: f64,
+    b: f64,
+    aa: f64,
+    bb: f64,
+    ab: f64,
+}
+
+/// Centred second moments of [`PairSums`] (sums, not means).
+struct PairMoments {
+    /// Pairs.
+    k: f64,
+    /// `Σ(a − ā)²`, `Σ(b − b̄)²`, `Σ(a − ā)(b − b̄)`.
+    va: f64,
+    vb: f64,
+    cov: f64,
+    /// `ā − b̄`.
+    mean_gap: f64,
+}
+
+impl PairSums {
+    fn add(&mut self, a: f64, b: f64) {
+        self.n += 1;
+        self.a += a;
+        self.b += b;
+        self.aa += a * a;
+        self.bb += b * b;
+        self.ab += a * b;
     }
-    let k = cnt as f64;
-    let (va, vb) = (saa - sa * sa / k, sbb - sb * sb / k);
-    let cov = sab - sa * sb / k;
-    if va <= 1e-12 * k || vb <= 1e-12 * k {
-        return f32::NAN;
+
+    /// The moments, `None` with fewer than `least` pairs or a constant side.
+    fn moments(&self, least: usize) -> Option<PairMoments> {
+        if self.n < least || self.n == 0 {
+            return None;
+        }
+        let k = self.n as f64;
+        let (va, vb) = (self.aa - self.a * self.a / k, self.bb - self.b * self.b / k);
+        if va <= 1e-12 * k || vb <= 1e-12 * k {
+            return None;
+        }
+        Some(PairMoments {
+            k,
+            va,
+            vb,
+            cov: self.ab - self.a * self.b / k,
+            mean_gap: (self.a - self.b) / k,
+        })
     }
-    (cov / (va * vb).sqrt()) as f32
 }
 
 /// The period in an autocorrelation `r` (index = shift), see the module docs.
@@ -539,34 +577,20 @@ fn half_shift_correlation(g: &LumaGrid, sx: f32, sy: f32, least: usize) -> f32 {
         let (tx, ty) = (f64::from(tx), f64::from(ty));
         Some((a * (1.0 - tx) + b * tx) * (1.0 - ty) + (c * (1.0 - tx) + d * tx) * ty)
     };
-    let (mut cnt, mut sa, mut sb) = (0usize, 0.0f64, 0.0f64);
-    let (mut saa, mut sbb, mut sab) = (0.0f64, 0.0f64, 0.0f64);
+    let mut sums = PairSums::default();
     for y in 0..h {
         for x in 0..w {
             let (px, py) = (x as f32, y as f32);
             let (Some(a), Some(b)) = (at(px - hx, py - hy), at(px + hx, py + hy)) else {
                 continue;
             };
-            cnt += 1;
-            sa += a;
-            sb += b;
-            saa += a * a;
-            sbb += b * b;
-            sab += a * b;
+            sums.add(a, b);
         }
     }
-    if cnt < least {
-        return f32::NAN;
-    }
-    let k = cnt as f64;
-    let (va, vb) = (saa - sa * sa / k, sbb - sb * sb / k);
-    let cov = sab - sa * sb / k;
-    if va <= 1e-12 * k || vb <= 1e-12 * k {
-        return f32::NAN;
-    }
     // Σ(a − b)² = va + vb − 2 cov + k (ā − b̄)².
-    let mean_gap = (sa - sb) / k;
-    ((2.0 * cov - k * mean_gap * mean_gap) / (va + vb)) as f32
+    sums.moments(least).map_or(f32::NAN, |m| {
+        ((2.0 * m.cov - m.k * m.mean_gap * m.mean_gap) / (m.va + m.vb)) as f32
+    })
 }
 
 /// The tile for periods `px` and `py` measured on a texture of side `size`:

@@ -1124,19 +1124,8 @@ pub fn reproject(
     confidence: &[f32],
     size: usize,
 ) -> Reprojected {
-    let block = merge_block(coords, mask, size);
-    reproject_rounds(
-        coords,
-        mask,
-        colour,
-        confidence,
-        size,
-        Splatting {
-            rounds: BACK_PROJECTIONS,
-            block,
-            shift: None,
-        },
-    )
+    let how = Splatting::full(coords, mask, size, None);
+    reproject_rounds(coords, mask, colour, confidence, size, how)
 }
 
 /// [`reproject`] of a folded tile whose repeat is centred
@@ -1144,8 +1133,7 @@ pub fn reproject(
 /// twice, at its coordinates and shifted by `shift` (units of the square,
 /// wrapped), so each texel is seen by the pixels of both its places in the
 /// pattern. Both copies go through one robust fit: a texel's colour is the
-/// robust mean of all of them, so a stray pixel at one place does not
-/// outweigh the repeats at the other.
+/// robust mean of the pixels of both places.
 ///
 /// # Panics
 /// When `coords` do not wrap (only a folded tile repeats by the shift), or
@@ -1162,19 +1150,8 @@ pub fn reproject_centred(
         coords.wrap,
         "reproject_centred: the coordinates must wrap (a folded tile)"
     );
-    let block = merge_block(coords, mask, size);
-    reproject_rounds(
-        coords,
-        mask,
-        colour,
-        confidence,
-        size,
-        Splatting {
-            rounds: BACK_PROJECTIONS,
-            block,
-            shift: Some(shift),
-        },
-    )
+    let how = Splatting::full(coords, mask, size, Some(shift));
+    reproject_rounds(coords, mask, colour, confidence, size, how)
 }
 
 /// `samples` followed by a copy of each moved by `by` (units of the square)
@@ -1270,6 +1247,18 @@ struct Splatting {
     /// Each sample splatted again, shifted by this (a centred fold:
     /// [`reproject_centred`]).
     shift: Option<[f32; 2]>,
+}
+
+impl Splatting {
+    /// [`reproject`]'s: every back-projection round, blocks merged as
+    /// [`merge_block`] finds them coherent.
+    fn full(coords: &Coords, mask: &[bool], size: usize, shift: Option<[f32; 2]>) -> Self {
+        Splatting {
+            rounds: BACK_PROJECTIONS,
+            block: merge_block(coords, mask, size),
+            shift,
+        }
+    }
 }
 
 /// [`reproject`] as `how` says.
