@@ -970,6 +970,9 @@ struct Fit {
     members: Vec<Vec<u32>>,
     size: usize,
     wrap: bool,
+    /// A centred fold's shift in texels by which every splat's sums are
+    /// added to themselves ([`reproject_centred`]).
+    shift: Option<[f32; 2]>,
     /// The first (plain) pass's texel means, which the robust weights compare with.
     mean: Vec<Vec3>,
     /// The robust weights' scale.
@@ -1002,11 +1005,44 @@ impl Fit {
             size,
         };
         let mut samples = samples(&src, block);
-        if let Some(by) = shift {
+        // A centred fold's second place for every sample. Where the shift is
+        // half the square (or none) along each axis and a whole number of
+        // texels, moving twice is the identity and the texture comes out
+        // symmetric, so each splat's sums plus the same sums moved
+        // ([`plus_shifted`]) are those of the copies: robust weights and
+        // back-projection residuals alike. Otherwise the copies are made.
+        let by_sums = shift.filter(|by| {
+            by.iter()
+                .all(|&b| (b * size as f32).fract() == 0.0 && (2.0 * b).fract() == 0.0)
+        });
+        if let (Some(by), None) = (shift, by_sums) {
             samples = with_shifted_copies(samples, by);
         }
         let members = band_members(&samples, size, coords.wrap);
-        let (sum, wsum, seen) = splat(&samples, &members, size, coords.wrap, None, 1.0, None, true);
+        let shift = by_sums.map(|by| [by[0] * size as f32, by[1] * size as f32]);
+        let sym = |(sum, wsum, seen): (Vec<Vec3>, Vec<f32>, Vec<f32>)| match shift {
+            Some(by) => (
+                plus_shifted(&sum, size, by),
+                plus_shifted(&wsum, size, by),
+                // (Not tracked: empty.)
+                if seen.is_empty() {
+                    seen
+                } else {
+                    plus_shifted(&seen, size, by)
+                },
+            ),
+            None => (sum, wsum, seen),
+        };
+        let (sum, wsum, seen) = sym(splat(
+            &samples,
+            &members,
+            size,
+            coords.wrap,
+            None,
+            1.0,
+            None,
+            true,
+        ));
         let mean = texel_means(&sum, &wsum);
         // Robust pass: Cauchy weights on the distance to the first-pass texel mean,
         // scale = 2 × the median deviation (at least 0.02).
@@ -1024,7 +1060,7 @@ impl Fit {
             None => 1.0,
             Some(m) => (2.0 * m[0]).max(0.02),
         };
-        let (sum, wsum, _) = splat(
+        let (sum, wsum, _) = sym(splat(
             &samples,
             &members,
             size,
@@ -1033,13 +1069,14 @@ impl Fit {
             scale,
             None,
             false,
-        );
+        ));
         let tex = texel_means(&sum, &wsum);
         Fit {
             samples,
             members,
             size,
             wrap: coords.wrap,
+            shift,
             mean,
             scale,
             wsum,
@@ -1090,6 +1127,10 @@ impl Fit {
                 Some(&residual),
                 false,
             );
+            let rsum = match self.shift {
+                Some(by) => plus_shifted(&rsum, size, by),
+                None => rsum,
+            };
             self.tex
                 .par_iter_mut()
                 .zip(rsum.par_iter().zip(self.wsum.par_iter()))
@@ -1133,7 +1174,14 @@ pub fn reproject(
 /// twice, at its coordinates and shifted by `shift` (units of the square,
 /// wrapped), so each texel is seen by the pixels of both its places in the
 /// pattern. Both copies go through one robust fit: a texel's colour is the
-/// robust mean of the pixels of both places.
+/// robust mean of the pixels of both places. Where the shift is half the
+/// square along each axis (or none) and a whole number of texels (a tile of
+/// one period each way: a chessboard's), the copies are not made: each
+/// splat's per-texel sums get themselves, moved, added ([`plus_shifted`]),
+/// which gives the same texture (it is symmetric, so the copies' robust
+/// weights and back-projection residuals are their originals') at the cost
+/// of [`reproject`]; otherwise the copies are made and splatted, at twice
+/// the cost.
 ///
 /// # Panics
 /// When `coords` do not wrap (only a folded tile repeats by the shift), or
@@ -1179,6 +1227,57 @@ fn with_shifted_copies(mut samples: Vec<Sample>, by: [f32; 2]) -> Vec<Sample> {
         });
     }
     samples
+}
+
+/// A `size × size` square of per-texel sums `a` (wrapping) plus the same
+/// sums moved by `by` texels: what the sums would be if every sample were
+/// also splatted `by` texels further on. The moved copy is read at
+/// `t − by`, bilinearly between texels when `by` is not whole (exact when
+/// it is). An empty square stays empty.
+///
+/// # Panics
+/// When `a` does not hold `size²` values.
+fn plus_shifted<T>(a: &[T], size: usize, by: [f32; 2]) -> Vec<T>
+where
+    T: Copy + Send + Sync + std::ops::Add<Output = T> + std::ops::Mul<f32, Output = T>,
+{
+    assert_eq!(a.len(), size * size, "plus_shifted: a square of sums");
+    if size == 0 {
+        return Vec::new();
+    }
+    let n = size as i64;
+    // Source column/row for destination `d` along one axis: the two texels
+    // and the weight of the second (0 when `by` is whole).
+    let taps = |d: usize, by: f32| {
+        let f = d as f32 - by;
+        let f0 = f.floor();
+        let t = f - f0;
+        let i0 = (f0 as i64).rem_euclid(n) as usize;
+        (i0, ((f0 as i64 + 1).rem_euclid(n)) as usize, t)
+    };
+    let cols: Vec<(usize, usize, f32)> = (0..size).map(|x| taps(x, by[0])).collect();
+    let mut out = a.to_vec();
+    out.par_chunks_mut(size).enumerate().for_each(|(y, row)| {
+        let (y0, y1, ty) = taps(y, by[1]);
+        for (x, o) in row.iter_mut().enumerate() {
+            let (x0, x1, tx) = cols[x];
+            let at = |yy: usize| {
+                let r = &a[yy * size..(yy + 1) * size];
+                if tx == 0.0 {
+                    r[x0]
+                } else {
+                    r[x0] * (1.0 - tx) + r[x1] * tx
+                }
+            };
+            let v = if ty == 0.0 {
+                at(y0)
+            } else {
+                at(y0) * (1.0 - ty) + at(y1) * ty
+            };
+            *o = *o + v;
+        }
+    });
+    out
 }
 
 /// The texels `own` did not observe that `other` (a reprojection of other
@@ -1559,6 +1658,71 @@ mod tests {
             .all(|(&a, &b)| !a || b));
     }
 
+    /// The reference for [`reproject_centred`]: the picture stacked twice
+    /// (a row outside the mask between), the second copy's coordinates
+    /// moved by the shift, reprojected plainly. Both of its ways agree with
+    /// it on noisy colours and a ragged mask, robust weights and
+    /// back-projection included: half-square shifts by their sums (to
+    /// rounding: a moved sample's texel, `(u + ½)·size`, can round the
+    /// other way at a texel's edge, which moves the robust weights' scale a
+    /// little), other shifts, fractions of a texel too, by their copies.
+    #[test]
+    fn a_centred_splat_is_the_splat_of_shifted_copies() {
+        let (w, h) = (40, 30);
+        let mut rng = picker_tensor::Rng::new(12);
+        let noise: Vec<f32> = (0..w * h).map(|_| rng.uniform(-0.1, 0.1)).collect();
+        let mask: Vec<bool> = (0..w * h).map(|_| rng.f64() < 0.7).collect();
+        let conf: Vec<f32> = (0..w * h).map(|_| rng.uniform(0.3, 1.0)).collect();
+        let (coords, img) = frontal(w, h, 20.0, |u, v| {
+            Vec3::new(u, v * v, (u * 9.0).sin().abs())
+        });
+        let mut noisy = img.clone();
+        for (i, n) in noise.iter().enumerate() {
+            noisy.set_rgb(i, img.rgb(i) + Vec3::splat(*n));
+        }
+        for (size, shift) in [
+            (20, [0.5f32, 0.5f32]),
+            (20, [0.5, 0.0]),
+            (40, [0.0, 0.5]),
+            (16, [0.25, 0.25]),
+            (42, [0.25, 0.75]),
+            (21, [0.5, 0.5]),
+        ] {
+            let h2 = 2 * h + 1;
+            let mut c2 = Coords {
+                width: w,
+                height: h2,
+                u: vec![f32::NAN; w * h2],
+                v: vec![f32::NAN; w * h2],
+                wrap: true,
+            };
+            let mut img2 = Image::zeros(3, h2, w);
+            let (mut m2, mut conf2) = (vec![false; w * h2], vec![0.0; w * h2]);
+            for i in 0..w * h {
+                for (j, by) in [(i, [0.0, 0.0]), (i + w * (h + 1), shift)] {
+                    c2.u[j] = (coords.u[i] + by[0]).fract();
+                    c2.v[j] = (coords.v[i] + by[1]).fract();
+                    img2.set_rgb(j, noisy.rgb(i));
+                    m2[j] = mask[i];
+                    conf2[j] = conf[i];
+                }
+            }
+            let got = reproject_centred(&coords, &mask, &noisy, &conf, size, shift);
+            let want = reproject(&c2, &m2, &img2, &conf2, size);
+            let case = format!("size {size} shift {shift:?}");
+            assert_eq!(got.known, want.known, "{case}");
+            for (a, b) in got.texture.data.iter().zip(&want.texture.data) {
+                assert!((a - b).abs() < 1e-3, "{case}: {a} vs {b}");
+            }
+            for (a, b) in got.weight.data.iter().zip(&want.weight.data) {
+                assert!(
+                    (a - b).abs() <= 1e-3 * b.abs().max(1.0),
+                    "{case}: {a} vs {b}"
+                );
+            }
+        }
+    }
+
     #[test]
     fn shifted_copies_wrap_and_keep_their_footprints() {
         let s = |u: f32, v: f32| Sample {
@@ -1583,6 +1747,36 @@ mod tests {
         }
         assert_eq!(out[3].colour, Vec3::new(0.6, 0.999_999_9, 1.0));
         assert!(with_shifted_copies(Vec::new(), [0.5, 0.5]).is_empty());
+    }
+
+    /// Whole shifts move the sums exactly (wrapping); a half-texel shift
+    /// reads the average of two neighbours; a shift by the whole square
+    /// doubles.
+    #[test]
+    fn shifted_sums_are_added_wrapping() {
+        let size = 4;
+        let a: Vec<f32> = (0..16).map(|i| i as f32).collect();
+        let b = plus_shifted(&a, size, [1.0, 0.0]);
+        for y in 0..4 {
+            for x in 0..4 {
+                let src = y * 4 + (x + 3) % 4;
+                assert_eq!(b[y * 4 + x], a[y * 4 + x] + a[src], "({x}, {y})");
+            }
+        }
+        let b = plus_shifted(&a, size, [0.0, -1.0]);
+        assert_eq!(b[0], a[0] + a[4]);
+        assert_eq!(b[12], a[12] + a[0]);
+        let b = plus_shifted(&a, size, [0.5, 0.0]);
+        assert_eq!(b[1], a[1] + 0.5 * (a[0] + a[1]));
+        assert_eq!(b[0], a[0] + 0.5 * (a[3] + a[0]));
+        let b = plus_shifted(&a, size, [4.0, 8.0]);
+        assert!(b.iter().zip(&a).all(|(x, y)| *x == 2.0 * y));
+        // Vectors too, and the empty square.
+        let v = vec![Vec3::new(1.0, 2.0, 3.0); 9];
+        assert!(plus_shifted(&v, 3, [1.5, 2.25])
+            .iter()
+            .all(|c| (*c - Vec3::new(2.0, 4.0, 6.0)).length() < 1e-6));
+        assert!(plus_shifted::<f32>(&[], 0, [0.5, 0.5]).is_empty());
     }
 
     #[test]
