@@ -801,6 +801,7 @@ pub fn run(a: Args) -> Result<ExitCode> {
                 all: a.all,
                 quad: quads.get(&p.rel).map(|q| q.0),
                 quad_size_m: quads.get(&p.rel).and_then(|q| q.1),
+                mask: None,
             };
             (p, req)
         })

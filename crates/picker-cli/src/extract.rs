@@ -290,6 +290,13 @@ pub struct Args {
     /// size on the surface (`texture.size_m`: repeat it every that many metres).
     #[arg(long, value_name = "WxH[mm|cm|m|in]", value_parser = parse_size_m, requires = "quad")]
     pub quad_size: Option<[f32; 2]>,
+    /// The material's pixels, instead of the segmentation's at the pick: a mask image the
+    /// photo's size as a viewer shows it (white on black, or a selection exported with
+    /// transparency: its alpha), or `quad` for the --quad's interior (`./quad` for a file of that
+    /// name). One material; the pick, if given, must lie in it (default: the mask's pixel
+    /// nearest its centroid).
+    #[arg(long, value_name = "FILE|quad", value_parser = parse_mask, conflicts_with_all = ["all", "tolerance", "connected"])]
+    pub mask: Option<MaskArg>,
     /// Render elements instead of the networks: a folder with diffuse_albedo.exr,
     /// specular_albedo.exr, glossiness.exr, normals.exr, view_vector.exr, uv.exr,
     /// segmentation.exr and optionally embedding.exr and envmap.exr (as `picker synth` or
@@ -343,6 +350,24 @@ pub fn parse_quad(s: &str) -> std::result::Result<Quad, String> {
         [v[4], v[5]],
         [v[6], v[7]],
     ]))
+}
+
+/// Where `--mask` takes the material's pixels from.
+#[derive(Clone, Debug, PartialEq)]
+pub enum MaskArg {
+    /// A mask image.
+    File(PathBuf),
+    /// The `--quad`'s interior ([`Quad::interior`]).
+    Quad,
+}
+
+/// Parses `--mask`: `quad`, or a file.
+pub fn parse_mask(s: &str) -> std::result::Result<MaskArg, String> {
+    match s {
+        "" => Err("expected a mask image or `quad`".into()),
+        "quad" => Ok(MaskArg::Quad),
+        f => Ok(MaskArg::File(PathBuf::from(f))),
+    }
 }
 
 /// Parses `--quad-size`: `WxH` in metres, or with a unit suffix (`mm`,
@@ -906,6 +931,9 @@ pub struct Request {
     pub quad: Option<Quad>,
     /// The quad's real size in metres (`--quad-size`).
     pub quad_size_m: Option<[f32; 2]>,
+    /// The material's pixels given (`--mask`): one material, the pick (if
+    /// any) inside it.
+    pub mask: Option<MaskArg>,
 }
 
 /// How [`write_materials`] lays out and annotates its files.
@@ -949,11 +977,78 @@ pub fn write_materials(
     for (_, pk) in &req.picks {
         prepared.check_pick(*pk).with_context(|| label.clone())?;
     }
+    // A given mask: the one material, its pick inside it.
+    let given = match &req.mask {
+        None => None,
+        Some(arg) => {
+            if req.picks.len() > 1 || req.all {
+                bail!("--mask gives the pixels of one material: use it with at most one --pick and without --all");
+            }
+            let (fw, fh) = prepared.photo_size();
+            let (full, shown) = match arg {
+                MaskArg::Quad => {
+                    let q = req
+                        .quad
+                        .ok_or_else(|| anyhow!("--mask quad needs --quad"))?;
+                    (q.interior(fw, fh), "the --quad's interior".to_string())
+                }
+                MaskArg::File(f) => {
+                    let m = picker_extract::photo::load_mask(f, &flags.photo_limits())
+                        .map_err(|e| anyhow!("--mask {e}"))?;
+                    if (m.width, m.height) != (fw, fh) {
+                        bail!(
+                            "--mask {}: the mask is {}x{} but the photo {label} is {fw}x{fh} (as a viewer shows it, EXIF orientation applied)",
+                            f.display(),
+                            m.width,
+                            m.height
+                        );
+                    }
+                    let full = picker_extract::mask::Mask {
+                        width: m.width,
+                        height: m.height,
+                        data: m.data,
+                    };
+                    if full.count() == 0 {
+                        bail!(
+                            "--mask {}: no pixel is set (white, or opaque where the file has transparency)",
+                            f.display()
+                        );
+                    }
+                    (full, f.display().to_string())
+                }
+            };
+            let pick = match req.picks.first() {
+                Some((_, pk)) => {
+                    let (x, y) = (pk[0] as usize, pk[1] as usize);
+                    if !full.data[y * fw + x] {
+                        bail!("--pick {x},{y} is outside the mask ({shown})");
+                    }
+                    *pk
+                }
+                None => {
+                    let [x, y] = full.central_pixel().expect("a non-empty mask");
+                    [x as u32, y as u32]
+                }
+            };
+            let name = req
+                .picks
+                .first()
+                .map_or_else(|| "material_0".to_string(), |(n, _)| n.clone());
+            let pm = prepared
+                .given_mask(full)
+                .with_context(|| format!("--mask {shown}"))?;
+            Some((name, pick, pm, shown))
+        }
+    };
     std::fs::create_dir_all(out_dir)
         .with_context(|| format!("creating output directory {}", out_dir.display()))?;
     let mask_opts = flags.mask_options();
     let mut jobs = Vec::new();
-    for (name, pk) in &req.picks {
+    let mask_shown = given.as_ref().map(|g| g.3.clone());
+    if let Some((name, pick, pm, _)) = given {
+        jobs.push((name, Some(pick), pm));
+    }
+    for (name, pk) in req.picks.iter().filter(|_| req.mask.is_none()) {
         let pm = prepared
             .pick_mask(*pk, &mask_opts)
             .with_context(|| format!("pick {},{} in {label}", pk[0], pk[1]))?;
@@ -1054,6 +1149,9 @@ pub fn write_materials(
             "preview": {"file": "preview.png", "envmap": if env.is_some() { "estimated" } else { "uniform white (no envmap network given)" }, "texture_repeats": repeats, "texture_repeats_rule": "about one texel per preview pixel at the sphere's centre (pi x 256 / texture side, whole, 1 to 8)", "exposure": exposure, "display": "linear radiance x exposure (a white diffuse sphere under this lighting averages 0.75), identity up to 0.8 then a soft roll-off towards 1, sRGB-encoded"},
             "report": "report.png",
         });
+        if let Some(shown) = &mask_shown {
+            extra["given_mask"] = json!(shown);
+        }
         if layout.timings {
             extra["timings_ms"] = json!({"extract": extract_ms, "preview_and_report": report_ms, "preview": preview_ms, "report_sheet": sheet_ms, "steps": diag.timings_ms});
         }
@@ -1206,8 +1304,14 @@ pub const SIZE_RATIO_HINT: f64 = 1.15;
 pub fn run(a: Args) -> Result<()> {
     let t_total = Instant::now();
     crate::threads::init(a.threads)?;
-    if a.pick.is_empty() && !a.all && a.quad.is_none() {
-        bail!("nothing to extract: give --pick X,Y (may be repeated), --all or --quad");
+    if a.pick.is_empty() && !a.all && a.quad.is_none() && a.mask.is_none() {
+        bail!("nothing to extract: give --pick X,Y (may be repeated), --all, --quad or --mask");
+    }
+    if a.mask == Some(MaskArg::Quad) && a.quad.is_none() {
+        bail!("--mask quad needs --quad (the quadrilateral whose interior is the material)");
+    }
+    if a.mask.is_some() && a.pick.len() > 1 {
+        bail!("--mask gives the pixels of one material: use it with at most one --pick");
     }
     if a.quad.is_some() && a.flags.uv == UvArg::Net {
         bail!("--quad gives the plane to rectify: it cannot be used with --uv net");
@@ -1240,7 +1344,8 @@ pub fn run(a: Args) -> Result<()> {
         &a.flags,
     )?;
     let mut picks: Vec<[u32; 2]> = a.pick.clone();
-    if let (Some(q), true) = (&a.quad, picks.is_empty()) {
+    // Without --pick: a quad's centre, unless a mask gives the material.
+    if let (Some(q), true, None) = (&a.quad, picks.is_empty(), &a.mask) {
         picks.push(q.centre_pixel());
     }
     let req = Request {
@@ -1252,6 +1357,7 @@ pub fn run(a: Args) -> Result<()> {
         all: a.all,
         quad: a.quad,
         quad_size_m: a.quad_size,
+        mask: a.mask.clone(),
     };
     let layout = Layout {
         always_subdirs: false,

@@ -849,6 +849,43 @@ fn out_of_range_values_are_refused_before_anything_is_written() {
         args.extend_from_slice(extra);
         picker(args)
     };
+    // Masks: a 10×10 one, an empty one and one of the photo's size (320×213)
+    // set only in its middle.
+    let masks = tempfile::tempdir().unwrap();
+    let mask_png = |name: &str, w: u32, h: u32, on: &dyn Fn(u32, u32) -> bool| {
+        let p = masks.path().join(name);
+        image::GrayImage::from_fn(w, h, |x, y| Luma([if on(x, y) { 255 } else { 0 }]))
+            .save(&p)
+            .unwrap();
+        p.display().to_string()
+    };
+    let small = mask_png("small.png", 10, 10, &|_, _| true);
+    let empty = mask_png("empty.png", 320, 213, &|_, _| false);
+    let middle = mask_png("middle.png", 320, 213, &|x, y| {
+        (100..200).contains(&x) && (50..150).contains(&y)
+    });
+    for (extra, needle) in [
+        (&["--mask", "quad"][..], "--mask quad needs --quad"),
+        (&["--mask", &small][..], "the mask is 10x10 but the photo"),
+        (&["--mask", &empty][..], "no pixel is set"),
+        (
+            &["--mask", &middle, "--pick", "5,5"][..],
+            "--pick 5,5 is outside the mask",
+        ),
+        (
+            &["--mask", &middle, "--pick", "150,60", "--pick", "160,70"][..],
+            "at most one --pick",
+        ),
+        (&["--mask", "/nonexistent/m.png"][..], "/nonexistent/m.png"),
+        (
+            &["--mask", &middle, "--quad", QUAD, "--pick", "12,22"][..],
+            "--pick 12,22 is outside the mask",
+        ),
+    ] {
+        let o = extract(extra);
+        assert_error_names(&o, needle);
+        assert!(!out.exists(), "{extra:?} wrote {}", out.display());
+    }
     for (extra, needle) in [
         (
             &["--pick", "10,10", "--tolerance", "2"][..],
@@ -918,6 +955,13 @@ fn out_of_range_values_are_refused_before_anything_is_written() {
         (
             &["--quad", QUAD, "--quad-size", "1e39x1"][..],
             "not a positive size",
+        ),
+        (&["--mask", "quad", "--all"][..], "--all"),
+        (&["--mask", "quad", "--tolerance", "0.1"][..], "--tolerance"),
+        (&["--mask", "quad", "--connected"][..], "--connected"),
+        (
+            &["--pick", "5,5", "--mask", ""][..],
+            "a mask image or `quad`",
         ),
     ] {
         let o = extract(extra);

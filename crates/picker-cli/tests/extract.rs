@@ -1373,3 +1373,95 @@ fn even_out_is_applied_on_request_and_recorded() {
         assert!(!out.exists(), "--even-out {bad}: wrote {out:?}");
     }
 }
+
+/// The material's pixels given: `--mask quad` takes the README wall quad's
+/// interior (the pick its pixel nearest the centroid), and a selection
+/// exported with transparency (a rectangle whose colours say the reverse)
+/// its opaque pixels, each as mask.png exactly, whatever the segmentation
+/// says; material.json says the mask was given.
+#[test]
+fn a_given_mask_is_the_material() {
+    const WALL: &str = "150.060,180.020,287.172,202.513,275.140,104.832,152.810,121.572";
+    let tmp = tempfile::tempdir().unwrap();
+    let photo = repo().join("fixtures/examples/room.png");
+    let out = tmp.path().join("q");
+    ok(&[
+        "extract",
+        photo.to_str().unwrap(),
+        "--quad",
+        WALL,
+        "--mask",
+        "quad",
+        "--out",
+        out.to_str().unwrap(),
+        "--max-size",
+        "64",
+    ]);
+    let m = json_file(&out.join("material.json"));
+    assert_eq!(m["given_mask"], "the --quad's interior", "{m}");
+    assert_eq!(m["diagnostics"]["mask_given"], true);
+    assert!(m["diagnostics"]["tolerance"].is_null());
+    let mask = read_png(&out.join("mask.png")).unwrap();
+    let (w, h) = (mask.width, mask.height);
+    let c: Vec<f64> = WALL
+        .split(',')
+        .map(|v| v.parse::<f64>().unwrap() + 0.5)
+        .collect();
+    let corner = |k: usize| (c[2 * k], c[2 * k + 1]);
+    // Inside every side (the corners go one way round).
+    let inside = |x: f64, y: f64| {
+        let s: Vec<f64> = (0..4)
+            .map(|k| {
+                let ((ax, ay), (bx, by)) = (corner(k), corner((k + 1) % 4));
+                (bx - ax) * (y - ay) - (by - ay) * (x - ax)
+            })
+            .collect();
+        s.iter().all(|&v| v >= -1e-9) || s.iter().all(|&v| v <= 1e-9)
+    };
+    for i in 0..w * h {
+        let (x, y) = ((i % w) as f64 + 0.5, (i / w) as f64 + 0.5);
+        assert_eq!(mask.data[i] > 0.5, inside(x, y), "pixel ({x}, {y})");
+    }
+    let pick: Vec<usize> = m["pick"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_u64().unwrap() as usize)
+        .collect();
+    assert!(mask.data[pick[1] * w + pick[0]] > 0.5, "{pick:?}");
+
+    // A selection with transparency: opaque black inside, transparent
+    // white outside.
+    let sel = tmp.path().join("sel.png");
+    image::RgbaImage::from_fn(320, 240, |x, y| {
+        if (100..200).contains(&x) && (50..150).contains(&y) {
+            image::Rgba([0, 0, 0, 255])
+        } else {
+            image::Rgba([255, 255, 255, 0])
+        }
+    })
+    .save(&sel)
+    .unwrap();
+    let out = tmp.path().join("s");
+    let said = ok(&[
+        "extract",
+        photo.to_str().unwrap(),
+        "--mask",
+        sel.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--max-size",
+        "64",
+    ]);
+    assert!(String::from_utf8_lossy(&said.stdout).contains("material_0: "));
+    let m = json_file(&out.join("material.json"));
+    assert_eq!(m["given_mask"], sel.display().to_string());
+    assert_eq!(m["pick"], json_pick(149.0, 99.0), "{}", m["pick"]);
+    let mask = read_png(&out.join("mask.png")).unwrap();
+    for i in 0..320 * 240 {
+        let (x, y) = (i % 320, i / 320);
+        let want = (100..200).contains(&x) && (50..150).contains(&y);
+        assert_eq!(mask.data[i] > 0.5, want, "({x}, {y})");
+    }
+    assert!((m["area_fraction"].as_f64().unwrap() - 10000.0 / 76800.0).abs() < 1e-9);
+}

@@ -74,6 +74,31 @@ impl Mask {
             data: self.data.iter().map(|&b| b as u8 as f32).collect(),
         }
     }
+    /// The pixel of the mask nearest its centroid (ties: the first in row
+    /// order), `[x, y]`; `None` for an empty mask. Inside the mask even when
+    /// the centroid is not (a ring, an L).
+    pub fn central_pixel(&self) -> Option<[usize; 2]> {
+        let w = self.width.max(1);
+        let (mut sx, mut sy, mut n) = (0f64, 0f64, 0usize);
+        for (i, _) in self.data.iter().enumerate().filter(|(_, &b)| b) {
+            sx += (i % w) as f64;
+            sy += (i / w) as f64;
+            n += 1;
+        }
+        if n == 0 {
+            return None;
+        }
+        let (cx, cy) = (sx / n as f64, sy / n as f64);
+        let d = |i: usize| ((i % w) as f64 - cx).powi(2) + ((i / w) as f64 - cy).powi(2);
+        let i = self
+            .data
+            .iter()
+            .enumerate()
+            .filter(|(_, &b)| b)
+            .map(|(i, _)| i)
+            .min_by(|&a, &b| d(a).total_cmp(&d(b)).then(a.cmp(&b)))?;
+        Some([i % w, i / w])
+    }
     /// The mask eroded by one pixel (8-neighbourhood; the image border does not erode).
     pub fn eroded(&self) -> Mask {
         use rayon::prelude::*;
@@ -127,6 +152,10 @@ pub struct PickMask {
     pub colour: [f32; 3],
     /// The tolerance used.
     pub tolerance: f32,
+    /// The mask at the photo's resolution when it was given rather than cut
+    /// from the segmentation (a user's mask: [`crate::Prepared::given_mask`]):
+    /// used as it is, not refined from `mask` to the photo's edges.
+    pub photo: Option<Mask>,
     /// The pixels of the mask within the pick's own colour spread `τ₀`
     /// ([`auto_tolerance`]): where the valley grew the mask, its surest
     /// part, from which the texture is taken (a pixel of another material
@@ -798,6 +827,7 @@ pub fn pick_mask_on(
         mask,
         colour: c,
         tolerance,
+        photo: None,
         sure,
     })
 }
@@ -964,6 +994,32 @@ mod tests {
             height: h,
             data: out,
         }
+    }
+
+    #[test]
+    fn the_central_pixel_is_in_the_mask() {
+        let mk = |w: usize, h: usize, f: &dyn Fn(usize, usize) -> bool| Mask {
+            width: w,
+            height: h,
+            data: (0..w * h).map(|i| f(i % w, i / w)).collect(),
+        };
+        // A filled square: its centre (ties go to the first in row order).
+        let m = mk(9, 7, &|x, y| (2..=6).contains(&x) && (1..=5).contains(&y));
+        assert_eq!(m.central_pixel(), Some([4, 3]));
+        // A ring, whose centroid is outside it: a pixel of the ring.
+        let ring = mk(21, 21, &|x, y| {
+            let d = ((x as f64 - 10.0).powi(2) + (y as f64 - 10.0).powi(2)).sqrt();
+            (6.0..8.0).contains(&d)
+        });
+        let [x, y] = ring.central_pixel().unwrap();
+        assert!(ring.data[y * 21 + x]);
+        // One pixel; none.
+        assert_eq!(
+            mk(5, 4, &|x, y| (x, y) == (4, 3)).central_pixel(),
+            Some([4, 3])
+        );
+        assert_eq!(mk(5, 4, &|_, _| false).central_pixel(), None);
+        assert_eq!(mk(0, 0, &|_, _| true).central_pixel(), None);
     }
 
     #[test]

@@ -326,6 +326,12 @@ pub fn format_for_extension(path: &Path) -> Option<&'static str> {
 /// Reads and decodes the file at `path`; see [`decode`]. A file larger than
 /// [`PhotoLimits::max_alloc`] is refused before it is read.
 pub fn load(path: &Path, limits: &PhotoLimits) -> Result<Photo, PhotoError> {
+    decode(&read_limited(path, limits)?, path, limits)
+}
+
+/// The bytes of the file at `path`, refused when larger than
+/// [`PhotoLimits::max_alloc`].
+fn read_limited(path: &Path, limits: &PhotoLimits) -> Result<Vec<u8>, PhotoError> {
     let io = |op: &'static str| {
         move |source| PhotoError::Io {
             path: path.to_path_buf(),
@@ -351,13 +357,60 @@ pub fn load(path: &Path, limits: &PhotoLimits) -> Result<Photo, PhotoError> {
         .map_err(|e| io("reading the file")(std::io::Error::other(e)))?;
     file.read_to_end(&mut bytes)
         .map_err(io("reading the file"))?;
-    decode(&bytes, path, limits)
+    Ok(bytes)
 }
 
 /// Decodes a photo from the bytes of a file; `label` names the file in
 /// messages (and its extension is compared with the content). See the module
 /// docs for what is accepted and how values are encoded.
 pub fn decode(bytes: &[u8], label: &Path, limits: &PhotoLimits) -> Result<Photo, PhotoError> {
+    let path = || label.to_path_buf();
+    let Decoded {
+        img,
+        kind,
+        orientation,
+        bit_depth,
+        channels_in_file,
+    } = decode_image(bytes, label, limits)?;
+    // Native buffer + 12 B/px here; the native buffer is freed right after.
+    let eight_bit_rgb = matches!(img, DynamicImage::ImageRgb8(_));
+    let mut rgb = rgb32f(img);
+    if !eight_bit_rgb && !rgb.is_empty() && rgb.iter().all(|v| !v.is_finite()) {
+        return Err(PhotoError::NoFiniteValues { path: path() });
+    }
+    if kind.linear {
+        expose_linear(&mut rgb);
+    } else if !eight_bit_rgb {
+        // (8-bit values are k / 255, always in [0, 1].)
+        // Float formats (e.g. 32-bit TIFF) may hold values outside [0, 1] or NaN.
+        for v in rgb.iter_mut() {
+            *v = if v.is_nan() { 0.0 } else { v.clamp(0.0, 1.0) };
+        }
+    }
+    let rgb = orient(rgb, orientation);
+    Ok(Photo {
+        rgb,
+        orientation,
+        format: kind.name.to_owned(),
+        bit_depth: u8::try_from(bit_depth).unwrap_or(u8::MAX),
+        channels_in_file,
+        linear_input: kind.linear,
+    })
+}
+
+/// What [`decode_image`] found: the decoded image as stored (not yet
+/// oriented), its format, orientation, bits per sample and channels.
+struct Decoded {
+    img: DynamicImage,
+    kind: Kind,
+    orientation: Orientation,
+    bit_depth: u16,
+    channels_in_file: u8,
+}
+
+/// The checks and the decoding [`decode`] and [`decode_mask`] share: the
+/// format from the content, cut-off files, the size limits, the pixels.
+fn decode_image(bytes: &[u8], label: &Path, limits: &PhotoLimits) -> Result<Decoded, PhotoError> {
     let path = || label.to_path_buf();
     if bytes.is_empty() {
         return Err(PhotoError::Empty { path: path() });
@@ -487,29 +540,78 @@ pub fn decode(bytes: &[u8], label: &Path, limits: &PhotoLimits) -> Result<Photo,
     let orientation = decoder.orientation().unwrap_or(Orientation::NoTransforms);
 
     let img = DynamicImage::from_decoder(decoder).map_err(fail)?;
-    // Native buffer + 12 B/px here; the native buffer is freed right after.
-    let eight_bit_rgb = matches!(img, DynamicImage::ImageRgb8(_));
-    let mut rgb = rgb32f(img);
-    if !eight_bit_rgb && !rgb.is_empty() && rgb.iter().all(|v| !v.is_finite()) {
-        return Err(PhotoError::NoFiniteValues { path: path() });
-    }
-    if kind.linear {
-        expose_linear(&mut rgb);
-    } else if !eight_bit_rgb {
-        // (8-bit values are k / 255, always in [0, 1].)
-        // Float formats (e.g. 32-bit TIFF) may hold values outside [0, 1] or NaN.
-        for v in rgb.iter_mut() {
-            *v = if v.is_nan() { 0.0 } else { v.clamp(0.0, 1.0) };
-        }
-    }
-    let rgb = orient(rgb, orientation);
-    Ok(Photo {
-        rgb,
+    Ok(Decoded {
+        img,
+        kind,
         orientation,
-        format: kind.name.to_owned(),
-        bit_depth: u8::try_from(bit_depth).unwrap_or(u8::MAX),
+        bit_depth,
         channels_in_file,
-        linear_input: kind.linear,
+    })
+}
+
+/// A mask image read by [`load_mask`]: which pixels are in, as a viewer
+/// shows the image (EXIF orientation applied).
+#[derive(Clone, Debug, PartialEq)]
+pub struct MaskImage {
+    /// Columns.
+    pub width: usize,
+    /// Rows.
+    pub height: usize,
+    /// `true` inside, row-major.
+    pub data: Vec<bool>,
+    /// Whether the mask came from the alpha channel (else from the grey
+    /// level).
+    pub from_alpha: bool,
+}
+
+/// Reads a mask image (any format [`load`] reads, the same limits and
+/// errors): a pixel is in when its alpha is at least ½ where the file has
+/// an alpha channel that is not opaque everywhere (a selection exported
+/// with transparency), else when its grey level (the mean of its channels,
+/// as stored: sRGB-encoded, or linear for EXR and HDR) is at least ½
+/// (white on black). NaN counts as 0.
+pub fn load_mask(path: &Path, limits: &PhotoLimits) -> Result<MaskImage, PhotoError> {
+    decode_mask(&read_limited(path, limits)?, path, limits)
+}
+
+/// [`load_mask`] of the bytes of a file (`label` names it in errors).
+pub fn decode_mask(
+    bytes: &[u8],
+    label: &Path,
+    limits: &PhotoLimits,
+) -> Result<MaskImage, PhotoError> {
+    let Decoded {
+        img, orientation, ..
+    } = decode_image(bytes, label, limits)?;
+    let has_alpha = img.color().has_alpha();
+    let rgba = img.into_rgba32f();
+    let value = |a: &image::Rgba<f32>| if a.0[3].is_nan() { 0.0 } else { a.0[3] };
+    let from_alpha = has_alpha && rgba.pixels().any(|p| value(p) < 0.5);
+    let grey = |p: &image::Rgba<f32>| {
+        let m = (p.0[0] + p.0[1] + p.0[2]) / 3.0;
+        if m.is_nan() {
+            0.0
+        } else {
+            m
+        }
+    };
+    // One channel per pixel, replicated to RGB to reuse the orientation.
+    let (w, h) = rgba.dimensions();
+    let flags: Vec<f32> = rgba
+        .pixels()
+        .flat_map(|p| {
+            let on = if from_alpha { value(p) } else { grey(p) } >= 0.5;
+            [f32::from(u8::from(on)); 3]
+        })
+        .collect();
+    drop(rgba);
+    let rgb = Rgb32FImage::from_raw(w, h, flags).expect("3 values per pixel");
+    let rgb = orient(rgb, orientation);
+    Ok(MaskImage {
+        width: rgb.width() as usize,
+        height: rgb.height() as usize,
+        data: rgb.pixels().map(|p| p.0[0] >= 0.5).collect(),
+        from_alpha,
     })
 }
 

@@ -436,6 +436,70 @@ impl Prepared {
             .unwrap_or(&self.inputs.segmentation)
     }
 
+    /// A pick mask from a mask given at the photo's resolution (a user's
+    /// selection, a quad's interior: [`crate::quad::Quad::interior`]) instead
+    /// of one cut from the segmentation. The working-resolution mask holds
+    /// the working pixels at least half covered by it (or, where none is,
+    /// every working pixel it touches); all of it is sure; its colour is the
+    /// mean segmentation colour over it; the tolerance is NaN (none was
+    /// used). [`extract`] then uses `full` as the photo-resolution mask as it
+    /// is.
+    ///
+    /// # Errors
+    /// [`Error::Invalid`] when `full` is not the photo's size or is empty.
+    pub fn given_mask(&self, full: Mask) -> Result<PickMask> {
+        let (w, h) = self.work_size();
+        let (fw, fh) = self.photo_size();
+        if (full.width, full.height) != (fw, fh) || full.data.len() != fw * fh {
+            return Err(Error::Invalid(format!(
+                "the given mask is {}x{} but the photo is {fw}x{fh}",
+                full.width, full.height
+            )));
+        }
+        if full.count() == 0 {
+            return Err(Error::Invalid("the given mask has no pixels".into()));
+        }
+        // Share of each working pixel's photo pixels in the mask.
+        let mut hit = vec![0u32; w * h];
+        let mut all = vec![0u32; w * h];
+        for fy in 0..fh {
+            let y = cell_under(fy, fh, h);
+            for fx in 0..fw {
+                let k = y * w + cell_under(fx, fw, w);
+                all[k] += 1;
+                hit[k] += u32::from(full.data[fy * fw + fx]);
+            }
+        }
+        let mut data: Vec<bool> = hit
+            .iter()
+            .zip(&all)
+            .map(|(&a, &n)| 2 * a >= n && a > 0)
+            .collect();
+        if !data.iter().any(|&b| b) {
+            data = hit.iter().map(|&a| a > 0).collect();
+        }
+        let mask = Mask {
+            width: w,
+            height: h,
+            data,
+        };
+        let seg = self.mask_segmentation();
+        let (mut sum, mut n) = ([0f64; 3], 0usize);
+        for (i, _) in mask.data.iter().enumerate().filter(|(_, &m)| m) {
+            for (c, v) in sum.iter_mut().enumerate() {
+                *v += f64::from(seg.at(c.min(seg.channels - 1), i));
+            }
+            n += 1;
+        }
+        Ok(PickMask {
+            sure: mask.data.clone(),
+            colour: sum.map(|v| (v / n.max(1) as f64) as f32),
+            tolerance: f32::NAN,
+            photo: Some(full),
+            mask,
+        })
+    }
+
     /// The segmentation colour of a pick's material: the mask's colour in the
     /// segmentation, or, when masks read the embedding, the mean
     /// segmentation colour over the mask's surest pixels.
@@ -770,6 +834,10 @@ pub struct Diagnostics {
     /// the fill was off.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub filled_from_mask: Option<f64>,
+    /// The mask was given ([`Prepared::given_mask`]: a user's mask file, a
+    /// quad's interior), not cut from the segmentation at the pick; the
+    /// tolerance is then none (null).
+    pub mask_given: bool,
     /// The seam ratio for which a band across the wrap edges was inpainted
     /// ([`Options::heal_seams`]): the observed texels'
     /// ([`picker_inpaint::known_seam_ratio`]), or, when they could not tell,
@@ -844,6 +912,14 @@ pub fn extract(
     opts: &Options,
 ) -> Result<(Material, Diagnostics)> {
     check_request(p, pm, opts)?;
+    if let (Some(full), Some([x, y])) = (&pm.photo, pick) {
+        let (x, y) = (x as usize, y as usize);
+        if x >= full.width || y >= full.height || !full.data[y * full.width + x] {
+            return Err(Error::Invalid(format!(
+                "the pick {x},{y} is outside the given mask"
+            )));
+        }
+    }
     match extract_as(p, name, pick, pm, opts, false) {
         Err(Error::NoTexture(why)) if opts.uv_choice() == UvChoice::Auto => {
             let (m, mut diag) = extract_as(p, name, pick, pm, opts, true)?;
@@ -894,6 +970,20 @@ fn check_request(p: &Prepared, pm: &PickMask, opts: &Options) -> Result<()> {
         }
         _ => {}
     }
+    if let Some(full) = &pm.photo {
+        let (fw, fh) = p.photo_size();
+        if (full.width, full.height) != (fw, fh) || full.data.len() != fw * fh {
+            return Err(Error::Invalid(format!(
+                "the given mask is {}x{} ({} values) but the photo is {fw}x{fh}",
+                full.width,
+                full.height,
+                full.data.len()
+            )));
+        }
+        if full.count() == 0 {
+            return Err(Error::Invalid("the given mask has no pixels".into()));
+        }
+    }
     let (w, h) = p.work_size();
     let m = &pm.mask;
     if (m.width, m.height) != (w, h) || m.data.len() != w * h || pm.sure.len() != w * h {
@@ -909,11 +999,15 @@ fn check_request(p: &Prepared, pm: &PickMask, opts: &Options) -> Result<()> {
 }
 
 /// A pick mask ([`Prepared::pick_mask`], working resolution) at the photo's
-/// resolution, as [`extract`] makes it: guided-upsampled to the photo's
+/// resolution, as [`extract`] makes it: a given one ([`PickMask::photo`]) as
+/// it is, else guided-upsampled to the photo's
 /// edges ([`mask::refine`]); a material thinner than a photo-resolution edge
 /// keeps its coarse mask, each masked working pixel also marking the photo
 /// pixel under its centre, so a non-empty mask never becomes empty.
 pub fn photo_mask(p: &Prepared, pm: &PickMask) -> Mask {
+    if let Some(full) = &pm.photo {
+        return full.clone();
+    }
     let (w, h) = p.work_size();
     let (fw, fh) = p.photo_size();
     let full = mask::refine(&pm.mask, &p.luma, fw, fh);
@@ -1057,6 +1151,7 @@ fn extract_as(
         texture_made_size: None,
         texture_fallback: None,
         filled_from_mask: None,
+        mask_given: pm.photo.is_some(),
         greyscale_photo: p.greyscale,
         seam_band: None,
         even_out_gain: None,
@@ -2696,6 +2791,7 @@ mod tests {
             },
             colour: [0.5; 3],
             tolerance: 0.1,
+            photo: None,
             sure: (0..w * h).map(sure).collect(),
         }
     }
@@ -3216,6 +3312,120 @@ mod tests {
             near(0.15),
             near(0.45)
         );
+    }
+
+    /// A mask given at the photo's resolution (twice the working one) is
+    /// the material's mask pixel for pixel, though the segmentation would
+    /// have taken the whole photo; its working mask holds the working pixels
+    /// at least half covered; a pick outside it, a mask of another size and
+    /// an empty one are refused.
+    #[test]
+    fn a_given_mask_is_the_material_at_the_photos_resolution() {
+        let (w, h, fw, fh) = (32usize, 24usize, 64usize, 48usize);
+        let photo = Image::new(
+            3,
+            fh,
+            fw,
+            (0..3 * fw * fh)
+                .map(|k| if (k % fw / 4) % 2 == 0 { 0.8 } else { 0.3 })
+                .collect(),
+        )
+        .unwrap();
+        let plane = |c: usize, v: f32| Image::new(c, h, w, vec![v; c * w * h]).unwrap();
+        let z = || {
+            let data = [0.0, 0.0, 1.0]
+                .iter()
+                .flat_map(|&v| vec![v; h * w])
+                .collect();
+            Image::new(3, h, w, data).unwrap()
+        };
+        let elements = ElementImages::new(
+            plane(3, 0.4),
+            plane(3, 0.04),
+            plane(1, 0.5),
+            z(),
+            z(),
+            Some(plane(3, 1.0)),
+        )
+        .unwrap();
+        let p = Prepared::new(Inputs {
+            photo,
+            elements,
+            segmentation: plane(3, 0.5),
+            embedding: None,
+            segmentation_estimated: false,
+            envmap: None,
+        })
+        .unwrap();
+        let disc = Mask {
+            width: fw,
+            height: fh,
+            data: (0..fw * fh)
+                .map(|i| {
+                    let (x, y) = ((i % fw) as f32 - 40.0, (i / fw) as f32 - 20.0);
+                    x * x + y * y <= 225.0
+                })
+                .collect(),
+        };
+        let pm = p.given_mask(disc.clone()).unwrap();
+        assert!(pm.tolerance.is_nan() && pm.photo.as_ref() == Some(&disc));
+        assert_eq!(pm.sure, pm.mask.data);
+        for k in 0..w * h {
+            let (x, y) = (k % w, k / w);
+            let hits = (0..4)
+                .filter(|&j| disc.data[(2 * y + j / 2) * fw + 2 * x + j % 2])
+                .count();
+            assert_eq!(
+                pm.mask.data[k],
+                hits >= 2,
+                "working pixel ({x}, {y}): {hits}"
+            );
+        }
+        let pick = disc.central_pixel().unwrap();
+        assert_eq!(pick, [40, 20]);
+        let inpainter = picker_inpaint::DiffusionInpainter::default();
+        let opts = test_options(&inpainter, UvChoice::Plane);
+        let pick = Some([40, 20]);
+        let (m, d) = extract(&p, "disc", pick, &pm, &opts).unwrap();
+        assert!(d.mask_given && d.tolerance.is_nan());
+        let got: Vec<bool> = m.mask.data.iter().map(|&v| v > 0.5).collect();
+        assert_eq!(got, disc.data);
+        assert!((m.area_fraction - disc.fraction()).abs() < 1e-9);
+        // The segmentation's own mask at that pick is the whole photo.
+        let seg = p.pick_mask([40, 20], &MaskOptions::default()).unwrap();
+        assert_eq!(seg.mask.count(), w * h);
+        let (_, d) = extract(&p, "all", pick, &seg, &opts).unwrap();
+        assert!(!d.mask_given);
+
+        let e = extract(&p, "disc", Some([2, 2]), &pm, &opts).unwrap_err();
+        assert!(e.to_string().contains("outside the given mask"), "{e}");
+        let small = Mask {
+            width: w,
+            height: h,
+            data: vec![true; w * h],
+        };
+        let e = p.given_mask(small.clone()).unwrap_err().to_string();
+        assert!(e.contains("32x24 but the photo is 64x48"), "{e}");
+        let empty = Mask {
+            width: fw,
+            height: fh,
+            data: vec![false; fw * fh],
+        };
+        assert!(p
+            .given_mask(empty)
+            .unwrap_err()
+            .to_string()
+            .contains("no pixels"));
+        // A pick mask whose (public) photo mask was swapped for one that does
+        // not fit is refused by extract.
+        let bad = PickMask {
+            photo: Some(small),
+            ..pm.clone()
+        };
+        let e = extract(&p, "disc", None, &bad, &opts)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("given mask is 32x24"), "{e}");
     }
 
     /// A greyscale photo gives a grey material and grey lighting whatever

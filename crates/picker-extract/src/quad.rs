@@ -17,6 +17,7 @@
 //! `v₁`, `v₂` relative to the centre, `f² = −v₁·v₂` ([`Quad::focal`]).
 
 use glam::{DVec2, DVec3, Vec3};
+use rayon::prelude::*;
 
 /// The plane the rectification uses when the user gives one
 /// ([`crate::pipeline::Options::plane`]).
@@ -168,6 +169,30 @@ impl Quad {
         Some(std::array::from_fn(|k| (p[(k + 1) % 4] - p[k]).length()))
     }
 
+    /// The photo pixels of a `w × h` photo whose centres lie inside the
+    /// quadrilateral or on its sides (any order of the corners around it;
+    /// a quad that is not convex, [`Quad::check`], gets the pixels on the
+    /// inner side of all four sides). The mask of the region the quad
+    /// outlines (`--mask quad`).
+    pub fn interior(&self, w: usize, h: usize) -> crate::mask::Mask {
+        let p = self.points();
+        // Twice the signed area: its sign says which way the corners go.
+        let area2: f64 = (0..4).map(|k| p[k].perp_dot(p[(k + 1) % 4])).sum();
+        let s = if area2 < 0.0 { -1.0 } else { 1.0 };
+        let data = (0..w * h)
+            .into_par_iter()
+            .map(|i| {
+                let q = DVec2::new((i % w) as f64 + 0.5, (i / w) as f64 + 0.5);
+                (0..4).all(|k| s * (p[(k + 1) % 4] - p[k]).perp_dot(q - p[k]) >= -1e-9)
+            })
+            .collect();
+        crate::mask::Mask {
+            width: w,
+            height: h,
+            data,
+        }
+    }
+
     /// The pixel nearest the corners' mean (the pick when none is given).
     pub fn centre_pixel(&self) -> [u32; 2] {
         let m = self.0.iter().fold([0.0f64; 2], |a, c| {
@@ -306,6 +331,61 @@ mod tests {
             .clamp(-1.0, 1.0)
             .acos()
             .to_degrees()
+    }
+
+    /// A rectangle's interior is its pixels, corners and sides included,
+    /// either way round; a tilted quad's count is its area within its
+    /// perimeter, and each pixel agrees with a winding-number test.
+    #[test]
+    fn the_interior_is_the_pixels_inside() {
+        let q = Quad([[10.0, 10.0], [20.0, 10.0], [20.0, 15.0], [10.0, 15.0]]);
+        let m = q.interior(40, 30);
+        assert_eq!(m.count(), 11 * 6);
+        assert!(m.data[10 * 40 + 10] && m.data[15 * 40 + 20] && !m.data[16 * 40 + 20]);
+        let r = Quad([q.0[3], q.0[2], q.0[1], q.0[0]]);
+        assert_eq!(r.interior(40, 30), m);
+        let t = Quad([[5.3, 20.1], [60.7, 4.2], [75.5, 50.9], [12.2, 70.4]]);
+        let (w, h) = (90, 80);
+        let m = t.interior(w, h);
+        let p = t.points();
+        let area: f64 = (0..4)
+            .map(|k| p[k].perp_dot(p[(k + 1) % 4]))
+            .sum::<f64>()
+            .abs()
+            / 2.0;
+        let perimeter: f64 = (0..4).map(|k| (p[(k + 1) % 4] - p[k]).length()).sum();
+        assert!(
+            (m.count() as f64 - area).abs() < perimeter,
+            "{} vs {area}",
+            m.count()
+        );
+        // Winding number of the closed polygon around each pixel centre.
+        for i in 0..w * h {
+            let c = DVec2::new((i % w) as f64 + 0.5, (i / w) as f64 + 0.5);
+            let turn: f64 = (0..4)
+                .map(|k| {
+                    let (a, b) = (p[k] - c, p[(k + 1) % 4] - c);
+                    a.perp_dot(b).atan2(a.dot(b))
+                })
+                .sum();
+            let inside = turn.abs() > std::f64::consts::PI;
+            let on_side = (0..4).any(|k| {
+                let (a, b) = (p[k], p[(k + 1) % 4]);
+                ((b - a).perp_dot(c - a) / (b - a).length()).abs() < 1e-6
+            });
+            if !on_side {
+                assert_eq!(m.data[i], inside, "pixel {i}");
+            }
+        }
+        // A quad beyond the photo: only the pixels inside both.
+        let big = Quad([
+            [-10.0, -10.0],
+            [100.0, -10.0],
+            [100.0, 100.0],
+            [-10.0, 100.0],
+        ]);
+        assert_eq!(big.interior(7, 5).count(), 35);
+        assert_eq!(big.interior(0, 5).count(), 0);
     }
 
     #[test]

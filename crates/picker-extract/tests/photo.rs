@@ -721,3 +721,92 @@ fn fuzz_regressions_give_one_line_errors() {
     }
     assert!(n >= 1);
 }
+
+fn mask_of(bytes: &[u8], name: &str) -> Result<photo::MaskImage, PhotoError> {
+    photo::decode_mask(bytes, Path::new(name), &PhotoLimits::default())
+}
+
+/// Masks: white on black in grey, RGB or 16-bit; a selection exported with
+/// transparency by its alpha (its colours ignored); an opaque alpha by the
+/// grey level; a linear EXR at ½; EXIF orientation applied as for photos;
+/// and the photo's errors for a file that is not a mask image.
+#[test]
+fn masks_from_grey_levels_or_alpha() {
+    let inside = |x: u32, y: u32| (2..5).contains(&x) && (1..4).contains(&y);
+    let want: Vec<bool> = (0..W * H).map(|i| inside(i % W, i / W)).collect();
+    let grey = DynamicImage::ImageLuma8(ImageBuffer::from_fn(W, H, |x, y| {
+        Luma([if inside(x, y) { 200 } else { 40 }])
+    }));
+    for (what, img) in [
+        ("grey png", grey.clone()),
+        ("rgb png", DynamicImage::ImageRgb8(grey.to_rgb8())),
+        ("grey16 png", DynamicImage::ImageLuma16(grey.to_luma16())),
+    ] {
+        let m = mask_of(&encode(&img, ImageFormat::Png), "m.png").unwrap();
+        assert_eq!((m.width, m.height), (W as usize, H as usize), "{what}");
+        assert_eq!(m.data, want, "{what}");
+        assert!(!m.from_alpha, "{what}");
+    }
+    // Transparent outside, whatever the colours say (here the reverse).
+    let sel = DynamicImage::ImageRgba8(ImageBuffer::from_fn(W, H, |x, y| {
+        if inside(x, y) {
+            Rgba([0, 0, 0, 255])
+        } else {
+            Rgba([255, 255, 255, 0])
+        }
+    }));
+    let m = mask_of(&encode(&sel, ImageFormat::Png), "sel.png").unwrap();
+    assert!(m.from_alpha);
+    assert_eq!(m.data, want);
+    let la = DynamicImage::ImageLumaA8(ImageBuffer::from_fn(W, H, |x, y| {
+        LumaA([0, if inside(x, y) { 255 } else { 10 }])
+    }));
+    assert_eq!(
+        mask_of(&encode(&la, ImageFormat::Png), "la.png")
+            .unwrap()
+            .data,
+        want
+    );
+    // Opaque everywhere: the grey level.
+    let opaque = DynamicImage::ImageRgba8(ImageBuffer::from_fn(W, H, |x, y| {
+        let v = if inside(x, y) { 255 } else { 0 };
+        Rgba([v, v, v, 255])
+    }));
+    let m = mask_of(&encode(&opaque, ImageFormat::Png), "o.png").unwrap();
+    assert!(!m.from_alpha);
+    assert_eq!(m.data, want);
+    // Linear EXR: ½ is the threshold, NaN is out.
+    let exr = DynamicImage::ImageRgba32F(Rgba32FImage::from_fn(W, H, |x, y| {
+        let v = if inside(x, y) {
+            0.6
+        } else if x == 0 {
+            f32::NAN
+        } else {
+            0.4
+        };
+        Rgba([v, v, v, 1.0])
+    }));
+    let m = mask_of(&encode(&exr, ImageFormat::OpenExr), "m.exr").unwrap();
+    assert_eq!(m.data, want);
+    // EXIF orientation 6 (rotate 90° clockwise): displayed H × W.
+    let rgb = DynamicImage::ImageRgb8(grey.to_rgb8());
+    let m = mask_of(&jpeg_with_orientation(&rgb, 6), "m.jpg").unwrap();
+    assert_eq!((m.width, m.height), (H as usize, W as usize));
+    for y in 0..W as usize {
+        for x in 0..H as usize {
+            // Displayed (x, y) shows stored (y, H − 1 − x).
+            let (sx, sy) = (y as u32, H - 1 - x as u32);
+            assert_eq!(m.data[y * H as usize + x], inside(sx, sy), "({x}, {y})");
+        }
+    }
+    // Not an image, and a missing file: the photo's messages.
+    let e = mask_of(b"hello", "m.png").unwrap_err().to_string();
+    assert!(e.starts_with("m.png: "), "{e}");
+    let e = photo::load_mask(Path::new("/nonexistent/m.png"), &PhotoLimits::default())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("/nonexistent/m.png") && e.contains("opening"),
+        "{e}"
+    );
+}
