@@ -11,14 +11,16 @@
 //! - **Work**: `--picks picks.csv` (`file,x,y[,name]`, file relative to
 //!   `IN_DIR`) and/or `--all`; `--quads quads.csv`
 //!   (`file,X1,Y1,X2,Y2,X3,Y3,X4,Y4[,WxH]`) gives a photo's plane by a
-//!   rectangle's corners, as `picker extract --quad` (and `--quad-size`).
+//!   rectangle's corners, as `picker extract --quad` (and `--quad-size`);
+//!   `--masks MASK_DIR` gives a photo `a/b.jpg` its material's pixels as the
+//!   mask image `MASK_DIR/a/b.<ext>`, as `picker extract --mask`.
 //!   The networks are loaded once.
 //! - **Outputs**: `OUT_DIR/<relative path>.material/` per photo, one folder
 //!   per material inside it, `summary.json`, `envmap.exr` and `manifest.json`.
 //!   A photo's folder appears whole: it is written as a hidden `.partial`
 //!   folder and renamed into place after its manifest.
 //! - **Resume**: the manifest holds the input's SHA-256, the weights' SHA-256,
-//!   every output-changing setting, the picks, the quad, the version and each file's
+//!   every output-changing setting, the picks, the quad, the mask's SHA-256, the version and each file's
 //!   size; a re-run skips photos whose manifest matches and redoes the rest.
 //!   Batch outputs hold no timings, thread counts or absolute paths, so a
 //!   resumed run ends with the same bytes as an uninterrupted one.
@@ -72,6 +74,12 @@ pub struct Args {
     /// the photo's one pick in --picks, else the quad's centre, is the material.
     #[arg(long, value_name = "CSV", conflicts_with = "all")]
     pub quads: Option<PathBuf>,
+    /// Masks: a folder where the photo IN_DIR/a/b.jpg finds its material's mask as
+    /// MASK_DIR/a/b.png (or .tif, .tiff, .webp, .bmp, .exr, .jpg, .jpeg, .hdr: one of them), as
+    /// `picker extract --mask` reads it; that photo gets that one material (its one pick in
+    /// --picks, if any, must lie in it). Photos without a mask go as the other flags say.
+    #[arg(long, value_name = "MASK_DIR", conflicts_with = "all")]
+    pub masks: Option<PathBuf>,
     /// Extract every material covering at least --min-area of each photo.
     #[arg(long)]
     pub all: bool,
@@ -142,7 +150,7 @@ struct Photo {
 
 /// Every supported image under `root`, sorted by relative path; `skip` (the
 /// output folder) and hidden entries are left out.
-fn discover(root: &Path, skip: Option<&Path>) -> Result<(Vec<Photo>, usize)> {
+fn discover(root: &Path, skip: &[&Path]) -> Result<(Vec<Photo>, usize)> {
     let mut found = Vec::new();
     let mut ignored = 0usize;
     let mut stack = vec![(root.to_path_buf(), String::new())];
@@ -165,10 +173,8 @@ fn discover(root: &Path, skip: Option<&Path>) -> Result<(Vec<Photo>, usize)> {
                 .file_type()
                 .with_context(|| format!("reading {}", path.display()))?;
             if ft.is_dir() {
-                if let Some(s) = skip {
-                    if same_file(&path, s) {
-                        continue;
-                    }
+                if skip.iter().any(|s| same_file(&path, s)) {
+                    continue;
                 }
                 if is_result_folder(&path) {
                     continue;
@@ -339,6 +345,38 @@ fn read_picks(path: &Path) -> Result<Picks> {
     Ok(out)
 }
 
+/// The extensions a mask in `--masks` may have, in the order they are
+/// looked for.
+const MASK_EXTENSIONS: [&str; 9] = [
+    "png", "tif", "tiff", "webp", "bmp", "exr", "jpg", "jpeg", "hdr",
+];
+
+/// The mask of the photo `rel` (relative to IN_DIR) in `dir`: `dir/<rel
+/// without its extension>.<ext>` for one of [`MASK_EXTENSIONS`]; `None`
+/// when there is none; an error naming both when there are several.
+fn mask_for(dir: &Path, rel: &str) -> std::result::Result<Option<PathBuf>, String> {
+    let base = dir.join(Path::new(rel).with_extension(""));
+    let found: Vec<PathBuf> = MASK_EXTENSIONS
+        .iter()
+        .map(|e| {
+            let mut p = base.clone().into_os_string();
+            p.push(".");
+            p.push(e);
+            PathBuf::from(p)
+        })
+        .filter(|p| p.is_file())
+        .collect();
+    match found.as_slice() {
+        [] => Ok(None),
+        [one] => Ok(Some(one.clone())),
+        [a, b, ..] => Err(format!(
+            "{rel}: two masks in --masks, {} and {}: keep one",
+            a.display(),
+            b.display()
+        )),
+    }
+}
+
 /// Lower-case hex SHA-256 of a file.
 fn sha256_file(path: &Path) -> Result<String> {
     let mut f = std::fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
@@ -395,6 +433,7 @@ fn manifest_key(
     weights: &[(String, String)],
     flags: &Flags,
     req: &Request,
+    mask_sha: Option<&str>,
 ) -> Value {
     json!({
         "picker_version": env!("CARGO_PKG_VERSION"),
@@ -405,6 +444,7 @@ fn manifest_key(
         "all": req.all,
         "quad": req.quad.map(|q| q.0),
         "quad_size_m": req.quad_size_m,
+        "mask_sha256": mask_sha,
     })
 }
 
@@ -504,7 +544,11 @@ fn process(s: &Shared<'_>, photo: &Photo, req: &Request) -> Result<Outcome> {
         Some(b) => hex(&Sha256::digest(b)),
         None => sha256_file(&photo.path)?,
     };
-    let key = manifest_key(&input_sha, s.weights, s.flags, req);
+    let mask_sha = match &req.mask {
+        Some(extract::MaskArg::File(f)) => Some(sha256_file(f)?),
+        _ => None,
+    };
+    let key = manifest_key(&input_sha, s.weights, s.flags, req, mask_sha.as_deref());
     if !s.force && up_to_date(&target, &key) {
         return Ok(Outcome::UpToDate);
     }
@@ -602,8 +646,8 @@ fn worker(s: &Shared<'_>) {
         let Some((photo, req)) = s.photos.get(i) else {
             return;
         };
-        let outcome = if req.picks.is_empty() && !req.all {
-            Outcome::Skipped("no picks for this photo in --picks or --quads".into())
+        let outcome = if req.picks.is_empty() && !req.all && req.mask.is_none() {
+            Outcome::Skipped("no picks for this photo in --picks, --quads or --masks".into())
         } else {
             match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| process(s, photo, req)))
             {
@@ -721,9 +765,10 @@ pub fn run(a: Args) -> Result<ExitCode> {
     let t0 = Instant::now();
     let usage = |msg: String| anyhow::Error::new(UsageError(msg));
     a.flags.validate().map_err(|e| usage(e.to_string()))?;
-    if a.picks.is_none() && !a.all && a.quads.is_none() {
+    if a.picks.is_none() && !a.all && a.quads.is_none() && a.masks.is_none() {
         return Err(usage(
-            "nothing to extract: give --picks picks.csv, --quads quads.csv and/or --all".into(),
+            "nothing to extract: give --picks picks.csv, --quads quads.csv, --masks MASK_DIR and/or --all"
+                .into(),
         ));
     }
     if a.quads.is_some() && a.flags.uv == crate::extract::UvArg::Net {
@@ -743,10 +788,22 @@ pub fn run(a: Args) -> Result<ExitCode> {
         None => BTreeMap::new(),
     };
     let in_picks_csv: BTreeSet<String> = picks.keys().cloned().collect();
-    // A quad gives one material's plane: its photo's one pick, or its centre.
+    if let Some(m) = &a.masks {
+        if !m.is_dir() {
+            return Err(usage(format!("--masks {}: not a folder", m.display())));
+        }
+    }
+    let mask_of = |rel: &str| match &a.masks {
+        Some(dir) => mask_for(dir, rel).map_err(usage),
+        None => Ok(None),
+    };
+    // A quad gives one material's plane: its photo's one pick, or its
+    // centre (unless a mask gives the material).
     for (file, (q, _)) in &quads {
+        let masked = mask_of(file)?.is_some();
         let entry = picks.entry(file.clone()).or_default();
         match entry.len() {
+            0 if masked => {}
             0 => entry.push(("material_0".into(), q.centre_pixel())),
             1 => {}
             n => {
@@ -768,7 +825,9 @@ pub fn run(a: Args) -> Result<ExitCode> {
     }
     std::fs::create_dir_all(&a.out)
         .with_context(|| format!("creating output folder {}", a.out.display()))?;
-    let (all_photos, ignored) = discover(&a.in_dir, Some(&a.out))?;
+    let mut skip: Vec<&Path> = vec![&a.out];
+    skip.extend(a.masks.as_deref());
+    let (all_photos, ignored) = discover(&a.in_dir, &skip)?;
     let total_found = all_photos.len();
     let known: BTreeSet<&str> = all_photos.iter().map(|p| p.rel.as_str()).collect();
     // Picks for files that are not there fail loudly instead of vanishing.
@@ -795,17 +854,30 @@ pub fn run(a: Args) -> Result<ExitCode> {
     let photos: Vec<(Photo, Request)> = all_photos
         .into_iter()
         .filter(|p| a.shard.is_none_or(|(k, n)| shard_of(&p.rel, n) == k))
-        .map(|p| {
+        .map(|p| -> Result<(Photo, Request)> {
+            let mask = mask_of(&p.rel)?;
+            let n = picks.get(&p.rel).map_or(0, Vec::len);
+            if mask.is_some() && n > 1 {
+                return Err(usage(format!(
+                    "{}: a mask in --masks gives the pixels of one material, but --picks has {n} picks for it",
+                    p.rel
+                )));
+            }
             let req = Request {
                 picks: picks.get(&p.rel).cloned().unwrap_or_default(),
                 all: a.all,
                 quad: quads.get(&p.rel).map(|q| q.0),
                 quad_size_m: quads.get(&p.rel).and_then(|q| q.1),
-                mask: None,
+                mask_label: mask.as_ref().and_then(|m| {
+                    let dir = a.masks.as_deref()?;
+                    let rel = m.strip_prefix(dir).ok()?;
+                    Some(format!("MASK_DIR/{}", rel.display()).replace('\\', "/"))
+                }),
+                mask: mask.map(extract::MaskArg::File),
             };
-            (p, req)
+            Ok((p, req))
         })
-        .collect();
+        .collect::<Result<_>>()?;
 
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     // At most MAX_PER_CORE threads (and jobs) per logical core, as elsewhere.
@@ -1047,7 +1119,7 @@ mod tests {
         touch("d.material/preview.png");
         // A folder merely named like one, without a result in it.
         touch("e.material/photo.png");
-        let (found, _) = discover(root, None).unwrap();
+        let (found, _) = discover(root, &[]).unwrap();
         let rel: Vec<&str> = found.iter().map(|p| p.rel.as_str()).collect();
         assert_eq!(rel, ["a.png", "e.material/photo.png", "sub/b.jpg"]);
     }

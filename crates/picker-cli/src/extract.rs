@@ -934,6 +934,10 @@ pub struct Request {
     /// The material's pixels given (`--mask`): one material, the pick (if
     /// any) inside it.
     pub mask: Option<MaskArg>,
+    /// How material.json names a mask file (`given_mask`); default: its
+    /// path as given (a batch names it relative to its folder instead, so
+    /// that its outputs hold no absolute paths).
+    pub mask_label: Option<String>,
 }
 
 /// How [`write_materials`] lays out and annotates its files.
@@ -1014,7 +1018,11 @@ pub fn write_materials(
                             f.display()
                         );
                     }
-                    (full, f.display().to_string())
+                    let shown = req
+                        .mask_label
+                        .clone()
+                        .unwrap_or_else(|| f.display().to_string());
+                    (full, shown)
                 }
             };
             let pick = match req.picks.first() {
@@ -1358,6 +1366,7 @@ pub fn run(a: Args) -> Result<()> {
         quad: a.quad,
         quad_size_m: a.quad_size,
         mask: a.mask.clone(),
+        mask_label: None,
     };
     let layout = Layout {
         always_subdirs: false,

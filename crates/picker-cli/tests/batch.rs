@@ -831,3 +831,101 @@ fn quads_give_each_photo_its_plane() {
         assert!(!fresh.join("room.png.material").exists(), "{extra:?}");
     }
 }
+
+/// `--masks`: a photo with a mask in MASK_DIR (same relative path, its own
+/// extension) gets that material exactly, pick or none; a photo without one
+/// follows --picks; the mask is in the manifest (a new mask redoes the
+/// photo); a mask folder inside IN_DIR is not read as photos; two masks for
+/// one photo, or a mask with two picks, are usage errors.
+#[test]
+fn masks_give_each_photo_its_material() {
+    let tmp = tempfile::tempdir().unwrap();
+    let input = tmp.path().join("photos");
+    std::fs::create_dir_all(input.join("sub")).unwrap();
+    photo(5, 64, 48).save(input.join("sub/a.jpg")).unwrap();
+    photo(6, 64, 48).save(input.join("b.png")).unwrap();
+    let masks = input.join("masks");
+    std::fs::create_dir_all(masks.join("sub")).unwrap();
+    let rect = |x0: u32, x1: u32| {
+        image::GrayImage::from_fn(64, 48, move |x, y| {
+            image::Luma([if (x0..x1).contains(&x) && (10..30).contains(&y) {
+                255
+            } else {
+                0
+            }])
+        })
+    };
+    rect(20, 40).save(masks.join("sub/a.png")).unwrap();
+    let picks = tmp.path().join("picks.csv");
+    std::fs::write(&picks, "b.png,5,40\n").unwrap();
+    let out = tmp.path().join("out");
+    let batch = |extra: &[&str]| {
+        picker()
+            .args(["batch", input.to_str().unwrap(), "--out"])
+            .arg(&out)
+            .args(["--masks", masks.to_str().unwrap()])
+            .args(["--picks", picks.to_str().unwrap()])
+            .args([
+                "--weights",
+                &weights(),
+                "--work-size",
+                "48",
+                "--max-size",
+                "32",
+                "--quiet",
+            ])
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    let o = batch(&[]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let r = report(&out);
+    // The masks are not photos.
+    assert_eq!(r["counts"]["photos"], 2, "{r:#}");
+    assert_eq!(r["counts"]["ok"], 2, "{r:#}");
+    let dir = out.join("sub/a.jpg.material/material_0");
+    let m: Value =
+        serde_json::from_slice(&std::fs::read(dir.join("material.json")).unwrap()).unwrap();
+    assert_eq!(m["diagnostics"]["mask_given"], true);
+    // Named relative to its folder: no absolute path in the outputs.
+    assert_eq!(m["given_mask"], "MASK_DIR/sub/a.png");
+    assert_eq!(m["pick"], serde_json::json!([29, 19]));
+    let mask = image::open(dir.join("mask.png")).unwrap().to_luma8();
+    for (x, y, v) in mask.enumerate_pixels() {
+        let want = (20..40).contains(&x) && (10..30).contains(&y);
+        assert_eq!(v.0[0] > 127, want, "({x}, {y})");
+    }
+    let m: Value = serde_json::from_slice(
+        &std::fs::read(out.join("b.png.material/material_0/material.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(m["diagnostics"]["mask_given"], false);
+
+    batch(&[]);
+    assert_eq!(report(&out)["counts"]["up_to_date"], 2);
+    rect(10, 30).save(masks.join("sub/a.png")).unwrap();
+    batch(&[]);
+    let r = report(&out);
+    assert_eq!(
+        (
+            r["counts"]["ok"].as_u64(),
+            r["counts"]["up_to_date"].as_u64()
+        ),
+        (Some(1), Some(1)),
+        "{r:#}"
+    );
+
+    // Two masks for one photo; a mask and two picks.
+    rect(10, 30).save(masks.join("sub/a.tif")).unwrap();
+    let o = batch(&[]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("two masks"), "{err}");
+    std::fs::remove_file(masks.join("sub/a.tif")).unwrap();
+    std::fs::write(&picks, "sub/a.jpg,25,15\nsub/a.jpg,26,16\n").unwrap();
+    let o = batch(&[]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("--picks has 2 picks"), "{err}");
+}
