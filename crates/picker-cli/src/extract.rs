@@ -643,7 +643,9 @@ pub fn load_inputs_from(
         "bits_per_sample": p.bit_depth,
         "channels_in_file": p.channels_in_file,
         "exif_orientation": format!("{:?}", p.orientation),
+        "exif_focal_35mm": p.focal_35mm,
     });
+    let focal_35mm = p.focal_35mm;
     timings.insert("read_photo".into(), json!(ms(t)));
     let t = Instant::now();
     let (inputs, source) = match source {
@@ -669,8 +671,9 @@ pub fn load_inputs_from(
         }
     };
     timings.insert("inputs".into(), json!(ms(t)));
-    let prepared =
+    let mut prepared =
         Prepared::new(inputs).with_context(|| format!("preparing {}", photo_path.display()))?;
+    prepared.focal_35mm = focal_35mm;
     timings.insert("prepare".into(), json!(prepared.prepare_ms));
     Ok(Loaded {
         prepared,

@@ -29,6 +29,8 @@ pub struct Photo {
     pub channels_in_file: u8,
     /// True for scene-linear inputs (EXR, HDR), exposed and sRGB-encoded.
     pub linear_input: bool,
+    /// The 35 mm-equivalent focal length the EXIF states, mm.
+    pub focal_35mm: Option<f32>,
 }
 
 impl From<lib::Photo> for Photo {
@@ -40,6 +42,7 @@ impl From<lib::Photo> for Photo {
             bit_depth: p.bit_depth,
             channels_in_file: p.channels_in_file,
             linear_input: p.linear_input,
+            focal_35mm: p.focal_35mm,
         }
     }
 }

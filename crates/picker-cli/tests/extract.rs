@@ -1465,3 +1465,91 @@ fn a_given_mask_is_the_material() {
     }
     assert!((m["area_fraction"].as_f64().unwrap() - 10000.0 / 76800.0).abs() < 1e-9);
 }
+
+/// `bytes` (a JPEG) with an APP1 EXIF segment right after its start marker
+/// stating a 35 mm-equivalent focal length of `f35` mm (IFD0's Exif IFD
+/// pointer, then `FocalLengthIn35mmFilm`, big-endian).
+fn jpeg_with_focal(bytes: &[u8], f35: u16) -> Vec<u8> {
+    let mut t = b"MM\0*".to_vec();
+    t.extend(8u32.to_be_bytes());
+    t.extend(1u16.to_be_bytes()); // one entry: ExifIFDPointer -> 26
+    t.extend(0x8769u16.to_be_bytes());
+    t.extend(4u16.to_be_bytes());
+    t.extend(1u32.to_be_bytes());
+    t.extend(26u32.to_be_bytes());
+    t.extend(0u32.to_be_bytes());
+    assert_eq!(t.len(), 26);
+    t.extend(1u16.to_be_bytes()); // FocalLengthIn35mmFilm, SHORT
+    t.extend(0xA405u16.to_be_bytes());
+    t.extend(3u16.to_be_bytes());
+    t.extend(1u32.to_be_bytes());
+    t.extend(f35.to_be_bytes());
+    t.extend([0, 0]);
+    t.extend(0u32.to_be_bytes());
+    let mut payload = b"Exif\0\0".to_vec();
+    payload.extend(t);
+    let mut out = bytes[..2].to_vec();
+    out.extend([0xFF, 0xE1]);
+    out.extend((payload.len() as u16 + 2).to_be_bytes());
+    out.extend(payload);
+    out.extend(&bytes[2..]);
+    out
+}
+
+/// A photo whose EXIF states its 35 mm-equivalent focal length: the plane
+/// mode uses it (`focal_source` "exif", `f35 / 43.27` of the diagonal), and
+/// material.json shows it with the photo; `--fov` still overrides it.
+#[test]
+fn the_exif_focal_length_sets_the_plane_modes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let jpeg = std::fs::read(repo().join("fixtures/examples/coffee.jpg")).unwrap();
+    let photo = tmp.path().join("coffee-28mm.jpg");
+    std::fs::write(&photo, jpeg_with_focal(&jpeg, 28)).unwrap();
+    let run = |name: &str, extra: &[&str]| {
+        let out = tmp.path().join(name);
+        let mut args = vec![
+            "extract",
+            photo.to_str().unwrap(),
+            "--pick",
+            "20,190",
+            "--uv",
+            "plane",
+            "--max-size",
+            "64",
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        ok(&args);
+        json_file(&out.join("material.json"))
+    };
+    let m = run("a", &[]);
+    assert_eq!(m["photo"]["exif_focal_35mm"], 28.0, "{}", m["photo"]);
+    let uv = &m["diagnostics"]["uv"];
+    assert_eq!(uv["focal_source"], "exif", "{uv}");
+    let (w, h) = (320f64, 213f64);
+    let want = 28.0 * (w * w + h * h).sqrt() / 43.266_615;
+    let f = uv["focal_px"].as_f64().unwrap();
+    assert!((f / want - 1.0).abs() < 1e-4, "{f} vs {want}");
+    let m = run("b", &["--fov", "50"]);
+    assert_eq!(m["diagnostics"]["uv"]["focal_source"], "fov");
+    // Without the segment: no EXIF focal length.
+    let plain = tmp.path().join("plain.jpg");
+    std::fs::write(&plain, &jpeg).unwrap();
+    let out = tmp.path().join("c");
+    ok(&[
+        "extract",
+        plain.to_str().unwrap(),
+        "--pick",
+        "20,190",
+        "--uv",
+        "plane",
+        "--max-size",
+        "64",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let m = json_file(&out.join("material.json"));
+    assert!(m["photo"]["exif_focal_35mm"].is_null());
+    assert_ne!(m["diagnostics"]["uv"]["focal_source"], "exif");
+}

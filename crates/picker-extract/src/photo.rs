@@ -120,6 +120,11 @@ pub struct Photo {
     /// True for scene-linear inputs (EXR, HDR) that went through
     /// [`expose_linear`].
     pub linear_input: bool,
+    /// The camera's 35 mm-equivalent focal length in mm, when the file's
+    /// EXIF states it ([`exif_focal_35mm`]): the plane mode's focal length
+    /// then follows from the photo's diagonal
+    /// ([`crate::Prepared::focal_35mm`]).
+    pub focal_35mm: Option<f32>,
 }
 
 /// Why a photo could not be read. Every message is one line that starts with
@@ -371,6 +376,7 @@ pub fn decode(bytes: &[u8], label: &Path, limits: &PhotoLimits) -> Result<Photo,
         orientation,
         bit_depth,
         channels_in_file,
+        focal_35mm,
     } = decode_image(bytes, label, limits)?;
     // Native buffer + 12 B/px here; the native buffer is freed right after.
     let eight_bit_rgb = matches!(img, DynamicImage::ImageRgb8(_));
@@ -395,6 +401,7 @@ pub fn decode(bytes: &[u8], label: &Path, limits: &PhotoLimits) -> Result<Photo,
         bit_depth: u8::try_from(bit_depth).unwrap_or(u8::MAX),
         channels_in_file,
         linear_input: kind.linear,
+        focal_35mm,
     })
 }
 
@@ -406,6 +413,7 @@ struct Decoded {
     orientation: Orientation,
     bit_depth: u16,
     channels_in_file: u8,
+    focal_35mm: Option<f32>,
 }
 
 /// The checks and the decoding [`decode`] and [`decode_mask`] share: the
@@ -538,6 +546,11 @@ fn decode_image(bytes: &[u8], label: &Path, limits: &PhotoLimits) -> Result<Deco
     };
     // A broken EXIF block is not worth refusing the photo for.
     let orientation = decoder.orientation().unwrap_or(Orientation::NoTransforms);
+    let focal_35mm = decoder
+        .exif_metadata()
+        .ok()
+        .flatten()
+        .and_then(|raw| exif_focal_35mm(&raw));
 
     let img = DynamicImage::from_decoder(decoder).map_err(fail)?;
     Ok(Decoded {
@@ -546,7 +559,66 @@ fn decode_image(bytes: &[u8], label: &Path, limits: &PhotoLimits) -> Result<Deco
         orientation,
         bit_depth,
         channels_in_file,
+        focal_35mm,
     })
+}
+
+/// Largest 35 mm-equivalent focal length taken from EXIF, mm (a 2000 mm
+/// lens is a telescope; beyond, the tag is garbage).
+pub const MAX_FOCAL_35MM: u32 = 2000;
+
+/// The 35 mm-equivalent focal length in mm stated by a raw EXIF block (a
+/// TIFF header and its IFDs, with or without the `Exif\0\0` prefix JPEG's
+/// APP1 segment has): the tag `FocalLengthIn35mmFilm` (0xA405, a SHORT or
+/// LONG) of the Exif IFD that IFD0's `ExifIFDPointer` (0x8769) points to.
+/// `None` when the block does not hold it, states 0 (unknown) or more than
+/// [`MAX_FOCAL_35MM`], or is malformed anywhere on the way (every read is
+/// bounds-checked: any bytes are safe).
+pub fn exif_focal_35mm(raw: &[u8]) -> Option<f32> {
+    let t = raw.strip_prefix(b"Exif\0\0").unwrap_or(raw);
+    let le = match t.get(0..4)? {
+        b"II*\0" => true,
+        b"MM\0*" => false,
+        _ => return None,
+    };
+    let u16_at = |o: usize| -> Option<u16> {
+        let b: [u8; 2] = t.get(o..o.checked_add(2)?)?.try_into().ok()?;
+        Some(if le {
+            u16::from_le_bytes(b)
+        } else {
+            u16::from_be_bytes(b)
+        })
+    };
+    let u32_at = |o: usize| -> Option<u32> {
+        let b: [u8; 4] = t.get(o..o.checked_add(4)?)?.try_into().ok()?;
+        Some(if le {
+            u32::from_le_bytes(b)
+        } else {
+            u32::from_be_bytes(b)
+        })
+    };
+    // The entry of `tag` in the IFD at `ifd`: its type, count and where its
+    // value (or the offset to it) is.
+    let find = |ifd: usize, tag: u16| -> Option<(u16, u32, usize)> {
+        let n = usize::from(u16_at(ifd)?);
+        (0..n).find_map(|k| {
+            let e = ifd.checked_add(2 + 12 * k)?;
+            (u16_at(e)? == tag).then(|| Some((u16_at(e + 2)?, u32_at(e + 4)?, e + 8)))?
+        })
+    };
+    let ifd0 = usize::try_from(u32_at(4)?).ok()?;
+    let (ty, count, at) = find(ifd0, 0x8769)?;
+    if !matches!(ty, 4 | 13) || count != 1 {
+        return None;
+    }
+    let exif = usize::try_from(u32_at(at)?).ok()?;
+    let (ty, count, at) = find(exif, 0xA405)?;
+    let v = match (ty, count) {
+        (3, 1) => u32::from(u16_at(at)?),
+        (4, 1) => u32_at(at)?,
+        _ => return None,
+    };
+    (1..=MAX_FOCAL_35MM).contains(&v).then_some(v as f32)
 }
 
 /// A mask image read by [`load_mask`]: which pixels are in, as a viewer
@@ -917,6 +989,89 @@ pub fn to_planar(rgb: &Rgb32FImage) -> Vec<f32> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A TIFF-structured EXIF block: IFD0 with an orientation entry and the
+    /// Exif IFD pointer, the Exif IFD with `FocalLengthIn35mmFilm` of type
+    /// `ty` (3 SHORT, 4 LONG) and value `v`, in either byte order.
+    fn exif_block(le: bool, ty: u16, v: u32) -> Vec<u8> {
+        let w16 = |o: &mut Vec<u8>, x: u16| {
+            o.extend_from_slice(&if le { x.to_le_bytes() } else { x.to_be_bytes() })
+        };
+        let w32 = |o: &mut Vec<u8>, x: u32| {
+            o.extend_from_slice(&if le { x.to_le_bytes() } else { x.to_be_bytes() })
+        };
+        let mut o = if le {
+            b"II*\0".to_vec()
+        } else {
+            b"MM\0*".to_vec()
+        };
+        w32(&mut o, 8); // IFD0 at 8
+        w16(&mut o, 2);
+        // Orientation = 1.
+        w16(&mut o, 0x0112);
+        w16(&mut o, 3);
+        w32(&mut o, 1);
+        w16(&mut o, 1);
+        w16(&mut o, 0);
+        // ExifIFDPointer -> 8 + 2 + 24 + 4 = 38.
+        w16(&mut o, 0x8769);
+        w16(&mut o, 4);
+        w32(&mut o, 1);
+        w32(&mut o, 38);
+        w32(&mut o, 0); // no next IFD
+        assert_eq!(o.len(), 38);
+        w16(&mut o, 1);
+        w16(&mut o, 0xA405);
+        w16(&mut o, ty);
+        w32(&mut o, 1);
+        if ty == 3 {
+            w16(&mut o, v as u16);
+            w16(&mut o, 0);
+        } else {
+            w32(&mut o, v);
+        }
+        w32(&mut o, 0);
+        o
+    }
+
+    #[test]
+    fn the_35mm_focal_length_is_read_from_exif_blocks() {
+        for le in [true, false] {
+            assert_eq!(exif_focal_35mm(&exif_block(le, 3, 26)), Some(26.0));
+            assert_eq!(exif_focal_35mm(&exif_block(le, 4, 105)), Some(105.0));
+            let mut app1 = b"Exif\0\0".to_vec();
+            app1.extend(exif_block(le, 3, 28));
+            assert_eq!(exif_focal_35mm(&app1), Some(28.0));
+            // 0 is "unknown"; a telescope's worth is garbage; a RATIONAL is
+            // not the tag's type.
+            assert_eq!(exif_focal_35mm(&exif_block(le, 3, 0)), None);
+            assert_eq!(exif_focal_35mm(&exif_block(le, 4, 5000)), None);
+            assert_eq!(exif_focal_35mm(&exif_block(le, 5, 26)), None);
+            // Every cut of the block, and seeded byte damage: no panic.
+            let full = exif_block(le, 3, 26);
+            for n in 0..full.len() {
+                let got = exif_focal_35mm(&full[..n]);
+                assert!(got.is_none() || got == Some(26.0), "cut at {n}: {got:?}");
+            }
+            let mut rng = picker_tensor::Rng::new(u64::from(le));
+            for _ in 0..2000 {
+                let mut b = full.clone();
+                for _ in 0..3 {
+                    let i = rng.range(0, b.len() - 1);
+                    b[i] = (rng.f64() * 256.0) as u8;
+                }
+                if let Some(f) = exif_focal_35mm(&b) {
+                    assert!((1.0..=MAX_FOCAL_35MM as f32).contains(&f));
+                }
+            }
+        }
+        // Not EXIF, or no Exif IFD.
+        assert_eq!(exif_focal_35mm(b""), None);
+        assert_eq!(exif_focal_35mm(b"JFIF\0\0\0\0\0\0"), None);
+        let mut no_ptr = exif_block(true, 3, 26);
+        no_ptr[22] = 0x00; // the pointer's tag 0x8769 -> 0x8700
+        assert_eq!(exif_focal_35mm(&no_ptr), None);
+    }
 
     #[test]
     fn jpeg_completeness() {

@@ -261,6 +261,15 @@ pub struct Prepared {
     pub greyscale: bool,
     /// Time spent preparing, ms.
     pub prepare_ms: f64,
+    /// The camera's 35 mm-equivalent focal length (mm) when the photo's
+    /// metadata states it ([`crate::photo::Photo::focal_35mm`]; `None` from
+    /// [`Prepared::new`]): the plane mode's focal length is then
+    /// `f35 / 43.27 mm` of the photo's diagonal in pixels (the 36 × 24 mm
+    /// frame's diagonal), unless `--fov` or a quad that tells its own gives
+    /// it ([`Diagnostics`] `uv.focal_source` `"exif"`). A photo cropped
+    /// since it was taken has a shorter diagonal than the frame the
+    /// equivalent refers to: give `--fov` for it.
+    pub focal_35mm: Option<f32>,
     /// The focal length from the photo's lines, found once at the first
     /// pick that needs it ([`Prepared::line_focal`]).
     line_focal: std::sync::OnceLock<(crate::lines::SmallLuma, Option<crate::lines::LineFocal>)>,
@@ -334,6 +343,7 @@ impl Prepared {
             valid,
             greyscale,
             prepare_ms: t.elapsed().as_secs_f64() * 1e3,
+            focal_35mm: None,
             line_focal: std::sync::OnceLock::new(),
             embedding_mask,
             smoothed: std::sync::OnceLock::new(),
@@ -701,7 +711,8 @@ pub struct UvDecision {
     /// Focal length used by the plane mode (photo pixels).
     pub focal_px: Option<f32>,
     /// Where `focal_px` came from: `"fov"` (given), `"quad"` (the given
-    /// quadrilateral, [`crate::quad::Quad::focal`]), `"lines"` (the photo's
+    /// quadrilateral, [`crate::quad::Quad::focal`]), `"exif"` (the photo's
+    /// 35 mm-equivalent focal length, [`Prepared::focal_35mm`]), `"lines"` (the photo's
     /// vanishing points), `"view vectors"` (the predicted ones) or
     /// `"default"` ([`plane::DEFAULT_FOV_Y_DEG`]).
     pub focal_source: Option<&'static str>,
@@ -928,6 +939,18 @@ pub fn extract(
         }
         r => r,
     }
+}
+
+/// The diagonal of the 35 mm film frame (36 × 24 mm), which 35 mm-equivalent
+/// focal lengths refer to.
+pub const FRAME_35MM_DIAGONAL_MM: f32 = 43.266_615;
+
+/// The focal length in pixels of a `w × h` photo taken at the 35 mm-equivalent
+/// focal length `f35` (mm): `f35` per [`FRAME_35MM_DIAGONAL_MM`] of the
+/// photo's diagonal (the equivalent is defined by the diagonal angle of view).
+pub fn focal_from_35mm(f35: f32, w: usize, h: usize) -> f32 {
+    let d = ((w as f64).powi(2) + (h as f64).powi(2)).sqrt();
+    (f64::from(f35) * d / f64::from(FRAME_35MM_DIAGONAL_MM)) as f32
 }
 
 /// Largest texture side [`extract`] makes ([`Options::size`],
@@ -1307,17 +1330,26 @@ fn extract_as(
                 _ => None,
             };
             // --fov, else a given quad's (when it tells it), else the
-            // photo's lines (when refining with them), else the predicted
-            // view vectors, else the default field of view.
+            // photo's EXIF, else the photo's lines (when refining with
+            // them), else the predicted view vectors, else the default field
+            // of view.
             let quad_focal = quad
                 .filter(|_| opts.fov_deg.is_none())
                 .and_then(|q| q.focal(fw, fh));
-            let line_focal = (opts.fov_deg.is_none() && quad_focal.is_none() && opts.line_refine)
+            let exif_focal = p
+                .focal_35mm
+                .filter(|f| f.is_finite() && *f > 0.0)
+                .map(|f35| focal_from_35mm(f35, fw, fh));
+            let line_focal = (opts.fov_deg.is_none()
+                && quad_focal.is_none()
+                && exif_focal.is_none()
+                && opts.line_refine)
                 .then(|| p.line_focal().1)
                 .flatten();
-            let (f, focal_source) = match (opts.fov_deg, quad_focal, line_focal) {
+            let (f, focal_source) = match (opts.fov_deg, quad_focal.or(exif_focal), line_focal) {
                 (Some(fov), _, _) => (plane::focal_from_fov(fh, fov), "fov"),
-                (None, Some(qf), _) => (qf, "quad"),
+                (None, Some(qf), _) if quad_focal.is_some() => (qf, "quad"),
+                (None, Some(ef), _) => (ef, "exif"),
                 (None, None, Some(lf)) => (lf.focal_px, "lines"),
                 (None, None, None) => {
                     // The view vectors' focal, unless its field of view is
@@ -3312,6 +3344,40 @@ mod tests {
             near(0.15),
             near(0.45)
         );
+    }
+
+    /// A 35 mm-equivalent focal length from the photo's EXIF sets the plane
+    /// mode's focal length (`f35 / 43.27` of the diagonal) unless `--fov`
+    /// does; the conversion matches a 36 × 24 frame's: 36 mm at the 35 mm
+    /// equivalent of 36 mm is the width.
+    #[test]
+    fn the_exif_focal_length_is_used_for_the_plane() {
+        assert!((focal_from_35mm(36.0, 3600, 2400) - 3600.0).abs() < 0.01);
+        // A 4032 × 3024 phone photo at 26 mm: 26 / 43.27 of its 5040-pixel diagonal.
+        assert!((focal_from_35mm(26.0, 4032, 3024) - 3028.66).abs() < 0.1);
+        let (w, h) = (64, 48);
+        let mut p = frontal_plane(w, h, &|i| if (i % w / 4) % 2 == 0 { 0.8 } else { 0.3 });
+        let pm = p.pick_mask([10, 10], &MaskOptions::default()).unwrap();
+        let inpainter = picker_inpaint::DiffusionInpainter::default();
+        let opts = test_options(&inpainter, UvChoice::Plane);
+        let uv = |p: &Prepared, opts: &Options| {
+            let (_, d) = extract(p, "m", Some([10, 10]), &pm, opts).unwrap();
+            let u = d.uv.unwrap();
+            (u.focal_px.unwrap(), u.focal_source.unwrap())
+        };
+        assert_ne!(uv(&p, &opts).1, "exif");
+        p.focal_35mm = Some(26.0);
+        let (f, src) = uv(&p, &opts);
+        assert_eq!(src, "exif");
+        assert!((f - focal_from_35mm(26.0, w, h)).abs() < 1e-3, "{f}");
+        let fov = Options {
+            fov_deg: Some(50.0),
+            ..test_options(&inpainter, UvChoice::Plane)
+        };
+        assert_eq!(uv(&p, &fov).1, "fov");
+        // A focal length of no length is ignored.
+        p.focal_35mm = Some(f32::NAN);
+        assert_ne!(uv(&p, &opts).1, "exif");
     }
 
     /// A mask given at the photo's resolution (twice the working one) is
