@@ -1128,23 +1128,25 @@ mod tests {
         }
     }
 
+    /// Bricks 24 × 10 (mortar 2 wide, 0.85; bricks 0.35) with every other
+    /// course shifted by half a brick.
+    fn running_bond(x: f32, y: f32) -> f32 {
+        let course = (y / 10.0).floor();
+        let x = x + if course as i64 % 2 == 1 { 12.0 } else { 0.0 };
+        let (fx, fy) = (x.rem_euclid(24.0), y.rem_euclid(10.0));
+        if fx < 2.0 || fy < 2.0 {
+            0.85
+        } else {
+            0.35
+        }
+    }
+
     #[test]
     fn running_bond_bricks_repeat_every_two_courses() {
-        // Bricks 24 × 10 with every other course shifted by half a brick:
-        // along y the pattern repeats after two courses (20), along x after
+        // Along y the pattern repeats after two courses (20), along x after
         // one brick (24).
-        let f = |x: f32, y: f32| {
-            let course = (y / 10.0).floor();
-            let x = x + if course as i64 % 2 == 1 { 12.0 } else { 0.0 };
-            let (fx, fy) = (x.rem_euclid(24.0), y.rem_euclid(10.0));
-            if fx < 2.0 || fy < 2.0 {
-                0.85
-            } else {
-                0.35
-            }
-        };
         let (w, h) = (240, 200);
-        let (x, y) = detect(&texture(w, h, f), &vec![true; w * h]);
+        let (x, y) = detect(&texture(w, h, running_bond), &vec![true; w * h]);
         assert!((x.unwrap().texels - 24.0).abs() < 0.3, "{x:?}");
         assert!((y.unwrap().texels - 20.0).abs() < 0.3, "{y:?}");
     }
@@ -1161,16 +1163,6 @@ mod tests {
                 0.8
             } else {
                 0.2
-            }
-        };
-        let bond = |x: f32, y: f32| {
-            let course = (y / 10.0).floor();
-            let x = x + if course as i64 % 2 == 1 { 12.0 } else { 0.0 };
-            let (fx, fy) = (x.rem_euclid(24.0), y.rem_euclid(10.0));
-            if fx < 2.0 || fy < 2.0 {
-                0.85
-            } else {
-                0.35
             }
         };
         // A motif of 13 × 11 repeated, every other column of motifs
@@ -1224,7 +1216,7 @@ mod tests {
         };
         for (name, t, yes) in [
             ("checker", texture(w, h, checker), true),
-            ("bond", texture(w, h, bond), true),
+            ("bond", texture(w, h, running_bond), true),
             ("half-drop", texture(w, h, &half_drop), true),
             ("tiles", texture(w, h, tiles(12.5, 20.0, 2.0)), false),
             ("motif", texture(w, h, plain_motif), false),
