@@ -11,7 +11,8 @@
 //! - **Work**: `--picks picks.csv` (`file,x,y[,name]`, file relative to
 //!   `IN_DIR`) and/or `--all`; `--quads quads.csv`
 //!   (`file,X1,Y1,X2,Y2,X3,Y3,X4,Y4[,WxH]`) gives a photo's plane by a
-//!   rectangle's corners, as `picker extract --quad` (and `--quad-size`);
+//!   rectangle's corners, as `picker extract --quad` (and `--quad-size`;
+//!   with `--quad-masks` its interior is the material, as `--mask quad`);
 //!   `--masks MASK_DIR` gives a photo `a/b.jpg` its material's pixels as the
 //!   mask image `MASK_DIR/a/b.<ext>`, as `picker extract --mask`.
 //!   The networks are loaded once.
@@ -80,6 +81,10 @@ pub struct Args {
     /// --picks, if any, must lie in it). Photos without a mask go as the other flags say.
     #[arg(long, value_name = "MASK_DIR", conflicts_with = "all")]
     pub masks: Option<PathBuf>,
+    /// Each photo with a quad in --quads (and no mask in --masks) takes the quad's interior as its
+    /// material's pixels, as `picker extract --mask quad`: a perspective crop of every photo.
+    #[arg(long, requires = "quads")]
+    pub quad_masks: bool,
     /// Extract every material covering at least --min-area of each photo.
     #[arg(long)]
     pub all: bool,
@@ -445,6 +450,7 @@ fn manifest_key(
         "quad": req.quad.map(|q| q.0),
         "quad_size_m": req.quad_size_m,
         "mask_sha256": mask_sha,
+        "quad_mask": req.mask == Some(extract::MaskArg::Quad),
     })
 }
 
@@ -800,7 +806,7 @@ pub fn run(a: Args) -> Result<ExitCode> {
     // A quad gives one material's plane: its photo's one pick, or its
     // centre (unless a mask gives the material).
     for (file, (q, _)) in &quads {
-        let masked = mask_of(file)?.is_some();
+        let masked = a.quad_masks || mask_of(file)?.is_some();
         let entry = picks.entry(file.clone()).or_default();
         match entry.len() {
             0 if masked => {}
@@ -856,6 +862,7 @@ pub fn run(a: Args) -> Result<ExitCode> {
         .filter(|p| a.shard.is_none_or(|(k, n)| shard_of(&p.rel, n) == k))
         .map(|p| -> Result<(Photo, Request)> {
             let mask = mask_of(&p.rel)?;
+            let quad_mask = a.quad_masks && mask.is_none() && quads.contains_key(&p.rel);
             let n = picks.get(&p.rel).map_or(0, Vec::len);
             if mask.is_some() && n > 1 {
                 return Err(usage(format!(
@@ -873,7 +880,11 @@ pub fn run(a: Args) -> Result<ExitCode> {
                     let rel = m.strip_prefix(dir).ok()?;
                     Some(format!("MASK_DIR/{}", rel.display()).replace('\\', "/"))
                 }),
-                mask: mask.map(extract::MaskArg::File),
+                mask: match (mask, quad_mask) {
+                    (Some(m), _) => Some(extract::MaskArg::File(m)),
+                    (None, true) => Some(extract::MaskArg::Quad),
+                    (None, false) => None,
+                },
             };
             Ok((p, req))
         })

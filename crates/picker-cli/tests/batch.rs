@@ -806,6 +806,37 @@ fn quads_give_each_photo_its_plane() {
         .unwrap();
     assert!((ratio / (0.44 / 0.5) - 1.0).abs() < 0.02, "{ratio}");
 
+    // --quad-masks: the quad's interior is the material (a perspective
+    // crop); a changed setting, so the photo is redone.
+    let o = batch(&["--quad-masks"]);
+    assert_eq!(
+        o.status.code(),
+        Some(1),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let r = report(&out);
+    assert_eq!(r["counts"]["ok"], 1, "{r:#}");
+    let dir = out.join("room.png.material/material_0");
+    let m: Value =
+        serde_json::from_slice(&std::fs::read(dir.join("material.json")).unwrap()).unwrap();
+    assert_eq!(m["diagnostics"]["mask_given"], true);
+    assert_eq!(m["given_mask"], "the --quad's interior");
+    let mask = image::open(dir.join("mask.png")).unwrap().to_luma8();
+    let set = mask.pixels().filter(|p| p.0[0] > 127).count() as f64;
+    // The quad's area (shoelace, on the corners' continuous points) within
+    // its perimeter.
+    let p: Vec<(f64, f64)> = c.chunks(2).map(|v| (v[0] + 0.5, v[1] + 0.5)).collect();
+    let area = (0..4)
+        .map(|k| p[k].0 * p[(k + 1) % 4].1 - p[(k + 1) % 4].0 * p[k].1)
+        .sum::<f64>()
+        .abs()
+        / 2.0;
+    let perimeter: f64 = (0..4)
+        .map(|k| ((p[(k + 1) % 4].0 - p[k].0).powi(2) + (p[(k + 1) % 4].1 - p[k].1).powi(2)).sqrt())
+        .sum();
+    assert!((set - area).abs() < perimeter, "{set} vs {area}");
+
     // Refused before any photo is made.
     let picks = tmp.path().join("picks.csv");
     std::fs::write(&picks, "room.png,200,150\nroom.png,100,200\n").unwrap();
