@@ -291,9 +291,9 @@ pub struct Args {
     #[arg(long, value_name = "WxH[mm|cm|m|in]", value_parser = parse_size_m, requires = "quad")]
     pub quad_size: Option<[f32; 2]>,
     /// The material's pixels, instead of the segmentation's at the pick: a mask image the
-    /// photo's size as a viewer shows it (white on black, or a selection exported with
-    /// transparency: its alpha), or `quad` for the --quad's interior (`./quad` for a file of that
-    /// name). One material; the pick, if given, must lie in it (default: the mask's pixel
+    /// photo's size as a viewer shows it, or another size of its aspect ratio (scaled to it),
+    /// white on black or a selection exported with transparency (its alpha); or `quad` for the
+    /// --quad's interior (`./quad` for a file of that name). One material; the pick, if given, must lie in it (default: the mask's pixel
     /// nearest its centroid).
     #[arg(long, value_name = "FILE|quad", value_parser = parse_mask, conflicts_with_all = ["all", "tolerance", "connected"])]
     pub mask: Option<MaskArg>,
@@ -351,6 +351,10 @@ pub fn parse_quad(s: &str) -> std::result::Result<Quad, String> {
         [v[6], v[7]],
     ]))
 }
+
+/// Largest relative difference between a `--mask`'s aspect ratio and the
+/// photo's for a mask of another size to be scaled to the photo.
+pub const MASK_ASPECT_TOLERANCE: f64 = 0.01;
 
 /// Where `--mask` takes the material's pixels from.
 #[derive(Clone, Debug, PartialEq)]
@@ -1002,29 +1006,37 @@ pub fn write_materials(
                 MaskArg::File(f) => {
                     let m = picker_extract::photo::load_mask(f, &flags.photo_limits())
                         .map_err(|e| anyhow!("--mask {e}"))?;
-                    if (m.width, m.height) != (fw, fh) {
+                    // Another size with the photo's aspect ratio (a mask
+                    // painted on a smaller copy): scaled to the photo.
+                    let aspect = |w: usize, h: usize| w as f64 / h.max(1) as f64;
+                    let (mw, mh) = (m.width, m.height);
+                    if (mw, mh) != (fw, fh)
+                        && (aspect(mw, mh) / aspect(fw, fh) - 1.0).abs() > MASK_ASPECT_TOLERANCE
+                    {
                         bail!(
-                            "--mask {}: the mask is {}x{} but the photo {label} is {fw}x{fh} (as a viewer shows it, EXIF orientation applied)",
+                            "--mask {}: the mask is {mw}x{mh} but the photo {label} is {fw}x{fh} (as a viewer shows it, EXIF orientation applied); a mask of another size needs the photo's aspect ratio",
                             f.display(),
-                            m.width,
-                            m.height
                         );
                     }
                     let full = picker_extract::mask::Mask {
-                        width: m.width,
-                        height: m.height,
+                        width: mw,
+                        height: mh,
                         data: m.data,
-                    };
+                    }
+                    .scaled_to(fw, fh);
                     if full.count() == 0 {
                         bail!(
                             "--mask {}: no pixel is set (white, or opaque where the file has transparency)",
                             f.display()
                         );
                     }
-                    let shown = req
+                    let mut shown = req
                         .mask_label
                         .clone()
                         .unwrap_or_else(|| f.display().to_string());
+                    if (mw, mh) != (fw, fh) {
+                        shown = format!("{shown} ({mw}x{mh}, scaled to {fw}x{fh})");
+                    }
                     (full, shown)
                 }
             };

@@ -1464,6 +1464,34 @@ fn a_given_mask_is_the_material() {
         assert_eq!(mask.data[i] > 0.5, want, "({x}, {y})");
     }
     assert!((m["area_fraction"].as_f64().unwrap() - 10000.0 / 76800.0).abs() < 1e-9);
+
+    // The same selection painted on a half-size copy: scaled to the photo.
+    let half = tmp.path().join("half.png");
+    image::GrayImage::from_fn(160, 120, |x, y| {
+        image::Luma([if (50..100).contains(&x) && (25..75).contains(&y) {
+            255
+        } else {
+            0
+        }])
+    })
+    .save(&half)
+    .unwrap();
+    let out = tmp.path().join("h");
+    ok(&[
+        "extract",
+        photo.to_str().unwrap(),
+        "--mask",
+        half.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--max-size",
+        "64",
+    ]);
+    let m = json_file(&out.join("material.json"));
+    let said = m["given_mask"].as_str().unwrap();
+    assert!(said.ends_with("(160x120, scaled to 320x240)"), "{said}");
+    let scaled = read_png(&out.join("mask.png")).unwrap();
+    assert_eq!(scaled.data, mask.data);
 }
 
 /// `bytes` (a JPEG) with an APP1 EXIF segment right after its start marker

@@ -74,6 +74,28 @@ impl Mask {
             data: self.data.iter().map(|&b| b as u8 as f32).collect(),
         }
     }
+    /// The mask resampled to `w × h` by nearest neighbour: each output
+    /// pixel takes the input pixel under its centre (an empty input gives an
+    /// empty output).
+    pub fn scaled_to(&self, w: usize, h: usize) -> Mask {
+        let (sw, sh) = (self.width, self.height);
+        let at = |i: usize, from: usize, to: usize| {
+            (((i as f64 + 0.5) * from as f64 / to as f64) as usize).min(from.saturating_sub(1))
+        };
+        let data = if sw == 0 || sh == 0 {
+            vec![false; w * h]
+        } else {
+            let cols: Vec<usize> = (0..w).map(|x| at(x, sw, w)).collect();
+            (0..w * h)
+                .map(|i| self.data[at(i / w, sh, h) * sw + cols[i % w]])
+                .collect()
+        };
+        Mask {
+            width: w,
+            height: h,
+            data,
+        }
+    }
     /// The pixel of the mask nearest its centroid (ties: the first in row
     /// order), `[x, y]`; `None` for an empty mask. Inside the mask even when
     /// the centroid is not (a ring, an L).
@@ -994,6 +1016,39 @@ mod tests {
             height: h,
             data: out,
         }
+    }
+
+    #[test]
+    fn scaled_masks_take_the_pixel_under_each_centre() {
+        let m = Mask {
+            width: 4,
+            height: 2,
+            data: vec![true, false, false, true, false, true, true, false],
+        };
+        assert_eq!(m.scaled_to(4, 2), m);
+        let up = m.scaled_to(8, 4);
+        for y in 0..4 {
+            for x in 0..8 {
+                assert_eq!(
+                    up.data[y * 8 + x],
+                    m.data[(y / 2) * 4 + x / 2],
+                    "({x}, {y})"
+                );
+            }
+        }
+        assert_eq!(up.scaled_to(4, 2), m);
+        // Odd ratios stay inside; empty sizes either way.
+        let odd = m.scaled_to(7, 3);
+        assert_eq!(odd.data.len(), 21);
+        assert_eq!(odd.data[0], m.data[0]);
+        assert_eq!(odd.data[20], m.data[7]);
+        assert_eq!(m.scaled_to(0, 5).data.len(), 0);
+        let none = Mask {
+            width: 0,
+            height: 0,
+            data: vec![],
+        };
+        assert_eq!(none.scaled_to(3, 2).count(), 0);
     }
 
     #[test]
