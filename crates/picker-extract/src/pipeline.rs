@@ -1322,7 +1322,7 @@ fn extract_as(
                             diag_lines: &mut Option<crate::lines::LineRefinement>,
                             diag_grain: &mut (Option<crate::grain::Grain>, bool),
                             diag_user: &mut Option<UserPlaneUsed>,
-                            frame_out: &mut Option<plane::Frame>,
+                            side_out: &mut Option<f32>,
                             rest_src: &mut Option<Mask>|
          -> Option<Coords> {
             let quad = match opts.plane {
@@ -1438,7 +1438,7 @@ fn extract_as(
             // gives no coordinates: no plane.
             let rest = rest_plane();
             let coords_along = |along: Option<Vec3>| {
-                plane::plane_coords_framed(
+                plane::plane_coords_with_side(
                     fw,
                     fh,
                     &full.data,
@@ -1448,21 +1448,21 @@ fn extract_as(
                     along,
                 )
             };
-            let (mut c, mut frame) = coords_along(along);
+            let (mut c, mut side) = coords_along(along);
             // No axis from the lines: the pattern's own direction, if clear.
             if along.is_none() && opts.align_grain {
                 let g = crate::grain::measure(&c, &full.data, &p.luma);
                 if let Some(g) = g.filter(crate::grain::Grain::decisive) {
                     let (e1, e2) = plane::plane_basis(n, None);
                     // Texture direction (du, dv) is e1·du − e2·dv on the plane.
-                    (c, frame) = coords_along(Some(e1 * g.along[0] - e2 * g.along[1]));
+                    (c, side) = coords_along(Some(e1 * g.along[0] - e2 * g.along[1]));
                     diag_grain.1 = true;
                 }
                 diag_grain.0 = g;
             }
             let usable = c.u.iter().zip(&full.data).any(|(u, &m)| m && u.is_finite());
             *rest_src = rest;
-            *frame_out = frame;
+            *side_out = side;
             usable.then_some(c)
         };
         // Why auto finds no coordinates, if it finds none.
@@ -1478,7 +1478,7 @@ fn extract_as(
         let mut grain = (None, false);
         let mut plane_rest = None;
         let mut user_plane = None;
-        let mut frame = None;
+        let mut square_side = None;
         let (mode, coords) =
             match uv_choice {
                 UvChoice::Net => match net_coords {
@@ -1488,7 +1488,7 @@ fn extract_as(
                             .into(),
                     )),
                 },
-                UvChoice::Plane => match plane_coords(&mut focal, &mut lines, &mut grain, &mut user_plane, &mut frame, &mut plane_rest) {
+                UvChoice::Plane => match plane_coords(&mut focal, &mut lines, &mut grain, &mut user_plane, &mut square_side, &mut plane_rest) {
                     Some(c) => (UvMode::Plane, c),
                     None if opts.plane.is_some() => {
                         return Err(Error::Invalid(
@@ -1513,11 +1513,11 @@ fn extract_as(
                             Some(c) => (UvMode::Net, c),
                             None => (
                                 UvMode::Plane,
-                                plane_coords(&mut focal, &mut lines, &mut grain, &mut user_plane, &mut frame, &mut plane_rest).ok_or_else(neither)?,
+                                plane_coords(&mut focal, &mut lines, &mut grain, &mut user_plane, &mut square_side, &mut plane_rest).ok_or_else(neither)?,
                             ),
                         }
                     } else {
-                        match plane_coords(&mut focal, &mut lines, &mut grain, &mut user_plane, &mut frame, &mut plane_rest) {
+                        match plane_coords(&mut focal, &mut lines, &mut grain, &mut user_plane, &mut square_side, &mut plane_rest) {
                             Some(c) => (UvMode::Plane, c),
                             None => (
                                 UvMode::Net,
@@ -1620,9 +1620,9 @@ fn extract_as(
         });
         // The texture's size on the surface, when a quad's real size gave
         // the plane its scale: the square (or the folded tile) in metres.
-        let size_m = match (user_plane.as_ref().and_then(|u| u.unit_m), frame) {
-            (Some(unit), Some(fr)) if mode == UvMode::Plane => {
-                let side = f64::from(fr.side()) * unit;
+        let size_m = match (user_plane.as_ref().and_then(|u| u.unit_m), square_side) {
+            (Some(unit), Some(side)) if mode == UvMode::Plane => {
+                let side = f64::from(side) * unit;
                 let t = fold.map_or([1.0, 1.0], |f| f.tile);
                 Some([side * f64::from(t[0]), side * f64::from(t[1])])
             }
