@@ -98,6 +98,9 @@ pub struct Args {
     /// (`extract --no-centring`).
     #[arg(long)]
     pub no_centring: bool,
+    /// Keep only the picked colour of a two-colour pattern (`extract --no-pattern`).
+    #[arg(long)]
+    pub no_pattern: bool,
     /// Inpaint every texel the mask's surest part did not show, instead of first filling them
     /// from the rest of the mask (its less sure pixels) where it showed them.
     #[arg(long)]
@@ -496,7 +499,10 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
     let prepared = Prepared::new(inputs)?;
     let inpainter = PatchMatchInpainter::default();
     let opts = pipeline::Options {
-        mask: Default::default(),
+        mask: picker_extract::mask::MaskOptions {
+            no_pattern: a.no_pattern,
+            ..Default::default()
+        },
         uv: a.uv.choice(),
         size: a.size.map(|s| s as usize),
         max_size: pipeline::DEFAULT_MAX_SIZE,

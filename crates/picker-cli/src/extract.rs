@@ -68,6 +68,11 @@ pub struct Flags {
     /// Keep only the connected region at the pick.
     #[arg(long)]
     pub connected: bool,
+    /// Keep only the picked colour of a two-colour pattern (a chessboard's black squares, a
+    /// striped fabric's dark stripes) instead of the whole pattern. By default an automatic mask
+    /// whose surroundings are mostly one other material, interleaved with it, takes it in.
+    #[arg(long)]
+    pub no_pattern: bool,
     /// Segmentation-colour tolerance (an RGB distance, 0 to 1, in the segmentation the masks read:
     /// the network's, smoothed along the photo; with an MSN that has a material embedding, as the
     /// embedded one does, a distance in the embedding scaled by 0.25); default automatic. A given
@@ -214,6 +219,7 @@ impl Flags {
         MaskOptions {
             connected: self.connected,
             tolerance: self.tolerance,
+            no_pattern: self.no_pattern,
         }
     }
 
@@ -237,6 +243,7 @@ impl Flags {
             "work_size": self.work_size,
             "connected": self.connected,
             "tolerance": self.tolerance,
+            "pattern": !self.no_pattern,
             "uv": format!("{:?}", self.uv).to_lowercase(),
             "fov": self.fov,
             "normal": self.normal.map(|p| match p {
@@ -1291,6 +1298,16 @@ fn hints(m: &Material, diag: &pipeline::Diagnostics) -> Vec<String> {
             "the photo shows {:.0} % of the texture; the rest was filled in by inpainting \
              (coverage.png): a closer or more frontal photo of the material shows more of it",
             100.0 * t.coverage_fraction
+        ));
+    }
+    if let Some(p) = diag.pattern.as_ref().filter(|p| p.merged) {
+        out.push(format!(
+            "the picked colour interleaves with another ({} and {} regions): the mask is the \
+             two-colour pattern, of which the picked colour is {:.0} %; --no-pattern keeps only \
+             the picked colour",
+            p.measured.elements.count,
+            p.measured.companion_elements.count,
+            100.0 * p.own_share
         ));
     }
     let uv = diag.uv.as_ref();

@@ -463,6 +463,7 @@ fn shards_jobs_and_staleness() {
         "--no-grain",
         "--no-fold",
         "--no-centring",
+        "--no-pattern",
         "--no-mask-fill",
         "--keep-seams",
     ] {

@@ -1021,6 +1021,121 @@ fn write_rgb_exr(path: &Path, w: usize, h: usize, f: impl Fn(usize, usize) -> [f
     .unwrap();
 }
 
+/// A chessboard whose segmentation has two colours: a pick on a dark square
+/// gives the whole board, says so (diagnostics, hint), and `--no-pattern`
+/// gives the dark squares alone.
+#[test]
+fn a_pick_on_a_chessboard_square_gives_the_board() {
+    use picker_render::io::{write_exr, Image};
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = tmp.path().join("scene");
+    std::fs::create_dir_all(&scene).unwrap();
+    // Render elements and photo at 160x120: a 64x64 board of 8-pixel
+    // squares on a brown floor, facing the camera.
+    let (w, h) = (160usize, 120usize);
+    let on_board = |x: usize, y: usize| (48..112).contains(&x) && (28..92).contains(&y);
+    let dark =
+        |x: usize, y: usize| on_board(x, y) && ((x - 48) / 8 + (y - 28) / 8).is_multiple_of(2);
+    let colour = |x: usize, y: usize| -> [f32; 3] {
+        if dark(x, y) {
+            [0.02, 0.02, 0.02]
+        } else if on_board(x, y) {
+            [0.7, 0.7, 0.65]
+        } else {
+            [0.3, 0.15, 0.08]
+        }
+    };
+    let write = |name: &str, c: usize, f: &dyn Fn(usize, usize) -> [f32; 3]| {
+        let mut data = vec![0.0f32; c * w * h];
+        for i in 0..w * h {
+            let v = f(i % w, i / w);
+            for k in 0..c {
+                data[k * w * h + i] = v[k];
+            }
+        }
+        write_exr(
+            &scene.join(format!("{name}.exr")),
+            &Image::new(c, h, w, data).unwrap(),
+        )
+        .unwrap();
+    };
+    write("diffuse_albedo", 3, &colour);
+    write("specular_albedo", 3, &|_, _| [0.04; 3]);
+    write("glossiness", 1, &|_, _| [0.3; 3]);
+    write("normals", 3, &|_, _| [0.0, 0.0, 1.0]);
+    write("view_vector", 3, &|_, _| [0.0, 0.0, 1.0]);
+    write("segmentation", 3, &|x, y| {
+        let c = colour(x, y);
+        [c[0] + 0.1, c[1] + 0.1, c[2] + 0.1]
+    });
+    let photo = image::RgbImage::from_fn(w as u32, h as u32, |x, y| {
+        let c = colour(x as usize, y as usize);
+        image::Rgb(c.map(|v| (v.powf(1.0 / 2.2) * 255.0) as u8))
+    });
+    photo.save(scene.join("image.png")).unwrap();
+    let board = 64 * 64;
+    let mask_count = |dir: &Path| {
+        image::open(dir.join("mask.png"))
+            .unwrap()
+            .to_luma8()
+            .pixels()
+            .filter(|p| p.0[0] > 127)
+            .count()
+    };
+    let run = |name: &str, extra: &[&str]| {
+        let out = tmp.path().join(name);
+        let mut args = vec![
+            "extract",
+            "--elements",
+            scene.to_str().unwrap(),
+            "--pick",
+            "51,31",
+            "--uv",
+            "plane",
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        let o = picker(args);
+        assert_ok(&o);
+        let m: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(out.join("material.json")).unwrap()).unwrap();
+        (out, o, m)
+    };
+    let (out, o, m) = run("board", &[]);
+    let n = mask_count(&out);
+    assert!((n as f64 - board as f64).abs() < 0.02 * board as f64, "{n}");
+    assert_eq!(
+        m["diagnostics"]["pattern"]["merged"], true,
+        "{}",
+        m["diagnostics"]
+    );
+    assert!(stderr(&o).contains("two-colour pattern"), "{}", stderr(&o));
+    // The texture is a checker: about half its texels light.
+    let light_share = |dir: &Path| {
+        let t = image::open(dir.join("texture.png")).unwrap().to_luma8();
+        t.pixels().filter(|p| p.0[0] > 128).count() as f64 / t.pixels().len() as f64
+    };
+    let s = light_share(&out);
+    assert!((0.35..0.65).contains(&s), "{s}");
+    let (out, o, m) = run("dark", &["--no-pattern"]);
+    let n = mask_count(&out);
+    // The dark squares (the leak guard's relief leaves out some of their
+    // corners, where four squares meet).
+    assert!(
+        n <= board / 2 && n as f64 > 0.85 * board as f64 / 2.0,
+        "{n}"
+    );
+    assert!(
+        m["diagnostics"]["pattern"].is_null(),
+        "{}",
+        m["diagnostics"]
+    );
+    assert!(!stderr(&o).contains("two-colour pattern"), "{}", stderr(&o));
+    let s = light_share(&out);
+    assert!(s < 0.1, "{s}");
+}
+
 /// A photo whose lines contradict the plane the elements give (vertical
 /// stripes seen head-on, normals saying a floor): the refused turn is in
 /// `material.json`, and `picker extract` suggests giving the plane, in

@@ -28,6 +28,7 @@ pub mod guided;
 pub mod lines;
 pub mod mask;
 pub mod material;
+pub mod pattern;
 pub mod period;
 pub mod photo;
 pub mod pipeline;

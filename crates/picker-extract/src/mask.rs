@@ -160,6 +160,9 @@ pub struct MaskOptions {
     pub connected: bool,
     /// Fixed tolerance `τ` instead of the automatic one.
     pub tolerance: Option<f32>,
+    /// Keep only the picked colour of a two-colour pattern (a chessboard's
+    /// black squares) rather than the whole pattern ([`crate::pattern`]).
+    pub no_pattern: bool,
 }
 
 /// The pick's material at the segmentation's resolution.
@@ -184,6 +187,9 @@ pub struct PickMask {
     /// that the growth took in would land in the texture). The whole mask
     /// when it did not grow or the tolerance was given.
     pub sure: Vec<bool>,
+    /// The two-colour pattern check ([`crate::pattern`]), when it ran: an
+    /// automatic mask's companion and whether it joined the mask.
+    pub pattern: Option<crate::pattern::PatternCheck>,
 }
 
 fn median(v: &mut [f32]) -> f32 {
@@ -617,8 +623,19 @@ pub fn neighbours4(i: usize, w: usize, h: usize) -> impl Iterator<Item = usize> 
     .flatten()
 }
 
-/// 8-connected component labels of `mask` (0 = outside, 1.. = component).
+/// 8-connected component labels of `mask` (0 = outside, 1.. = component)
+/// and the components' sizes (index 0: 0).
 pub fn components(mask: &Mask) -> (Vec<u32>, Vec<usize>) {
+    labelled(mask, true)
+}
+
+/// [`components`] with 4-connectivity: regions that touch only at a corner
+/// (a chessboard's squares of one colour) are apart.
+pub fn components4(mask: &Mask) -> (Vec<u32>, Vec<usize>) {
+    labelled(mask, false)
+}
+
+fn labelled(mask: &Mask, eight: bool) -> (Vec<u32>, Vec<usize>) {
     let (w, h) = (mask.width, mask.height);
     let mut label = vec![0u32; w * h];
     let mut sizes = vec![0usize];
@@ -634,10 +651,13 @@ pub fn components(mask: &Mask) -> (Vec<u32>, Vec<usize>) {
         while let Some(i) = stack.pop() {
             size += 1;
             let (x, y) = ((i % w) as i64, (i / w) as i64);
-            for dy in -1..=1 {
-                for dx in -1..=1 {
+            for dy in -1..=1i64 {
+                for dx in -1..=1i64 {
                     let (xx, yy) = (x + dx, y + dy);
                     if xx < 0 || yy < 0 || xx >= w as i64 || yy >= h as i64 {
+                        continue;
+                    }
+                    if !eight && dx != 0 && dy != 0 {
                         continue;
                     }
                     let j = yy as usize * w + xx as usize;
@@ -851,6 +871,7 @@ pub fn pick_mask_on(
         tolerance,
         photo: None,
         sure,
+        pattern: None,
     })
 }
 
@@ -1120,8 +1141,8 @@ mod tests {
     /// [`pick_mask`] with the tolerance `t` given (no guard), unwrapped.
     fn pick_fixed(seg: &Image, valid: &[bool], (x, y): (usize, usize), t: f32) -> PickMask {
         let opts = MaskOptions {
-            connected: false,
             tolerance: Some(t),
+            ..Default::default()
         };
         pick_mask(seg, valid, x, y, &opts).unwrap()
     }
@@ -1153,7 +1174,7 @@ mod tests {
             2,
             &MaskOptions {
                 connected: true,
-                tolerance: None,
+                ..Default::default()
             },
         )
         .unwrap();
@@ -1353,8 +1374,8 @@ mod tests {
         assert!(e.to_string().contains("relief"), "{e}");
         // A given tolerance needs no relief.
         let fixed = MaskOptions {
-            connected: false,
             tolerance: Some(0.05),
+            ..Default::default()
         };
         assert!(pick_mask_on(&seg, &[], &valid, 5, 5, &fixed).is_ok());
     }

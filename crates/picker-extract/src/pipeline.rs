@@ -402,7 +402,61 @@ impl Prepared {
         if opts.tolerance.is_some() {
             return Ok(pm);
         }
-        self.with_raw_sure(pm, &self.valid, x, y)
+        let pm = self.with_raw_sure(pm, &self.valid, x, y)?;
+        if opts.no_pattern {
+            return Ok(pm);
+        }
+        Ok(self.with_pattern(pm, opts, (x, y)))
+    }
+
+    /// An automatic mask completed to its two-colour pattern when it is one
+    /// of ([`crate::pattern`]): the companion is picked (as [`Self::pick_mask`]
+    /// would, with the same options) on the mask's surroundings, and when the
+    /// two interleave the mask becomes their union, its surest part theirs.
+    /// With `connected`, the union's region at the pick (`at`, working
+    /// pixels) is kept. The check is recorded in [`PickMask::pattern`].
+    fn with_pattern(&self, mut pm: PickMask, opts: &MaskOptions, at: (usize, usize)) -> PickMask {
+        let seg = self.mask_segmentation();
+        let Some((seed, colour)) = crate::pattern::companion_seed(seg, &self.valid, &pm.mask)
+        else {
+            return pm;
+        };
+        let Ok(other) = mask::pick_mask_on(seg, self.relief(), &self.valid, seed[0], seed[1], opts)
+            .and_then(|o| self.with_raw_sure(o, &self.valid, seed[0], seed[1]))
+        else {
+            return pm;
+        };
+        let blend = crate::pattern::blend(seg, &self.valid, pm.colour, other.colour);
+        let measured = crate::pattern::measure(&pm.mask, &other.mask, &blend);
+        let merged = measured.is_pattern();
+        let mut own_share = 1.0;
+        if merged {
+            let own = pm.mask.count();
+            let mut union = crate::pattern::merged(&pm.mask, &other.mask, &blend);
+            if opts.connected {
+                let (label, _) = mask::components(&union);
+                let keep = mask::nearest_label(&label, union.width, at);
+                for (m, &l) in union.data.iter_mut().zip(&label) {
+                    *m = l != 0 && l == keep;
+                }
+            }
+            for ((s, &o), &u) in pm.sure.iter_mut().zip(&other.sure).zip(&union.data) {
+                *s = (*s || o) && u;
+            }
+            if !pm.sure.iter().any(|&b| b) {
+                pm.sure.clone_from(&union.data);
+            }
+            own_share = own as f64 / union.count().max(1) as f64;
+            pm.mask = union;
+        }
+        pm.pattern = Some(crate::pattern::PatternCheck {
+            companion_colour: colour,
+            companion_pick: seed,
+            measured,
+            merged,
+            own_share,
+        });
+        pm
     }
 
     /// An automatic mask's surest part joined with the mask's pixels that
@@ -507,6 +561,7 @@ impl Prepared {
             tolerance: f32::NAN,
             photo: Some(full),
             mask,
+            pattern: None,
         })
     }
 
@@ -849,6 +904,13 @@ pub struct Diagnostics {
     /// quad's interior), not cut from the segmentation at the pick; the
     /// tolerance is then none (null).
     pub mask_given: bool,
+    /// The two-colour pattern check of an automatic mask
+    /// ([`crate::pattern`], [`PickMask::pattern`]): the companion material
+    /// its surroundings show, how the two interleave, and whether it joined
+    /// the mask; absent when the check did not run (a given mask or
+    /// tolerance, `no_pattern`, a mask with no surroundings).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub pattern: Option<crate::pattern::PatternCheck>,
     /// The seam ratio for which a band across the wrap edges was inpainted
     /// ([`Options::heal_seams`]): the observed texels'
     /// ([`picker_inpaint::known_seam_ratio`]), or, when they could not tell,
@@ -1175,6 +1237,7 @@ fn extract_as(
         texture_fallback: None,
         filled_from_mask: None,
         mask_given: pm.photo.is_some(),
+        pattern: pm.pattern.clone(),
         greyscale_photo: p.greyscale,
         seam_band: None,
         even_out_gain: None,
@@ -2685,6 +2748,109 @@ mod tests {
         .unwrap()
     }
 
+    /// A chessboard whose two colours the segmentation tells apart, on a
+    /// background of a third colour with a grey object on it: a pick on
+    /// either colour gives the whole board (and the check says so), not the
+    /// background's fringe; `no_pattern` keeps the picked colour; a pick on
+    /// the object or the background gives it alone.
+    #[test]
+    fn a_pick_on_one_colour_of_a_chessboard_gives_the_board() {
+        let (w, h) = (160, 96);
+        let on_board = |x: usize, y: usize| (40..120).contains(&x) && (24..72).contains(&y);
+        let dark =
+            |x: usize, y: usize| on_board(x, y) && ((x - 40) / 8 + (y - 24) / 8).is_multiple_of(2);
+        let object = |x: usize, y: usize| (130..150).contains(&x) && (40..60).contains(&y);
+        let colour = |i: usize| -> [f32; 3] {
+            let (x, y) = (i % w, i / w);
+            if dark(x, y) {
+                [0.1, 0.1, 0.12]
+            } else if on_board(x, y) {
+                [0.9, 0.85, 0.8]
+            } else if object(x, y) {
+                [0.5, 0.5, 0.5]
+            } else {
+                [0.3, 0.6, 0.9]
+            }
+        };
+        let mut p = frontal_plane(w, h, &|i| colour(i)[0]);
+        p.inputs.segmentation = Image::new(
+            3,
+            h,
+            w,
+            (0..3 * h * w)
+                .map(|k| colour(k % (h * w))[k / (h * w)])
+                .collect(),
+        )
+        .unwrap();
+        let board: Vec<bool> = (0..w * h).map(|i| on_board(i % w, i / w)).collect();
+        for pick in [[44u32, 28], [52, 28], [115, 67]] {
+            let pm = p.pick_mask(pick, &MaskOptions::default()).unwrap();
+            // The board (all but the corners of its corner squares, where
+            // the leak guard's relief leaves the picked colour's own mask
+            // short and the other colour is not near) and nothing else.
+            let area = board.iter().filter(|&&b| b).count();
+            let (inside, outside) = pm
+                .mask
+                .data
+                .iter()
+                .zip(&board)
+                .fold((0, 0), |(i, o), (&m, &b)| {
+                    (i + (m && b) as usize, o + (m && !b) as usize)
+                });
+            assert!(
+                outside == 0 && inside >= area - 4,
+                "pick {pick:?}: {inside} of {area} inside, {outside} outside, {:?}",
+                pm.pattern
+            );
+            let check = pm.pattern.as_ref().unwrap();
+            assert!(
+                check.merged && (check.own_share - 0.5).abs() < 0.05,
+                "{check:?}"
+            );
+            assert!(pm.sure.iter().zip(&board).all(|(&s, &b)| !s || b));
+            // The texture is taken from both colours.
+            assert!(pm.sure.iter().filter(|&&s| s).count() > 3000);
+            let own = p
+                .pick_mask(
+                    pick,
+                    &MaskOptions {
+                        no_pattern: true,
+                        ..Default::default()
+                    },
+                )
+                .unwrap();
+            assert!(own.pattern.is_none());
+            let own_n = own.mask.count();
+            assert!(
+                own_n <= area / 2 && own_n >= area * 9 / 20,
+                "{own_n} of {area}"
+            );
+            // Connected: the board is one region, the pick's.
+            let con = p
+                .pick_mask(
+                    pick,
+                    &MaskOptions {
+                        connected: true,
+                        ..Default::default()
+                    },
+                )
+                .unwrap();
+            assert!(
+                con.mask.count() <= own_n || con.mask.count() >= area - 4,
+                "connected: {} pixels",
+                con.mask.count()
+            );
+        }
+        for pick in [[140u32, 50], [10, 10]] {
+            let pm = p.pick_mask(pick, &MaskOptions::default()).unwrap();
+            assert!(
+                !pm.pattern.as_ref().is_some_and(|c| c.merged),
+                "pick {pick:?}"
+            );
+            assert!(pm.mask.data.iter().zip(&board).all(|(&m, &b)| !(m && b)));
+        }
+    }
+
     /// Collapsed UVs (every pixel at one point of the square) on a material
     /// whose normals are too noisy for a plane by the spread rule (a third
     /// facing the camera, a third tilted 31° either way): `auto` rectifies a
@@ -2825,6 +2991,7 @@ mod tests {
             tolerance: 0.1,
             photo: None,
             sure: (0..w * h).map(sure).collect(),
+            pattern: None,
         }
     }
 

@@ -1177,7 +1177,7 @@ pub fn reproject(
 /// robust mean of the pixels of both places. Where the shift is half the
 /// square along each axis (or none) and a whole number of texels (a tile of
 /// one period each way: a chessboard's), the copies are not made: each
-/// splat's per-texel sums get themselves, moved, added ([`plus_shifted`]),
+/// splat's per-texel sums get themselves, moved, added (`plus_shifted`),
 /// which gives the same texture (it is symmetric, so the copies' robust
 /// weights and back-projection residuals are their originals') at the cost
 /// of [`reproject`]; otherwise the copies are made and splatted, at twice
