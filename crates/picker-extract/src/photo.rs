@@ -546,11 +546,19 @@ fn decode_image(bytes: &[u8], label: &Path, limits: &PhotoLimits) -> Result<Deco
     };
     // A broken EXIF block is not worth refusing the photo for.
     let orientation = decoder.orientation().unwrap_or(Orientation::NoTransforms);
+    // A TIFF file is itself the TIFF structure EXIF blocks are made of: its
+    // first IFD holds the Exif IFD pointer a camera writes (the `image`
+    // crate's TIFF decoder gives no EXIF block).
     let focal_35mm = decoder
         .exif_metadata()
         .ok()
         .flatten()
-        .and_then(|raw| exif_focal_35mm(&raw));
+        .and_then(|raw| exif_focal_35mm(&raw))
+        .or_else(|| {
+            (kind.image == ImageFormat::Tiff)
+                .then(|| exif_focal_35mm(bytes))
+                .flatten()
+        });
 
     let img = DynamicImage::from_decoder(decoder).map_err(fail)?;
     Ok(Decoded {
@@ -1032,6 +1040,85 @@ mod tests {
         }
         w32(&mut o, 0);
         o
+    }
+
+    /// A 4×2 uncompressed 8-bit RGB TIFF file whose IFD0 points to an Exif
+    /// IFD stating `FocalLengthIn35mmFilm` = `f35` (little-endian), as a
+    /// camera writes it: the file is its own EXIF structure.
+    fn tiff_with_focal(f35: u16) -> Vec<u8> {
+        let (w, h) = (4u32, 2u32);
+        let entries: [(u16, u16, u32, u32); 10] = [
+            (256, 3, 1, w),         // ImageWidth
+            (257, 3, 1, h),         // ImageLength
+            (258, 3, 3, 0),         // BitsPerSample -> patched below
+            (259, 3, 1, 1),         // no compression
+            (262, 3, 1, 2),         // RGB
+            (273, 4, 1, 0),         // StripOffsets -> patched
+            (277, 3, 1, 3),         // SamplesPerPixel
+            (278, 3, 1, h),         // RowsPerStrip
+            (279, 4, 1, w * h * 3), // StripByteCounts
+            (0x8769, 4, 1, 0),      // ExifIFDPointer -> patched
+        ];
+        let ifd0 = 8u32;
+        let ifd0_len = 2 + 12 * entries.len() as u32 + 4;
+        let bits_at = ifd0 + ifd0_len;
+        let exif_at = bits_at + 6;
+        let exif_len = 2 + 12 + 4;
+        let pixels_at = exif_at + exif_len;
+        let mut o = b"II*\0".to_vec();
+        o.extend(ifd0.to_le_bytes());
+        o.extend((entries.len() as u16).to_le_bytes());
+        for (tag, ty, count, v) in entries {
+            let v = match tag {
+                258 => bits_at,
+                273 => pixels_at,
+                0x8769 => exif_at,
+                _ => v,
+            };
+            o.extend(tag.to_le_bytes());
+            o.extend(ty.to_le_bytes());
+            o.extend(count.to_le_bytes());
+            if ty == 3 && count == 1 {
+                o.extend((v as u16).to_le_bytes());
+                o.extend([0, 0]);
+            } else {
+                o.extend(v.to_le_bytes());
+            }
+        }
+        o.extend(0u32.to_le_bytes());
+        for _ in 0..3 {
+            o.extend(8u16.to_le_bytes());
+        }
+        o.extend(1u16.to_le_bytes());
+        o.extend(0xA405u16.to_le_bytes());
+        o.extend(3u16.to_le_bytes());
+        o.extend(1u32.to_le_bytes());
+        o.extend(f35.to_le_bytes());
+        o.extend([0, 0]);
+        o.extend(0u32.to_le_bytes());
+        assert_eq!(o.len() as u32, pixels_at);
+        o.extend((0..w * h * 3).map(|i| (i * 10) as u8));
+        o
+    }
+
+    #[test]
+    fn a_tiff_photo_states_its_focal_length_itself() {
+        let bytes = tiff_with_focal(35);
+        let p = decode(&bytes, Path::new("cam.tif"), &PhotoLimits::default()).unwrap();
+        assert_eq!(
+            (p.rgb.width(), p.rgb.height(), p.format.as_str()),
+            (4, 2, "tiff")
+        );
+        assert_eq!(p.focal_35mm, Some(35.0));
+        // Without the tag, none.
+        let mut plain = bytes.clone();
+        let at = plain
+            .windows(2)
+            .position(|b| b == 0xA405u16.to_le_bytes())
+            .unwrap();
+        plain[at..at + 2].copy_from_slice(&0xA404u16.to_le_bytes());
+        let p = decode(&plain, Path::new("cam.tif"), &PhotoLimits::default()).unwrap();
+        assert_eq!(p.focal_35mm, None);
     }
 
     #[test]
