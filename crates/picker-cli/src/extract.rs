@@ -1302,11 +1302,13 @@ fn hints(m: &Material, diag: &pipeline::Diagnostics) -> Vec<String> {
     }
     if let Some(p) = diag.pattern.as_ref().filter(|p| p.merged) {
         out.push(format!(
-            "the picked colour interleaves with another ({} and {} regions): the mask is the \
-             two-colour pattern, of which the picked colour is {:.0} %; --no-pattern keeps only \
-             the picked colour",
-            p.measured.elements.count,
-            p.measured.companion_elements.count,
+            "the picked colour interleaves with another ({} elements of one colour): the mask is \
+             the two-colour pattern, of which the picked colour is {:.0} %; --no-pattern keeps \
+             only the picked colour",
+            p.measured
+                .elements
+                .count
+                .max(p.measured.companion_elements.count),
             100.0 * p.own_share
         ));
     }
