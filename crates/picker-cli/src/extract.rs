@@ -1086,7 +1086,7 @@ pub fn write_materials(
     }
     let mut palette_ids = None;
     if req.all {
-        let pal = prepared.palette(flags.min_area, 64);
+        let pal = prepared.palette(flags.min_area, 64, !flags.no_pattern);
         if pal.is_empty() {
             bail!(
                 "{label}: no material covers --min-area {} of the image",

@@ -406,7 +406,7 @@ impl Prepared {
         if opts.no_pattern {
             return Ok(pm);
         }
-        Ok(self.with_pattern(pm, opts, (x, y)))
+        Ok(self.with_pattern(pm, opts, (x, y), &self.valid))
     }
 
     /// An automatic mask completed to its two-colour pattern when it is one
@@ -414,19 +414,25 @@ impl Prepared {
     /// would, with the same options) on the mask's surroundings, and when the
     /// two interleave the mask becomes their union, its surest part theirs.
     /// With `connected`, the union's region at the pick (`at`, working
-    /// pixels) is kept. The check is recorded in [`PickMask::pattern`].
-    fn with_pattern(&self, mut pm: PickMask, opts: &MaskOptions, at: (usize, usize)) -> PickMask {
+    /// pixels) is kept. Only `valid` pixels may join (the palette's pixels
+    /// not yet taken). The check is recorded in [`PickMask::pattern`].
+    fn with_pattern(
+        &self,
+        mut pm: PickMask,
+        opts: &MaskOptions,
+        at: (usize, usize),
+        valid: &[bool],
+    ) -> PickMask {
         let seg = self.mask_segmentation();
-        let Some((seed, colour)) = crate::pattern::companion_seed(seg, &self.valid, &pm.mask)
+        let Some((seed, colour)) = crate::pattern::companion_seed(seg, valid, &pm.mask) else {
+            return pm;
+        };
+        let Ok(other) = mask::pick_mask_on(seg, self.relief(), valid, seed[0], seed[1], opts)
+            .and_then(|o| self.with_raw_sure(o, valid, seed[0], seed[1]))
         else {
             return pm;
         };
-        let Ok(other) = mask::pick_mask_on(seg, self.relief(), &self.valid, seed[0], seed[1], opts)
-            .and_then(|o| self.with_raw_sure(o, &self.valid, seed[0], seed[1]))
-        else {
-            return pm;
-        };
-        let blend = crate::pattern::blend(seg, &self.valid, pm.colour, other.colour);
+        let blend = crate::pattern::blend(seg, valid, pm.colour, other.colour);
         let measured = crate::pattern::measure(&pm.mask, &other.mask, &blend);
         let merged = measured.is_pattern();
         let mut own_share = 1.0;
@@ -592,7 +598,15 @@ impl Prepared {
     /// The material palette: masks of every material covering at least
     /// `min_fraction` of the image (greedy, largest segmentation-colour
     /// cluster first; a pixel belongs to at most one material), at most `max`.
-    pub fn palette(&self, min_fraction: f64, max: usize) -> Vec<([u32; 2], PickMask)> {
+    /// With `patterns`, a material whose mask makes a two-colour pattern
+    /// with a companion among the pixels not yet taken is the whole pattern
+    /// ([`crate::pattern`], as [`Self::pick_mask`] does).
+    pub fn palette(
+        &self,
+        min_fraction: f64,
+        max: usize,
+        patterns: bool,
+    ) -> Vec<([u32; 2], PickMask)> {
         let (w, h) = self.work_size();
         let (fw, fh) = self.photo_size();
         let seg = self.mask_segmentation();
@@ -648,6 +662,11 @@ impl Prepared {
             let Ok(pm) = pm else {
                 remaining[seed] = false;
                 continue;
+            };
+            let pm = if patterns {
+                self.with_pattern(pm, &MaskOptions::default(), (x, y), &remaining)
+            } else {
+                pm
             };
             let got = pm.mask.count();
             for (r, &m) in remaining.iter_mut().zip(&pm.mask.data) {
@@ -2625,7 +2644,7 @@ mod tests {
         })
         .unwrap();
         // Bins 8 and 9 of channel 0 hold 4 and 6 columns: 12.5 % and 19 %.
-        let pal = p.palette(0.25, 8);
+        let pal = p.palette(0.25, 8, true);
         assert_eq!(
             pal.len(),
             2,
@@ -2638,7 +2657,7 @@ mod tests {
                 assert_eq!(right.data[y * w + x], x >= 22, "({x}, {y})");
             }
         }
-        assert_eq!(p.palette(0.4, 8).len(), 1);
+        assert_eq!(p.palette(0.4, 8, true).len(), 1);
     }
 
     #[test]
@@ -2748,13 +2767,11 @@ mod tests {
         .unwrap()
     }
 
-    /// A chessboard whose two colours the segmentation tells apart, on a
-    /// background of a third colour with a grey object on it: a pick on
-    /// either colour gives the whole board (and the check says so), not the
-    /// background's fringe; `no_pattern` keeps the picked colour; a pick on
-    /// the object or the background gives it alone.
-    #[test]
-    fn a_pick_on_one_colour_of_a_chessboard_gives_the_board() {
+    /// A 160×96 scene: a chessboard of 8-pixel squares (80×48, from (40,
+    /// 24)) whose two colours the segmentation tells apart, on a background
+    /// of a third colour with a grey 20×20 object on it (at (130, 40)); and
+    /// the board's pixels.
+    fn chessboard_on_a_floor() -> (Prepared, Vec<bool>) {
         let (w, h) = (160, 96);
         let on_board = |x: usize, y: usize| (40..120).contains(&x) && (24..72).contains(&y);
         let dark =
@@ -2782,7 +2799,17 @@ mod tests {
                 .collect(),
         )
         .unwrap();
-        let board: Vec<bool> = (0..w * h).map(|i| on_board(i % w, i / w)).collect();
+        let board = (0..w * h).map(|i| on_board(i % w, i / w)).collect();
+        (p, board)
+    }
+
+    /// On [`chessboard_on_a_floor`]: a pick on either colour gives the whole
+    /// board (and the check says so), not the background's fringe;
+    /// `no_pattern` keeps the picked colour; a pick on the object or the
+    /// background gives it alone.
+    #[test]
+    fn a_pick_on_one_colour_of_a_chessboard_gives_the_board() {
+        let (p, board) = chessboard_on_a_floor();
         for pick in [[44u32, 28], [52, 28], [115, 67]] {
             let pm = p.pick_mask(pick, &MaskOptions::default()).unwrap();
             // The board (all but the corners of its corner squares, where
@@ -2849,6 +2876,38 @@ mod tests {
             );
             assert!(pm.mask.data.iter().zip(&board).all(|(&m, &b)| !(m && b)));
         }
+    }
+
+    /// `--all` on [`chessboard_on_a_floor`]: the board is one material of
+    /// the palette with patterns, its two colours two without.
+    #[test]
+    fn the_palette_takes_a_chessboard_whole() {
+        let (p, board) = chessboard_on_a_floor();
+        let area = board.iter().filter(|&&b| b).count();
+        let on_board = |pm: &PickMask| {
+            pm.mask
+                .data
+                .iter()
+                .zip(&board)
+                .filter(|(&m, &b)| m && b)
+                .count()
+        };
+        let pal = p.palette(0.05, 8, true);
+        let boards: Vec<usize> = pal
+            .iter()
+            .map(|(_, pm)| on_board(pm))
+            .filter(|&n| n > 0)
+            .collect();
+        assert_eq!(boards.len(), 1, "{boards:?}");
+        assert!(boards[0] >= area - 4, "{boards:?} of {area}");
+        let pal = p.palette(0.05, 8, false);
+        let boards: Vec<usize> = pal
+            .iter()
+            .map(|(_, pm)| on_board(pm))
+            .filter(|&n| n > 0)
+            .collect();
+        assert_eq!(boards.len(), 2, "{boards:?}");
+        assert!(boards.iter().all(|&n| n <= area / 2), "{boards:?}");
     }
 
     /// Collapsed UVs (every pixel at one point of the square) on a material
