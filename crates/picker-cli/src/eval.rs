@@ -240,50 +240,6 @@ fn share_inside(a: &[bool], b: &[bool]) -> f64 {
     both as f64 / n as f64
 }
 
-/// Chamfer (3-4) distance of every pixel of `mask` to the nearest pixel outside it (image border counts as outside).
-fn inner_distance(mask: &[bool], w: usize, h: usize) -> Vec<u32> {
-    let mut d: Vec<u32> = mask
-        .iter()
-        .map(|&m| if m { u32::MAX / 2 } else { 0 })
-        .collect();
-    let get = |d: &[u32], x: i64, y: i64| {
-        if x < 0 || y < 0 || x >= w as i64 || y >= h as i64 {
-            0
-        } else {
-            d[y as usize * w + x as usize]
-        }
-    };
-    for y in 0..h as i64 {
-        for x in 0..w as i64 {
-            let i = y as usize * w + x as usize;
-            let m = [
-                (get(&d, x - 1, y), 3),
-                (get(&d, x, y - 1), 3),
-                (get(&d, x - 1, y - 1), 4),
-                (get(&d, x + 1, y - 1), 4),
-            ];
-            for (v, c) in m {
-                d[i] = d[i].min(v + c);
-            }
-        }
-    }
-    for y in (0..h as i64).rev() {
-        for x in (0..w as i64).rev() {
-            let i = y as usize * w + x as usize;
-            let m = [
-                (get(&d, x + 1, y), 3),
-                (get(&d, x, y + 1), 3),
-                (get(&d, x + 1, y + 1), 4),
-                (get(&d, x - 1, y + 1), 4),
-            ];
-            for (v, c) in m {
-                d[i] = d[i].min(v + c);
-            }
-        }
-    }
-    d
-}
-
 /// Tolerances of [`oracle_tolerance_iou`]: 0.005 to 0.5 in steps of 0.005.
 pub const ORACLE_TOLERANCE_STEPS: usize = 100;
 
@@ -540,7 +496,8 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
         if area == 0.0 || area < a.min_area {
             continue;
         }
-        let dist = inner_distance(&true_mask, w, h);
+        // Chamfer (3-4) distance to the material's outside.
+        let dist = picker_extract::mask::chamfer_depth(&true_mask, w, h, 3, 4);
         let best = (0..w * h)
             .max_by_key(|&i| (dist[i], std::cmp::Reverse(i)))
             .expect("non-empty");

@@ -673,6 +673,55 @@ fn labelled(mask: &Mask, eight: bool) -> (Vec<u32>, Vec<usize>) {
     (label, sizes)
 }
 
+/// Chamfer distance from each pixel of `set` (a `w × h` grid) to the
+/// nearest pixel outside it, 0 outside (the grid's border counts as
+/// outside): two passes with steps of `straight` to the 4 and `diagonal` to
+/// the diagonal neighbours. Steps of 1 and 1 give the Chebyshev distance
+/// exactly (1 on the set's boundary); 3 and 4, three times a close
+/// approximation of the Euclidean one.
+///
+/// # Panics
+/// When `set` does not hold `w × h` values.
+pub fn chamfer_depth(set: &[bool], w: usize, h: usize, straight: u32, diagonal: u32) -> Vec<u32> {
+    assert_eq!(
+        set.len(),
+        w * h,
+        "chamfer_depth: {} values for {w}x{h}",
+        set.len()
+    );
+    let mut d: Vec<u32> = set.iter().map(|&b| if b { u32::MAX } else { 0 }).collect();
+    let at = |d: &[u32], x: i64, y: i64| -> u32 {
+        if x < 0 || y < 0 || x >= w as i64 || y >= h as i64 {
+            0
+        } else {
+            d[y as usize * w + x as usize]
+        }
+    };
+    let steps = |sign: i64| {
+        [
+            (-sign, 0, straight),
+            (0, -sign, straight),
+            (-sign, -sign, diagonal),
+            (sign, -sign, diagonal),
+        ]
+    };
+    for (sign, rows) in [(1i64, false), (-1, true)] {
+        for yy in 0..h as i64 {
+            let y = if rows { h as i64 - 1 - yy } else { yy };
+            for xx in 0..w as i64 {
+                let x = if rows { w as i64 - 1 - xx } else { xx };
+                let i = y as usize * w + x as usize;
+                if d[i] != 0 {
+                    for (dx, dy, c) in steps(sign) {
+                        d[i] = d[i].min(at(&d, x + dx, y + dy).saturating_add(c));
+                    }
+                }
+            }
+        }
+    }
+    d
+}
+
 /// The label (of [`components`], on a grid `w` wide) of the labelled pixel
 /// nearest to `(x, y)` (Euclidean; ties: the first in row order), or 0 when
 /// no pixel is labelled.
@@ -1096,6 +1145,42 @@ mod tests {
         );
         assert_eq!(mk(5, 4, &|_, _| false).central_pixel(), None);
         assert_eq!(mk(0, 0, &|_, _| true).central_pixel(), None);
+    }
+
+    #[test]
+    fn chamfer_depth_with_unit_steps_is_the_chebyshev_distance() {
+        let mut rng = picker_tensor::Rng::new(11);
+        for &(w, h) in &[(1usize, 1usize), (7, 1), (1, 5), (9, 7), (16, 12)] {
+            for density in [0.3, 0.7, 0.95, 1.0] {
+                let set: Vec<bool> = (0..w * h).map(|_| rng.f64() < density).collect();
+                let brute: Vec<u32> = (0..w * h)
+                    .map(|i| {
+                        if !set[i] {
+                            return 0;
+                        }
+                        let (x, y) = ((i % w) as i64, (i / w) as i64);
+                        // Outside: unset pixels and the ring around the grid.
+                        let mut best = i64::MAX;
+                        for yy in -1..=h as i64 {
+                            for xx in -1..=w as i64 {
+                                let inside =
+                                    (0..w as i64).contains(&xx) && (0..h as i64).contains(&yy);
+                                if !inside || !set[yy as usize * w + xx as usize] {
+                                    best = best.min((xx - x).abs().max((yy - y).abs()));
+                                }
+                            }
+                        }
+                        best as u32
+                    })
+                    .collect();
+                assert_eq!(chamfer_depth(&set, w, h, 1, 1), brute, "{w}x{h} {density}");
+            }
+        }
+        // 3-4 steps: three times the distance along an axis.
+        let row = vec![true; 9];
+        assert_eq!(chamfer_depth(&row, 9, 1, 3, 4), vec![3; 9]);
+        let square = vec![true; 25];
+        assert_eq!(chamfer_depth(&square, 5, 5, 3, 4)[12], 9);
     }
 
     #[test]

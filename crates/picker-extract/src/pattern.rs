@@ -211,57 +211,15 @@ pub fn companion_seed(seg: &Image, valid: &[bool], mask: &Mask) -> Option<([usiz
     Some(([best % w, best / w], med))
 }
 
-/// Chebyshev distance from each pixel of `set` to the nearest pixel outside
-/// it (1 on its boundary; the grid's border counts as outside), 0 outside:
-/// a two-pass chamfer transform with unit steps to all 8 neighbours, exact
-/// for the Chebyshev metric.
-pub fn depth(set: &[bool], w: usize, h: usize) -> Vec<u32> {
-    assert_eq!(set.len(), w * h, "depth: {} values for {w}x{h}", set.len());
-    let mut d: Vec<u32> = set.iter().map(|&b| if b { u32::MAX } else { 0 }).collect();
-    let at = |d: &[u32], x: i64, y: i64| -> u32 {
-        if x < 0 || y < 0 || x >= w as i64 || y >= h as i64 {
-            0
-        } else {
-            d[y as usize * w + x as usize]
-        }
-    };
-    for y in 0..h as i64 {
-        for x in 0..w as i64 {
-            let i = y as usize * w + x as usize;
-            if d[i] != 0 {
-                let m = [(-1, -1), (0, -1), (1, -1), (-1, 0)]
-                    .iter()
-                    .map(|&(dx, dy)| at(&d, x + dx, y + dy))
-                    .min()
-                    .unwrap_or(0);
-                d[i] = d[i].min(m.saturating_add(1));
-            }
-        }
-    }
-    for y in (0..h as i64).rev() {
-        for x in (0..w as i64).rev() {
-            let i = y as usize * w + x as usize;
-            if d[i] != 0 {
-                let m = [(1, 1), (0, 1), (-1, 1), (1, 0)]
-                    .iter()
-                    .map(|&(dx, dy)| at(&d, x + dx, y + dy))
-                    .min()
-                    .unwrap_or(0);
-                d[i] = d[i].min(m.saturating_add(1));
-            }
-        }
-    }
-    d
-}
-
 /// How far the companion is looked for around `mask`: twice the median,
-/// over the mask's 4-connected regions, of each region's largest [`depth`],
+/// over the mask's 4-connected regions, of each region's largest Chebyshev
+/// distance to its outside ([`crate::mask::chamfer_depth`] with unit steps),
 /// plus [`RING_FAR`] for the soft edge between the two (a chessboard's squares
 /// of side `s`: about `s`, so a light square next to a picked dark one is
 /// reached whole).
 pub fn reach(mask: &Mask) -> usize {
     let (w, h) = (mask.width, mask.height);
-    let d = depth(&mask.data, w, h);
+    let d = crate::mask::chamfer_depth(&mask.data, w, h, 1, 1);
     let (label, sizes) = crate::mask::components4(mask);
     let mut deepest = vec![0u32; sizes.len()];
     for (i, &l) in label.iter().enumerate() {
