@@ -101,6 +101,10 @@ pub struct Args {
     /// Keep only the picked colour of a two-colour pattern (`extract --no-pattern`).
     #[arg(long)]
     pub no_pattern: bool,
+    /// Keep a folded tile's wrap edges where the fold put them, rather than where its texels change
+    /// least (for measuring what the placement does).
+    #[arg(long)]
+    pub no_wrap_placement: bool,
     /// Inpaint every texel the mask's surest part did not show, instead of first filling them
     /// from the rest of the mask (its less sure pixels) where it showed them.
     #[arg(long)]
@@ -471,6 +475,7 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
         fold_centring: !a.no_centring,
         fill_from_mask: !a.no_mask_fill,
         heal_seams: !a.keep_seams,
+        wrap_placement: !a.no_wrap_placement,
         tileable: true,
         seamless: false,
         even_out: a.even_out,

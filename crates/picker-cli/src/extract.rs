@@ -207,6 +207,7 @@ impl Flags {
             fold_centring: !self.no_centring,
             fill_from_mask: !self.no_mask_fill,
             heal_seams: !self.keep_seams,
+            wrap_placement: true,
             tileable: !self.no_tile,
             seamless: self.seamless,
             even_out: self.even_out,

@@ -212,6 +212,10 @@ pub struct Options<'a> {
     /// better. Wrapped UVs join at the edges by construction and are left
     /// alone.
     pub heal_seams: bool,
+    /// Put a folded tile's wrap edges where its observed texels change least
+    /// (any cyclic shift of a repeating tile is the same texture), so that a
+    /// pattern's edge is not taken for a seam ([`smoothest_wrap`]).
+    pub wrap_placement: bool,
     /// Also remove colour jumps across the wrap edges when they show (see
     /// [`make_seamless`]); only with `tileable`. Off by default: on synthetic
     /// scenes with true elements it lowered the aligned texture PSNR (the
@@ -947,6 +951,70 @@ pub struct Diagnostics {
     pub greyscale_photo: bool,
     /// Timings, ms.
     pub timings_ms: std::collections::BTreeMap<String, f64>,
+}
+
+/// Where a repeating square's wrap edges change least: the column `x` and
+/// row `y` whose edge with the column (row) before it, wrapping, has the
+/// smallest mean absolute luma step over the pairs of `known` texels across
+/// it (an edge with fewer than half its pairs known is passed over; none:
+/// 0). Ties: the lowest index.
+pub fn smoothest_wrap(tex: &Image, known: &[bool]) -> [usize; 2] {
+    let (w, h) = (tex.width, tex.height);
+    assert_eq!(
+        known.len(),
+        w * h,
+        "smoothest_wrap: known is the texture's size"
+    );
+    let luma = |i: usize| luminance(tex.rgb(i));
+    let best = |n: usize, m: usize, at: &dyn Fn(usize, usize) -> usize| -> usize {
+        // Edge k lies between line k−1 and line k (wrapping), m texels long.
+        let mut choice = (f64::INFINITY, 0usize);
+        for k in 0..n {
+            let prev = (k + n - 1) % n;
+            let (mut sum, mut count) = (0.0f64, 0usize);
+            for j in 0..m {
+                let (a, b) = (at(prev, j), at(k, j));
+                if known[a] && known[b] {
+                    sum += f64::from((luma(a) - luma(b)).abs());
+                    count += 1;
+                }
+            }
+            if 2 * count >= m && count > 0 {
+                let cost = sum / count as f64;
+                if cost < choice.0 {
+                    choice = (cost, k);
+                }
+            }
+        }
+        choice.1
+    };
+    let x = best(w, h, &|col, row| row * w + col);
+    let y = best(h, w, &|row, col| row * w + col);
+    [x, y]
+}
+
+/// `img` rolled cyclically so that its column `at[0]` and row `at[1]` come
+/// first.
+pub fn roll(img: &Image, at: [usize; 2]) -> Image {
+    let (w, h) = (img.width, img.height);
+    let mut out = Image::zeros(img.channels, h, w);
+    for c in 0..img.channels {
+        let (src, dst) = (img.plane(c), &mut out.data[c * w * h..(c + 1) * w * h]);
+        for y in 0..h {
+            let sy = (y + at[1]) % h;
+            for x in 0..w {
+                dst[y * w + x] = src[sy * w + (x + at[0]) % w];
+            }
+        }
+    }
+    out
+}
+
+/// [`roll`] of a `w × h` mask.
+fn roll_mask(m: &[bool], w: usize, h: usize, at: [usize; 2]) -> Vec<bool> {
+    (0..w * h)
+        .map(|i| m[((i / w + at[1]) % h) * w + (i % w + at[0]) % w])
+        .collect()
 }
 
 /// The relative luminance of a linear Rec. 709 / sRGB colour.
@@ -1925,6 +1993,21 @@ fn extract_as(
             fraction: known_fraction,
             ..
         } = seen;
+        // A folded tile repeats: any cyclic shift of it is the same texture.
+        // Its wrap edges are put where the observed texels change least, so
+        // that a pattern's edge (a chessboard's square) does not lie on them,
+        // where the seam band would inpaint over it.
+        let (raw, known, coverage) = match fold.as_ref() {
+            Some(_) if opts.tileable && opts.wrap_placement => {
+                let at = smoothest_wrap(&raw, &known);
+                (
+                    roll(&raw, at),
+                    roll_mask(&known, raw.width, raw.height, at),
+                    roll(&coverage, at),
+                )
+            }
+            _ => (raw, known, coverage),
+        };
         let final_tex = inpaint(&raw, &known, &mut diag.seam_band)?;
         if let Some(d) = diag.uv.as_mut() {
             d.repeats = uv_fold.as_ref().map(|f| f.1);
@@ -2255,6 +2338,7 @@ mod tests {
             fill_from_mask: true,
             tileable: true,
             heal_seams: true,
+            wrap_placement: true,
             seamless: false,
             even_out: None,
             seed: 1,
@@ -3046,6 +3130,74 @@ mod tests {
             sure: (0..w * h).map(sure).collect(),
             pattern: None,
         }
+    }
+
+    #[test]
+    fn a_repeating_tile_is_rolled_to_its_smoothest_wrap() {
+        // A 12×8 tile: a bright band at columns 5..9 and rows 2..5 (a
+        // pattern's edges at 5, 9, 2 and 5); every other edge is flat.
+        let (w, h) = (12, 8);
+        let v = |x: usize, y: usize| {
+            if (5..9).contains(&x) || (2..5).contains(&y) {
+                0.9
+            } else {
+                0.1
+            }
+        };
+        let tex = Image::new(
+            3,
+            h,
+            w,
+            (0..3 * w * h).map(|k| v(k % w, (k / w) % h)).collect(),
+        )
+        .unwrap();
+        let known = vec![true; w * h];
+        let at = smoothest_wrap(&tex, &known);
+        // The lowest flat edges: column 0 (between 11 and 0), row 0.
+        assert_eq!(at, [0, 0]);
+        // Moved by (3, 1): the flat edges are elsewhere, the lowest found.
+        let moved = roll(&tex, [3, 1]);
+        let at = smoothest_wrap(&moved, &known);
+        let step_x = |c: usize| step_x_of(&moved, c, w, h);
+        let step_y = |r: usize| {
+            (0..w)
+                .map(|x| (moved.at(0, r * w + x) - moved.at(0, ((r + h - 1) % h) * w + x)).abs())
+                .sum::<f32>()
+        };
+        assert_eq!(
+            step_x(at[0]),
+            (0..w).map(step_x).fold(f32::INFINITY, f32::min)
+        );
+        assert_eq!(
+            step_y(at[1]),
+            (0..h).map(step_y).fold(f32::INFINITY, f32::min)
+        );
+        // Rolling back undoes the roll; the rolled tile wraps as smoothly.
+        let back = roll(&moved, [w - 3, h - 1]);
+        assert_eq!(back.data, tex.data);
+        let r = roll(&moved, at);
+        assert_eq!(
+            step_x_of(&r, 0, w, h),
+            (0..w).map(step_x).fold(f32::INFINITY, f32::min)
+        );
+        // Unknown texels do not count; an edge with under half its pairs
+        // known is passed over; nothing known: no roll.
+        let mut partly = vec![false; w * h];
+        for y in 0..h {
+            for x in 0..w {
+                partly[y * w + x] = x != 0 && x != 11;
+            }
+        }
+        assert_ne!(smoothest_wrap(&tex, &partly)[0], 0);
+        assert_eq!(smoothest_wrap(&tex, &vec![false; w * h]), [0, 0]);
+        let m = roll_mask(&partly, w, h, [1, 0]);
+        assert!(!m[10] && !m[11] && m[0]);
+    }
+
+    fn step_x_of(t: &Image, c: usize, w: usize, h: usize) -> f32 {
+        (0..h)
+            .map(|y| (t.at(0, y * w + c) - t.at(0, y * w + (c + w - 1) % w)).abs())
+            .sum()
     }
 
     /// The plane-mode extraction of `pm` in `p` at `pick` (PatchMatch, sides
