@@ -129,7 +129,8 @@ impl Interleaving {
 /// `material.json`'s diagnostics).
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct PatternCheck {
-    /// The companion's colour in the image the masks are cut from.
+    /// The companion's colour in the image the masks are cut from (its
+    /// pick colour, [`crate::mask::pick_colour`]).
     pub companion_colour: [f32; 3],
     /// Where the companion was picked (working pixels).
     pub companion_pick: [usize; 2],

@@ -428,7 +428,7 @@ impl Prepared {
         valid: &[bool],
     ) -> PickMask {
         let seg = self.mask_segmentation();
-        let Some((seed, colour)) = crate::pattern::companion_seed(seg, valid, &pm.mask) else {
+        let Some((seed, _)) = crate::pattern::companion_seed(seg, valid, &pm.mask) else {
             return pm;
         };
         let Ok(other) = mask::pick_mask_on(seg, self.relief(), valid, seed[0], seed[1], opts)
@@ -441,7 +441,6 @@ impl Prepared {
         let merged = measured.is_pattern();
         let mut own_share = 1.0;
         if merged {
-            let own = pm.mask.count();
             let mut union = crate::pattern::merged(&pm.mask, &other.mask, &blend);
             if opts.connected {
                 let (label, _) = mask::components(&union);
@@ -458,11 +457,16 @@ impl Prepared {
             // observed, against 62 segments, the checker's period and all of
             // it with the whole union).
             pm.sure.clone_from(&union.data);
-            own_share = own as f64 / union.count().max(1) as f64;
+            let own = union
+                .data
+                .iter()
+                .zip(&pm.mask.data)
+                .filter(|(&u, &m)| u && m);
+            own_share = own.count() as f64 / union.count().max(1) as f64;
             pm.mask = union;
         }
         pm.pattern = Some(crate::pattern::PatternCheck {
-            companion_colour: colour,
+            companion_colour: other.colour,
             companion_pick: seed,
             measured,
             merged,
