@@ -52,9 +52,10 @@ pub const MAX_AREA_RATIO: f64 = 12.0;
 /// A soft-edge pixel's colour lies at most this far from the segment between
 /// the two materials' colours ([`blend`]).
 pub const BLEND_DISTANCE: f32 = 0.1;
-/// Regions of the mask smaller than this share of its area are not counted
-/// as elements of a pattern.
-pub const MIN_REGION_SHARE: f64 = 0.01;
+/// Regions smaller than this many pixels, or than
+/// [`crate::mask::MIN_SPECK_FRACTION`] of the grid, are specks, not elements
+/// of a pattern.
+pub const MIN_ELEMENT_PIXELS: usize = 4;
 /// One of the two colours must come in at least this many elements ...
 pub const MIN_ELEMENTS: usize = 8;
 /// ... none of which holds more than this share of its colour's area.
@@ -72,8 +73,8 @@ pub struct Interleaving {
     pub interleave: f64,
     /// Larger area over smaller.
     pub area_ratio: f64,
-    /// The mask's elements: its 4-connected regions of at least
-    /// [`MIN_REGION_SHARE`] of its area, and the largest one's share of it.
+    /// The mask's elements: its 4-connected regions that are not specks
+    /// ([`MIN_ELEMENT_PIXELS`]), and the largest one's share of its area.
     pub elements: Elements,
     /// The companion's (its part within the mask's [`reach`]).
     pub companion_elements: Elements,
@@ -82,7 +83,7 @@ pub struct Interleaving {
 /// The elements of one colour of a pattern ([`Interleaving`]).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct Elements {
-    /// 4-connected regions of at least [`MIN_REGION_SHARE`] of the area.
+    /// 4-connected regions that are not specks ([`MIN_ELEMENT_PIXELS`]).
     pub count: usize,
     /// The largest region's share of the area.
     pub largest_share: f64,
@@ -98,11 +99,12 @@ impl Elements {
             data: set.to_vec(),
         });
         let area: usize = sizes.iter().skip(1).sum();
+        let speck = (crate::mask::MIN_SPECK_FRACTION * set.len() as f64).ceil() as usize;
         Elements {
             count: sizes
                 .iter()
                 .skip(1)
-                .filter(|&&n| n as f64 >= MIN_REGION_SHARE * area as f64)
+                .filter(|&&n| n >= MIN_ELEMENT_PIXELS.max(speck))
                 .count(),
             largest_share: sizes.iter().skip(1).copied().max().unwrap_or(0) as f64
                 / area.max(1) as f64,
@@ -450,6 +452,21 @@ mod tests {
                 (6..w - 6).contains(&x) && (6..h - 6).contains(&y)
             }));
         }
+    }
+
+    #[test]
+    fn a_fine_chessboard_has_many_elements() {
+        // 4-pixel squares, 128 of each colour on 64×64: each well under 1 %
+        // of its colour's area, all elements; single pixels are specks.
+        let (w, h) = (64, 64);
+        let dark = board(w, h, 4, 0, 0, true);
+        let e = Elements::of(&dark.data, w);
+        assert_eq!(e.count, 128);
+        assert!(e.repeat(), "{e:?}");
+        let dots: Vec<bool> = (0..w * h).map(|i| i % 7 == 0).collect();
+        assert_eq!(Elements::of(&dots, w).count, 0);
+        let m = measure(&dark, &board(w, h, 4, 0, 0, false), &vec![true; w * h]);
+        assert!(m.is_pattern(), "{m:?}");
     }
 
     #[test]
