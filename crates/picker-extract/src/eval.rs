@@ -17,8 +17,17 @@
 //! both images are box-downsampled by 2 until the smaller side of the
 //! extracted one is below 32 texels, every shift is tried at that coarsest
 //! level, and the best [`ALIGN_CANDIDATES`] shifts are refined level by level
-//! in a ±[`ALIGN_REFINE_RADIUS`] window around their projection. A 256² pair
-//! takes a few tens of milliseconds. Rotations by 90° and mirror images are
+//! in a ±[`ALIGN_REFINE_RADIUS`] window around their projection. The tiling's
+//! offset is continuous, so whole-texel shifts are not enough where the
+//! truth is finer than the extracted texture (a 16-texel tile of a 128-pixel
+//! truth may be off by any fraction of a texel): for every scale within 3 dB
+//! of the best, the truth's resampled grid is then moved by a sub-texel
+//! offset (a pattern search in steps of ½, ¼ and ⅛ texel, each offset scored
+//! at the whole shifts within one texel of the best), along the axes where
+//! the truth has at least [`SUBTEXEL_MIN_RATIO`] texels per extracted texel
+//! (a moved area average stays as sharp as the unmoved one; where the truth
+//! is coarser, moving would interpolate, blur it and flatter blurry
+//! textures). A 256² pair takes a few tens of milliseconds. Rotations by 90° and mirror images are
 //! **not** searched (the extracted texture's orientation follows the
 //! recovered UVs, which keep the handedness and orientation of the truth in
 //! the synthetic data).
@@ -29,7 +38,7 @@ use picker_nets::conventions::srgb_encode;
 use picker_render::io::Image;
 use rayon::prelude::*;
 
-use crate::report::resize;
+use crate::report::{resize, resize_periodic_at};
 
 /// Scales tried by [`aligned_texture_score`], in order (ties keep the first):
 /// the size of one period of the truth, in extracted texels, relative to the
@@ -39,6 +48,13 @@ pub const ALIGN_SCALES: [f64; 7] = [1.0, 0.5, 2.0, 1.0 / 3.0, 0.25, 1.5, 2.0 / 3
 pub const ALIGN_CANDIDATES: usize = 8;
 /// Half-width of the refinement window (texels at each level).
 pub const ALIGN_REFINE_RADIUS: i64 = 2;
+/// The sub-texel search runs along an axis where the truth has at least
+/// this many texels per texel of the resampled grid (where it has fewer, a
+/// moved grid would blur the truth and flatter a blurry texture).
+pub const SUBTEXEL_MIN_RATIO: f64 = 2.0;
+/// Scales whose whole-texel error is within this factor of the best one's
+/// get the sub-texel search (2: 3 dB).
+const SUBTEXEL_SCALE_MARGIN: f64 = 2.0;
 /// The coarsest pyramid level's smaller side is below this many texels.
 const COARSEST_SIDE: usize = 32;
 
@@ -70,8 +86,14 @@ pub struct AlignedScore {
     pub psnr_db: f64,
     /// The best cyclic shift `(rows, cols)`: extracted texel `(r, c)` is
     /// compared with texel `((r + rows) mod H, (c + cols) mod W)` of the truth
-    /// resampled to `H × W = round(scale·h) × round(scale·w)`.
+    /// resampled to `H × W = round(scale·h) × round(scale·w)` on a grid moved
+    /// by [`offset`](Self::offset).
     pub shift: (usize, usize),
+    /// The sub-texel part of the alignment `(rows, cols)`, in extracted
+    /// texels (each in `(−1, 1)`, 0 along an axis where the truth is not at
+    /// least [`SUBTEXEL_MIN_RATIO`] times finer than the resampled grid): the
+    /// truth's resampled grid is moved by it (see the module docs).
+    pub offset: (f64, f64),
     /// The best scale (one of [`ALIGN_SCALES`]): one period of the truth
     /// spans `scale` times the extracted texture (0.5: the truth appears
     /// tiled 2×2).
@@ -131,6 +153,7 @@ fn score_turns(extracted: &Image, truth: &Image, turns: usize) -> Vec<AlignedSco
         let nan = AlignedScore {
             psnr_db: f64::NAN,
             shift: (0, 0),
+            offset: (0.0, 0.0),
             scale: 1.0,
             colour_distance: f64::NAN,
         };
@@ -152,17 +175,30 @@ fn score_turns(extracted: &Image, truth: &Image, turns: usize) -> Vec<AlignedSco
             };
             let e_pyr = pyramid(&e, levels(e.height, e.width));
             let c_pyrs = cands.for_size(e.height, e.width, e_pyr.len() - 1);
-            let mut best: Option<(f64, (usize, usize), f64)> = None;
-            for (&s, c_pyr) in ALIGN_SCALES.iter().zip(c_pyrs) {
-                let (mse, shift) = best_shift(&e_pyr, c_pyr);
-                if best.is_none_or(|(b, _, _)| mse < b) {
-                    best = Some((mse, shift, s));
+            let whole: Vec<(f64, (usize, usize))> = c_pyrs
+                .iter()
+                .map(|c_pyr| best_shift(&e_pyr, c_pyr))
+                .collect();
+            let least = whole.iter().map(|w| w.0).fold(f64::INFINITY, f64::min);
+            // Scales within SUBTEXEL_SCALE_MARGIN of the best whole-texel
+            // alignment get their sub-texel search; ties keep the first scale.
+            let mut best: Option<(f64, (usize, usize), (f64, f64), f64)> = None;
+            for ((&s, c_pyr), &(mse, shift)) in ALIGN_SCALES.iter().zip(c_pyrs).zip(&whole) {
+                let cand = if mse <= least * SUBTEXEL_SCALE_MARGIN {
+                    subtexel(&e, &t, (c_pyr[0].height, c_pyr[0].width), (mse, shift))
+                } else {
+                    (mse, shift, (0.0, 0.0))
+                };
+                if best.is_none_or(|(b, ..)| cand.0 < b) {
+                    best = Some((cand.0, cand.1, cand.2, s));
                 }
             }
-            let (mse, shift, scale) = best.unwrap_or((f64::NAN, (0, 0), 1.0));
+            let (mse, shift, offset, scale) =
+                best.unwrap_or((f64::NAN, (0, 0), (0.0, 0.0), 1.0));
             AlignedScore {
                 psnr_db: psnr_from_mse(mse),
                 shift,
+                offset,
                 scale,
                 colour_distance,
             }
@@ -451,6 +487,69 @@ fn best_shift(e_pyr: &[Image], c_pyr: &[Image]) -> (f64, (usize, usize)) {
         .first()
         .map(|&(m, y, x)| (m, (y, x)))
         .unwrap_or((f64::NAN, (0, 0)))
+}
+
+/// The sub-texel refinement of a whole-texel alignment `(mse, shift)` of
+/// `e` (sRGB) against the linear `truth` resampled to `(hc, wc)`: a pattern
+/// search over the resampled grid's offset (steps ½, ¼, ⅛ texel along the axes
+/// where the truth is at least [`SUBTEXEL_MIN_RATIO`] times finer), each offset
+/// scored at the whole shifts within one texel of the best so far. Returns
+/// `(mse, shift, offset)`; never worse than the input.
+fn subtexel(
+    e: &Image,
+    truth: &Image,
+    (hc, wc): (usize, usize),
+    (mse, shift): (f64, (usize, usize)),
+) -> (f64, (usize, usize), (f64, f64)) {
+    let fine = |src: usize, dst: usize| src as f64 >= SUBTEXEL_MIN_RATIO * dst as f64;
+    let (fy, fx) = (fine(truth.height, hc), fine(truth.width, wc));
+    let mut best = (mse, shift, (0.0, 0.0));
+    if !fy && !fx {
+        return best;
+    }
+    // Scores one offset at the whole shifts around the best shift so far.
+    let score = |off: (f64, f64), around: (usize, usize)| {
+        let cand = srgb3(&resize_periodic_at(truth, hc, wc, off));
+        let ext = Extended::new(&cand, e.height, e.width);
+        let mut out: Option<(f64, (usize, usize))> = None;
+        for dy in -1i64..=1 {
+            for dx in -1i64..=1 {
+                let y = (around.0 as i64 + dy).rem_euclid(hc as i64) as usize;
+                let x = (around.1 as i64 + dx).rem_euclid(wc as i64) as usize;
+                let m = ext.mse(e, y, x);
+                if out.is_none_or(|(b, _)| m < b) {
+                    out = Some((m, (y, x)));
+                }
+            }
+        }
+        out.expect("nine shifts scored")
+    };
+    for step in [0.5, 0.25, 0.125] {
+        let centre = best;
+        let mut moves = Vec::new();
+        for sy in [-1.0, 0.0, 1.0] {
+            for sx in [-1.0, 0.0, 1.0] {
+                let (my, mx) = (if fy { sy * step } else { 0.0 }, if fx { sx * step } else { 0.0 });
+                if (my, mx) != (0.0, 0.0) && !moves.contains(&(my, mx)) {
+                    moves.push((my, mx));
+                }
+            }
+        }
+        let scored: Vec<_> = moves
+            .into_par_iter()
+            .map(|(my, mx)| {
+                let off = (centre.2 .0 + my, centre.2 .1 + mx);
+                let (m, s) = score(off, centre.1);
+                (m, s, off)
+            })
+            .collect();
+        for cand in scored {
+            if cand.0 < best.0 {
+                best = cand;
+            }
+        }
+    }
+    best
 }
 
 /// Sorts by error (then shift, for determinism) and keeps [`ALIGN_CANDIDATES`].

@@ -651,11 +651,44 @@ pub fn resize_rows(
     wrap: bool,
     row: impl Fn(usize, usize, &mut [f32]) + Sync,
 ) -> Image {
+    resize_rows_at((c, sh, sw), height, width, (wrap, (0.0, 0.0)), row)
+}
+
+/// [`resize`] of a periodic image with its output grid moved by `offset =
+/// (rows, columns)` output texels: output texel `(r, c)` covers (or, along a
+/// growing axis, samples the centre of) the source footprint of texel
+/// `(r + offset.0, c + offset.1)` of the unmoved resize, wrapping around.
+/// Offset `(0, 0)` gives exactly `resize(img, height, width, true)`.
+pub(crate) fn resize_periodic_at(
+    img: &Image,
+    height: usize,
+    width: usize,
+    offset: (f64, f64),
+) -> Image {
+    let sw = img.width;
+    resize_rows_at(
+        (img.channels, img.height, img.width),
+        height,
+        width,
+        (true, offset),
+        |ch, r, row| row.copy_from_slice(&img.plane(ch)[r * sw..(r + 1) * sw]),
+    )
+}
+
+/// [`resize_rows`] with the output grid moved by `offset` output texels
+/// (`(wrap, offset)`; see [`resize_periodic_at`]).
+fn resize_rows_at(
+    (c, sh, sw): (usize, usize, usize),
+    height: usize,
+    width: usize,
+    (wrap, offset): (bool, (f64, f64)),
+    row: impl Fn(usize, usize, &mut [f32]) + Sync,
+) -> Image {
     if sw == 0 || sh == 0 || width == 0 || height == 0 {
         return Image::zeros(c, height, width);
     }
-    let wx = axis_weights(sw, width, wrap);
-    let wy = axis_weights(sh, height, wrap);
+    let wx = axis_weights_at(sw, width, wrap, offset.1);
+    let wy = axis_weights_at(sh, height, wrap, offset.0);
     let mut out = vec![0.0f32; c * width * height];
     let mut tmp = vec![0.0f32; sh * width];
     // Rows in parallel in both passes; every value is one fixed-order sum, so
@@ -688,37 +721,48 @@ pub fn resize_rows(
 }
 
 /// Per output index, the source taps `(index, weight)` (weights sum to 1).
+#[cfg(test)]
 fn axis_weights(src: usize, dst: usize, wrap: bool) -> Vec<Vec<(usize, f32)>> {
+    axis_weights_at(src, dst, wrap, 0.0)
+}
+
+/// [`axis_weights`] for the output grid moved by `offset` output texels
+/// (source indices wrap with `wrap`, else clamp to the edge). Offset 0 gives
+/// the same taps in the same order as no offset.
+fn axis_weights_at(src: usize, dst: usize, wrap: bool, offset: f64) -> Vec<Vec<(usize, f32)>> {
     let scale = src as f64 / dst as f64;
+    let idx = |i: i64| -> usize {
+        if wrap {
+            i.rem_euclid(src as i64) as usize
+        } else {
+            i.clamp(0, src as i64 - 1) as usize
+        }
+    };
     (0..dst)
         .map(|o| {
+            let at = o as f64 + offset;
             if scale > 1.0 {
-                // Area average over [o·scale, (o+1)·scale).
-                let (a, b) = (o as f64 * scale, (o as f64 + 1.0) * scale);
+                // Area average over [at·scale, (at+1)·scale); unmoved, the
+                // footprint ends inside the source (`i < src` drops a last
+                // index that rounding alone reaches).
+                let (a, b) = (at * scale, (at + 1.0) * scale);
                 let mut taps = Vec::new();
-                let mut i = a.floor() as usize;
-                while (i as f64) < b && i < src {
+                let mut i = a.floor() as i64;
+                while (i as f64) < b && (offset != 0.0 || i < src as i64) {
                     let lo = a.max(i as f64);
                     let hi = b.min(i as f64 + 1.0);
                     if hi > lo {
-                        taps.push((i, ((hi - lo) / scale) as f32));
+                        taps.push((idx(i), ((hi - lo) / scale) as f32));
                     }
                     i += 1;
                 }
                 taps
             } else {
                 // Bilinear at the output texel centre.
-                let s = (o as f64 + 0.5) * scale - 0.5;
+                let s = (at + 0.5) * scale - 0.5;
                 let f = s.floor();
                 let t = (s - f) as f32;
                 let i0 = f as i64;
-                let idx = |i: i64| -> usize {
-                    if wrap {
-                        i.rem_euclid(src as i64) as usize
-                    } else {
-                        i.clamp(0, src as i64 - 1) as usize
-                    }
-                };
                 vec![(idx(i0), 1.0 - t), (idx(i0 + 1), t)]
             }
         })
@@ -759,6 +803,71 @@ mod tests {
             height,
             width,
             data: out,
+        }
+    }
+
+    /// A moved periodic resize against its definition: the integral of the
+    /// source (a step function, periodic) over each output texel's footprint,
+    /// taken by brute force on a 1/64-texel grid along the shrinking axis;
+    /// bilinear samples of the periodic source along the growing one.
+    #[test]
+    fn moved_periodic_resize_matches_its_definition() {
+        let mut rng = picker_tensor::Rng::new(17);
+        for (sh, sw, h, w) in [(24, 40, 6, 5), (7, 9, 3, 4), (5, 6, 10, 15), (32, 3, 8, 7)] {
+            let data: Vec<f32> = (0..sh * sw).map(|_| rng.uniform(0.0, 1.0)).collect();
+            let img = Image::new(1, sh, sw, data.clone()).unwrap();
+            for off in [(0.0, 0.0), (0.375, -0.5), (-0.875, 0.25), (2.0, -1.0)] {
+                let out = resize_periodic_at(&img, h, w, off);
+                // Along one axis: the weights the definition gives output `o`.
+                let weights = |src: usize, dst: usize, o: usize, off: f64| -> Vec<f64> {
+                    let scale = src as f64 / dst as f64;
+                    let mut wts = vec![0.0f64; src];
+                    if scale > 1.0 {
+                        let steps = 64 * src;
+                        for k in 0..steps {
+                            let x = (o as f64 + off) * scale + (k as f64 + 0.5) * scale / steps as f64;
+                            wts[(x.floor() as i64).rem_euclid(src as i64) as usize] += 1.0 / steps as f64;
+                        }
+                    } else {
+                        let x = (o as f64 + 0.5 + off) * scale - 0.5;
+                        let t = x - x.floor();
+                        wts[(x.floor() as i64).rem_euclid(src as i64) as usize] += 1.0 - t;
+                        wts[(x.floor() as i64 + 1).rem_euclid(src as i64) as usize] += t;
+                    }
+                    wts
+                };
+                for r in 0..h {
+                    let wy = weights(sh, h, r, off.0);
+                    for c in 0..w {
+                        let wx = weights(sw, w, c, off.1);
+                        let mut want = 0.0f64;
+                        for (y, a) in wy.iter().enumerate() {
+                            for (x, b) in wx.iter().enumerate() {
+                                want += a * b * f64::from(data[y * sw + x]);
+                            }
+                        }
+                        let got = f64::from(out.data[r * w + c]);
+                        assert!(
+                            (got - want).abs() < 2e-3,
+                            "{sh}x{sw} -> {h}x{w} at {off:?}: ({r}, {c}) {got} vs {want}"
+                        );
+                    }
+                }
+                if off == (0.0, 0.0) {
+                    assert_eq!(out.data, resize(&img, h, w, true).data, "unmoved: resize's bytes");
+                }
+                if off == (2.0, -1.0) {
+                    // Whole texels: the unmoved resize rolled.
+                    let plain = resize(&img, h, w, true);
+                    for r in 0..h {
+                        for c in 0..w {
+                            let (pr, pc) = ((r + 2) % h, (c + w - 1) % w);
+                            let d = out.data[r * w + c] - plain.data[pr * w + pc];
+                            assert!(d.abs() < 1e-5, "{sh}x{sw} roll ({r}, {c}): {d}");
+                        }
+                    }
+                }
+            }
         }
     }
 

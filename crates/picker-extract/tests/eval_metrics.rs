@@ -61,6 +61,7 @@ fn identical_textures_score_perfectly() {
     let s = aligned_texture_score(&t, &t);
     assert_eq!(s.psnr_db, f64::INFINITY);
     assert_eq!(s.shift, (0, 0));
+    assert_eq!(s.offset, (0.0, 0.0));
     assert_eq!(s.scale, 1.0);
     assert_eq!(s.colour_distance, 0.0);
     assert_eq!(colour_distance(&t, &t), 0.0);
@@ -126,6 +127,71 @@ fn half_scale_tiled_copy_is_found_at_half_scale() {
     assert_eq!(s.scale, 0.5, "{s:?}");
     assert_eq!(s.shift, (3, 9));
     assert!(s.psnr_db > 60.0, "{s:?}");
+}
+
+/// The `h × w` area average of `img` (each side a whole multiple), in linear light.
+fn box_down(img: &Image, h: usize, w: usize) -> Image {
+    let (ry, rx) = (img.height / h, img.width / w);
+    let mut out = Image::zeros(img.channels, h, w);
+    for c in 0..img.channels {
+        for r in 0..h {
+            for x in 0..w {
+                let mut sum = 0.0f32;
+                for yy in 0..ry {
+                    for xx in 0..rx {
+                        sum += img.data[c * img.plane_len() + (r * ry + yy) * img.width + x * rx + xx];
+                    }
+                }
+                out.data[c * h * w + r * w + x] = sum / (ry * rx) as f32;
+            }
+        }
+    }
+    out
+}
+
+/// A texture seen at an eighth of the truth's resolution with its texel grid
+/// a fraction of a texel off the truth's (3 and 5 truth pixels = 3/8 and 5/8
+/// of a texel): the whole-texel search alone cannot line it up; the sub-texel
+/// search finds the offset and a near-exact match.
+#[test]
+fn subtexel_offset_is_found_when_the_truth_is_finer() {
+    let t = texture(128, 128, 21);
+    for (dy, dx, sy, sx) in [(3, 5, 0, 0), (5, 13, 7, 2)] {
+        // Extracted texel (r, c) averages truth rows 8r + dy .. 8r + dy + 8.
+        let e = shifted(&box_down(&shifted(&t, dy, dx), 16, 16), sy, sx);
+        let s = aligned_texture_score(&e, &t);
+        assert_eq!(s.scale, 1.0, "{s:?}");
+        assert!(s.psnr_db > 60.0, "({dy}, {dx}): {s:?}");
+        // Offset and whole shift together: (dy, dx)/8 + (sy, sx) texels.
+        let at = |shift: usize, off: f64, want: f64| {
+            let got = shift as f64 + off;
+            ((got - want).rem_euclid(16.0)).min((want - got).rem_euclid(16.0)) < 1e-9
+        };
+        assert!(at(s.shift.0, s.offset.0, dy as f64 / 8.0 + sy as f64), "{s:?}");
+        assert!(at(s.shift.1, s.offset.1, dx as f64 / 8.0 + sx as f64), "{s:?}");
+    }
+}
+
+/// Where the truth is no finer than the extracted grid, the grid is never
+/// moved (it would blur the truth): a half-texel shift of a same-size
+/// texture is scored at whole texels only.
+#[test]
+fn no_subtexel_offset_at_the_truths_own_resolution() {
+    let t = texture(48, 48, 23);
+    // Halfway between each texel and its right neighbour.
+    let mut e = t.clone();
+    let n = t.plane_len();
+    for c in 0..3 {
+        for r in 0..48 {
+            for x in 0..48 {
+                let at = |xx: usize| t.data[c * n + r * 48 + xx % 48];
+                e.data[c * n + r * 48 + x] = 0.5 * (at(x) + at(x + 1));
+            }
+        }
+    }
+    let s = aligned_texture_score(&e, &t);
+    assert_eq!(s.offset, (0.0, 0.0), "{s:?}");
+    assert!(s.psnr_db < 40.0, "{s:?}");
 }
 
 #[test]
