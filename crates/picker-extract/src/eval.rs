@@ -182,19 +182,19 @@ fn score_turns(extracted: &Image, truth: &Image, turns: usize) -> Vec<AlignedSco
             let least = whole.iter().map(|w| w.0).fold(f64::INFINITY, f64::min);
             // Scales within SUBTEXEL_SCALE_MARGIN of the best whole-texel
             // alignment get their sub-texel search; ties keep the first scale.
-            let mut best: Option<(f64, (usize, usize), (f64, f64), f64)> = None;
+            let mut best: Option<(Aligned, f64)> = None;
             for ((&s, c_pyr), &(mse, shift)) in ALIGN_SCALES.iter().zip(c_pyrs).zip(&whole) {
                 let cand = if mse <= least * SUBTEXEL_SCALE_MARGIN {
                     subtexel(&e, &t, (c_pyr[0].height, c_pyr[0].width), (mse, shift))
                 } else {
                     (mse, shift, (0.0, 0.0))
                 };
-                if best.is_none_or(|(b, ..)| cand.0 < b) {
-                    best = Some((cand.0, cand.1, cand.2, s));
+                if best.is_none_or(|(b, _)| cand.0 < b.0) {
+                    best = Some((cand, s));
                 }
             }
-            let (mse, shift, offset, scale) =
-                best.unwrap_or((f64::NAN, (0, 0), (0.0, 0.0), 1.0));
+            let ((mse, shift, offset), scale) =
+                best.unwrap_or(((f64::NAN, (0, 0), (0.0, 0.0)), 1.0));
             AlignedScore {
                 psnr_db: psnr_from_mse(mse),
                 shift,
@@ -500,7 +500,7 @@ fn subtexel(
     truth: &Image,
     (hc, wc): (usize, usize),
     (mse, shift): (f64, (usize, usize)),
-) -> (f64, (usize, usize), (f64, f64)) {
+) -> Aligned {
     let fine = |src: usize, dst: usize| src as f64 >= SUBTEXEL_MIN_RATIO * dst as f64;
     let (fy, fx) = (fine(truth.height, hc), fine(truth.width, wc));
     let mut best = (mse, shift, (0.0, 0.0));
@@ -529,7 +529,10 @@ fn subtexel(
         let mut moves = Vec::new();
         for sy in [-1.0, 0.0, 1.0] {
             for sx in [-1.0, 0.0, 1.0] {
-                let (my, mx) = (if fy { sy * step } else { 0.0 }, if fx { sx * step } else { 0.0 });
+                let (my, mx) = (
+                    if fy { sy * step } else { 0.0 },
+                    if fx { sx * step } else { 0.0 },
+                );
                 if (my, mx) != (0.0, 0.0) && !moves.contains(&(my, mx)) {
                     moves.push((my, mx));
                 }
@@ -551,6 +554,9 @@ fn subtexel(
     }
     best
 }
+
+/// An alignment and its error: `(mse, whole shift, sub-texel offset)`.
+type Aligned = (f64, (usize, usize), (f64, f64));
 
 /// Sorts by error (then shift, for determinism) and keeps [`ALIGN_CANDIDATES`].
 fn keep_best(scored: &mut Vec<(f64, usize, usize)>) {

@@ -825,8 +825,10 @@ mod tests {
                     if scale > 1.0 {
                         let steps = 64 * src;
                         for k in 0..steps {
-                            let x = (o as f64 + off) * scale + (k as f64 + 0.5) * scale / steps as f64;
-                            wts[(x.floor() as i64).rem_euclid(src as i64) as usize] += 1.0 / steps as f64;
+                            let x =
+                                (o as f64 + off) * scale + (k as f64 + 0.5) * scale / steps as f64;
+                            wts[(x.floor() as i64).rem_euclid(src as i64) as usize] +=
+                                1.0 / steps as f64;
                         }
                     } else {
                         let x = (o as f64 + 0.5 + off) * scale - 0.5;
@@ -854,7 +856,11 @@ mod tests {
                     }
                 }
                 if off == (0.0, 0.0) {
-                    assert_eq!(out.data, resize(&img, h, w, true).data, "unmoved: resize's bytes");
+                    assert_eq!(
+                        out.data,
+                        resize(&img, h, w, true).data,
+                        "unmoved: resize's bytes"
+                    );
                 }
                 if off == (2.0, -1.0) {
                     // Whole texels: the unmoved resize rolled.

@@ -139,7 +139,8 @@ fn box_down(img: &Image, h: usize, w: usize) -> Image {
                 let mut sum = 0.0f32;
                 for yy in 0..ry {
                     for xx in 0..rx {
-                        sum += img.data[c * img.plane_len() + (r * ry + yy) * img.width + x * rx + xx];
+                        sum +=
+                            img.data[c * img.plane_len() + (r * ry + yy) * img.width + x * rx + xx];
                     }
                 }
                 out.data[c * h * w + r * w + x] = sum / (ry * rx) as f32;
@@ -167,8 +168,14 @@ fn subtexel_offset_is_found_when_the_truth_is_finer() {
             let got = shift as f64 + off;
             ((got - want).rem_euclid(16.0)).min((want - got).rem_euclid(16.0)) < 1e-9
         };
-        assert!(at(s.shift.0, s.offset.0, dy as f64 / 8.0 + sy as f64), "{s:?}");
-        assert!(at(s.shift.1, s.offset.1, dx as f64 / 8.0 + sx as f64), "{s:?}");
+        assert!(
+            at(s.shift.0, s.offset.0, dy as f64 / 8.0 + sy as f64),
+            "{s:?}"
+        );
+        assert!(
+            at(s.shift.1, s.offset.1, dx as f64 / 8.0 + sx as f64),
+            "{s:?}"
+        );
     }
 }
 
