@@ -2,7 +2,8 @@
 //! an artist can use (design.md §4–5, `docs/contract-extract.md`).
 //!
 //! The chain, one module per step:
-//! - [`photo`]: the photograph read from any supported file, oriented, checked.
+//! - [`photo`]: the photograph read from any supported file, oriented, checked
+//!   ([`jpeg`]: a JPEG's coded blocks walked, so a damaged file is refused).
 //! - [`resample`], [`guided`]: the network outputs at the working resolution
 //!   are brought to the photo's resolution guided by the photo.
 //! - [`smooth`], [`mask`]: the segmentation smoothed along the photo; pick → mask
@@ -25,6 +26,7 @@ pub mod eval;
 pub mod export;
 pub mod grain;
 pub mod guided;
+pub mod jpeg;
 pub mod lines;
 pub mod mask;
 pub mod material;

@@ -167,6 +167,17 @@ pub enum PhotoError {
         /// What is missing.
         detail: String,
     },
+    /// The image data holds what no encoder writes (a damaged file that
+    /// decoders would silently decode into garbage).
+    #[error("{}: the {format} data is damaged ({detail})", path.display())]
+    Corrupt {
+        /// The file.
+        path: PathBuf,
+        /// The format found from the content, e.g. `"JPEG"`.
+        format: &'static str,
+        /// What is wrong and where.
+        detail: String,
+    },
     /// The extension names one format, the content is another, and the
     /// content does not decode.
     #[error("{}: the file is named .{extension} but its content is {format}, which could not be decoded: {reason}", path.display())]
@@ -253,6 +264,7 @@ impl PhotoError {
             | Self::Empty { path }
             | Self::Unsupported { path, .. }
             | Self::Truncated { path, .. }
+            | Self::Corrupt { path, .. }
             | Self::Mislabelled { path, .. }
             | Self::TooManyPixels { path, .. }
             | Self::TooMuchMemory { path, .. }
@@ -455,6 +467,7 @@ fn decode_image(bytes: &[u8], label: &Path, limits: &PhotoLimits) -> Result<Deco
                 "no end-of-image marker after the image data".into(),
             ))
         }
+
         ImageFormat::WebP => {
             if let Some(declared) = bytes.get(4..8) {
                 let declared = u32::from_le_bytes(declared.try_into().unwrap_or([0; 4])) as u64;
@@ -560,7 +573,28 @@ fn decode_image(bytes: &[u8], label: &Path, limits: &PhotoLimits) -> Result<Deco
                 .flatten()
         });
 
-    let img = DynamicImage::from_decoder(decoder).map_err(fail)?;
+    // The JPEG decoder also fills in what a damaged file's blocks lack and
+    // decodes changed bytes as whatever they say: its coded blocks are
+    // walked (crate::jpeg) on a second thread while it decodes.
+    let (img, walked) = std::thread::scope(|s| {
+        let check =
+            (kind.image == ImageFormat::Jpeg).then(|| s.spawn(|| crate::jpeg::check(bytes)));
+        let img = DynamicImage::from_decoder(decoder);
+        let walked = check.map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)));
+        (img, walked)
+    });
+    match walked {
+        Some(Err(crate::jpeg::Damage::EndsEarly(detail))) => return Err(truncated(detail)),
+        Some(Err(crate::jpeg::Damage::Corrupt(detail))) => {
+            return Err(PhotoError::Corrupt {
+                path: path(),
+                format: kind.display,
+                detail,
+            })
+        }
+        _ => {}
+    }
+    let img = img.map_err(fail)?;
     Ok(Decoded {
         img,
         kind,
