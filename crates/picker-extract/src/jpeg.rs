@@ -53,6 +53,11 @@ pub enum Damage {
 
 /// Walks the entropy-coded data of the JPEG file `bytes` (see the module
 /// docs). `Ok` when nothing is wrong or the file is not walked.
+///
+/// Memory: a progressive file's AC history takes 8 bytes per block of each
+/// component it refines (12 MB for a 100-megapixel picture, but 512 MB for
+/// a lying 65535 × 65535 header): [`crate::photo`] calls this only after the
+/// header's size has passed its limits.
 pub fn check(bytes: &[u8]) -> Result<Checked, Damage> {
     if !bytes.starts_with(&[0xFF, 0xD8]) {
         return Ok(Checked::NotWalked);
@@ -635,7 +640,10 @@ fn walk_scan(
         }
         for &(k, td, ta) in &units {
             let missing = Fault::Bad;
-            let (dc, ac) = (tables.dc[td].as_ref(), tables.ac[ta].as_ref());
+            let (dc, ac) = (
+                tables.dc.get(td).and_then(Option::as_ref),
+                tables.ac.get(ta).and_then(Option::as_ref),
+            );
             let dc = || dc.ok_or(missing("a missing Huffman table"));
             let ac = || ac.ok_or(missing("a missing Huffman table"));
             let mut walk = || -> Result<(), Fault> {

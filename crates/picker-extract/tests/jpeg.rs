@@ -272,3 +272,29 @@ fn other_codings_are_not_walked() {
     assert_eq!(check(b"not a jpeg"), Ok(Checked::NotWalked));
     assert_eq!(check(&[]), Ok(Checked::NotWalked));
 }
+
+/// A DC refinement scan decodes raw bits: its table selectors are not used
+/// and may hold anything (a fuzzed file once made the walk index past the
+/// four tables).
+#[test]
+fn unused_table_selectors_are_ignored() {
+    let (_, bytes) = fixtures()
+        .into_iter()
+        .find(|(n, _)| n == "progressive-420.jpg")
+        .unwrap();
+    let mut changed = 0;
+    let mut file = bytes.clone();
+    for sos in (0..bytes.len() - 1).filter(|&i| bytes[i] == 0xFF && bytes[i + 1] == 0xDA) {
+        let n = bytes[sos + 4] as usize;
+        let tail = sos + 5 + 2 * n;
+        // Ss = Se = 0, Ah ≠ 0: a DC refinement.
+        if bytes[tail] == 0 && bytes[tail + 1] == 0 && bytes[tail + 2] >> 4 != 0 {
+            for k in 0..n {
+                file[sos + 5 + 2 * k + 1] = 0xFF;
+                changed += 1;
+            }
+        }
+    }
+    assert!(changed > 0, "no DC refinement scan in the fixture");
+    assert_eq!(check(&file), Ok(Checked::Walked));
+}
