@@ -10,9 +10,13 @@
 //!
 //! **Alignment search** (no FFT): for each scale `s` in [`ALIGN_SCALES`],
 //! the (linear) truth is resampled with wrap-around to `round(s·h) × round(s·w)`
-//! (area average when shrinking, bilinear when enlarging), sRGB-encoded like
-//! the extracted texture, and treated as periodic, so at `s < 1` it is effectively tiled
-//! and at `s > 1` the extracted texture is compared with a window of it. The
+//! (area average when shrinking, bilinear when enlarging) and sRGB-encoded
+//! like the extracted texture. At `s ≤ 1` it is treated as periodic
+//! (effectively tiled) and the extracted texture is compared with a window of
+//! it; at `s > 1` the whole of it is compared with the extracted texture
+//! tiled (the texture as an artist uses it, so a cyclic roll of the texture
+//! changes only the shift found; comparing the texture with a window of the
+//! truth was not invariant to such rolls). The
 //! mean squared error over all cyclic shifts is minimised coarse-to-fine:
 //! both images are box-downsampled by 2 until the smaller side of the
 //! extracted one is below 32 texels, every shift is tried at that coarsest
@@ -87,7 +91,10 @@ pub struct AlignedScore {
     /// The best cyclic shift `(rows, cols)`: extracted texel `(r, c)` is
     /// compared with texel `((r + rows) mod H, (c + cols) mod W)` of the truth
     /// resampled to `H × W = round(scale·h) × round(scale·w)` on a grid moved
-    /// by [`offset`](Self::offset).
+    /// by [`offset`](Self::offset). At scales over 1 (one period of the truth
+    /// spans more than the extracted texture) the roles swap: every texel
+    /// `(R, C)` of the resampled truth is compared with extracted texel
+    /// `((R + rows) mod h, (C + cols) mod w)`, i.e. with the texture tiled.
     pub shift: (usize, usize),
     /// The sub-texel part of the alignment `(rows, cols)`, in extracted
     /// texels (each in `(−1, 1)`, 0 along an axis where the truth is not at
@@ -175,9 +182,19 @@ fn score_turns(extracted: &Image, truth: &Image, turns: usize) -> Vec<AlignedSco
             };
             let e_pyr = pyramid(&e, levels(e.height, e.width));
             let c_pyrs = cands.for_size(e.height, e.width, e_pyr.len() - 1);
+            // Where the truth's period spans more than the extracted texture
+            // (scales over 1), the whole period is compared with the
+            // extracted texture tiled, as an artist uses it: any cyclic roll
+            // of the texture is then the same texture, at another shift.
             let whole: Vec<(f64, (usize, usize))> = c_pyrs
                 .iter()
-                .map(|c_pyr| best_shift(&e_pyr, c_pyr))
+                .map(|c_pyr| {
+                    if tiles(&e, (c_pyr[0].height, c_pyr[0].width)) {
+                        best_shift(c_pyr, &e_pyr)
+                    } else {
+                        best_shift(&e_pyr, c_pyr)
+                    }
+                })
                 .collect();
             let least = whole.iter().map(|w| w.0).fold(f64::INFINITY, f64::min);
             // Scales within SUBTEXEL_SCALE_MARGIN of the best whole-texel
@@ -507,16 +524,31 @@ fn subtexel(
     if !fy && !fx {
         return best;
     }
+    // The periodic side of the comparison (see `tiles`): the extracted
+    // texture tiled, made once, or each offset's resampled truth.
+    let tiled = tiles(e, (hc, wc)).then(|| Extended::new(e, hc, wc));
+    let period = if tiled.is_some() {
+        (e.height, e.width)
+    } else {
+        (hc, wc)
+    };
     // Scores one offset at the whole shifts around the best shift so far.
     let score = |off: (f64, f64), around: (usize, usize)| {
         let cand = srgb3(&resize_periodic_at(truth, hc, wc, off));
-        let ext = Extended::new(&cand, e.height, e.width);
+        let own;
+        let (ext, window) = match &tiled {
+            Some(ext) => (ext, &cand),
+            None => {
+                own = Extended::new(&cand, e.height, e.width);
+                (&own, e)
+            }
+        };
         let mut out: Option<(f64, (usize, usize))> = None;
         for dy in -1i64..=1 {
             for dx in -1i64..=1 {
-                let y = (around.0 as i64 + dy).rem_euclid(hc as i64) as usize;
-                let x = (around.1 as i64 + dx).rem_euclid(wc as i64) as usize;
-                let m = ext.mse(e, y, x);
+                let y = (around.0 as i64 + dy).rem_euclid(period.0 as i64) as usize;
+                let x = (around.1 as i64 + dx).rem_euclid(period.1 as i64) as usize;
+                let m = ext.mse(window, y, x);
                 if out.is_none_or(|(b, _)| m < b) {
                     out = Some((m, (y, x)));
                 }
@@ -553,6 +585,13 @@ fn subtexel(
         }
     }
     best
+}
+
+/// True when the truth resampled to `(hc, wc)` spans more than the
+/// extracted texture `e` (a scale over 1): the comparison is then of the
+/// whole resampled truth with `e` tiled, not of `e` with a window of it.
+fn tiles(e: &Image, (hc, wc): (usize, usize)) -> bool {
+    hc > e.height || wc > e.width
 }
 
 /// An alignment and its error: `(mse, whole shift, sub-texel offset)`.

@@ -351,3 +351,50 @@ fn turned_textures_are_scored_at_the_turn_that_undoes_them() {
         }
     }
 }
+
+/// At scales over 1 the truth's whole period is compared with the texture
+/// tiled: a texture holding half the period scores the same at every cyclic
+/// roll, and one that is exactly the period's repeating half matches.
+#[test]
+fn textures_smaller_than_the_period_are_compared_tiled() {
+    // The truth: a 32 × 32 tile repeated 2 × 2 with a faint difference
+    // between the copies, so its period is 64.
+    let tile = texture(32, 32, 31);
+    let mut t = Image::zeros(3, 64, 64);
+    for c in 0..3 {
+        for r in 0..64 {
+            for x in 0..64 {
+                let faint = if (r / 32 + x / 32) % 2 == 1 {
+                    0.02
+                } else {
+                    0.0
+                };
+                t.data[c * 4096 + r * 64 + x] =
+                    tile.data[c * 1024 + (r % 32) * 32 + x % 32] + faint;
+            }
+        }
+    }
+    let e = shifted(&tile, 5, 9);
+    let s0 = aligned_texture_score(&e, &t);
+    assert_eq!(s0.scale, 2.0, "{s0:?}");
+    assert!(s0.psnr_db > 35.0 && s0.psnr_db < 60.0, "{s0:?}");
+    for (dy, dx) in [(1, 0), (0, 13), (17, 30), (31, 31)] {
+        let s = aligned_texture_score(&shifted(&e, dy, dx), &t);
+        assert_eq!(s.scale, 2.0, "roll ({dy}, {dx}): {s:?}");
+        assert!(
+            (s.psnr_db - s0.psnr_db).abs() < 1e-6,
+            "roll ({dy}, {dx}): {s:?} vs {s0:?}"
+        );
+    }
+    // Without the difference between copies, the tiled texture is the truth.
+    let mut exact = t.clone();
+    for c in 0..3 {
+        for r in 0..64 {
+            for x in 0..64 {
+                exact.data[c * 4096 + r * 64 + x] = tile.data[c * 1024 + (r % 32) * 32 + x % 32];
+            }
+        }
+    }
+    let s = aligned_texture_score(&shifted(&tile, 3, 4), &exact);
+    assert!(s.psnr_db > 100.0, "{s:?}");
+}
