@@ -342,13 +342,70 @@ pub fn measure(mask: &Mask, companion: &Mask, blend: &[bool]) -> Interleaving {
 }
 
 /// The union of `mask` and its `companion` (within the mask's [`reach`])
-/// with the soft edge between them filled ([`GAP_FILL`], `blend` pixels).
+/// with the soft edge between them filled ([`GAP_FILL`], `blend` pixels),
+/// and its holes that are missed bits of the pattern filled
+/// ([`enclosed_pattern_holes`]).
 pub fn merged(mask: &Mask, companion: &Mask, blend: &[bool]) -> Mask {
-    Mask {
-        width: mask.width,
-        height: mask.height,
-        data: union_parts(mask, companion, blend).1,
+    let (other, mut union) = union_parts(mask, companion, blend);
+    let (w, h) = (mask.width, mask.height);
+    let largest = [&mask.data, &other]
+        .iter()
+        .map(|set| {
+            crate::mask::components4(&Mask {
+                width: w,
+                height: h,
+                data: set.to_vec(),
+            })
+            .1
+            .into_iter()
+            .skip(1)
+            .max()
+            .unwrap_or(0)
+        })
+        .max()
+        .unwrap_or(0);
+    for i in enclosed_pattern_holes(&union, w, h, blend, largest) {
+        union[i] = true;
     }
+    Mask {
+        width: w,
+        height: h,
+        data: union,
+    }
+}
+
+/// The pixels of the holes of `union` (4-connected regions outside it that
+/// do not reach the grid's border) that are missed bits of the pattern:
+/// no larger than `largest` pixels (one element of either colour) and
+/// every pixel's colour a blend of the two ([`blend`]; a third material's
+/// object lying on the pattern stays out).
+fn enclosed_pattern_holes(
+    union: &[bool],
+    w: usize,
+    h: usize,
+    blend: &[bool],
+    largest: usize,
+) -> Vec<usize> {
+    let outside = Mask {
+        width: w,
+        height: h,
+        data: union.iter().map(|&b| !b).collect(),
+    };
+    let (label, sizes) = crate::mask::components4(&outside);
+    let mut ok = vec![true; sizes.len()];
+    ok[0] = false;
+    for (i, &l) in label.iter().enumerate() {
+        let (x, y) = (i % w, i / w);
+        if l != 0 && (x == 0 || y == 0 || x + 1 == w || y + 1 == h || !blend[i]) {
+            ok[l as usize] = false;
+        }
+    }
+    for (k, &n) in sizes.iter().enumerate() {
+        if n > largest {
+            ok[k] = false;
+        }
+    }
+    (0..w * h).filter(|&i| ok[label[i] as usize]).collect()
 }
 
 #[cfg(test)]
@@ -452,6 +509,57 @@ mod tests {
                 (6..w - 6).contains(&x) && (6..h - 6).contains(&y)
             }));
         }
+    }
+
+    /// Holes in the union where neither colour's mask reached (the centre
+    /// of a dark square) are filled when they are a blend of the two colours
+    /// and no larger than an element; a third material's object lying on
+    /// the board, a hole larger than a square and the outside stay out.
+    #[test]
+    fn missed_bits_of_the_pattern_are_filled() {
+        let (w, h) = (96, 80);
+        let mut dark = board(w, h, 10, 8, 1, true);
+        let light = board(w, h, 10, 8, 1, false);
+        // Dark squares at (8..18, 8..18) [square (0, 0)] and (28..38, 28..38)
+        // [square (2, 2)] lose their centres; square (4, 4) at (48..58, 48..58)
+        // holds an object of another colour.
+        let hole = |x: usize, y: usize, x0: usize, y0: usize| {
+            (x0 + 3..x0 + 7).contains(&x) && (y0 + 3..y0 + 7).contains(&y)
+        };
+        for y in 0..h {
+            for x in 0..w {
+                if hole(x, y, 8, 8) || hole(x, y, 28, 28) || hole(x, y, 48, 48) {
+                    dark.data[y * w + x] = false;
+                }
+            }
+        }
+        let mut blend = vec![true; w * h];
+        for y in 0..h {
+            for x in 0..w {
+                // Off the two colours' segment: the object, and the outside.
+                if hole(x, y, 48, 48) || x < 6 || y < 6 || x >= w - 6 || y >= h - 6 {
+                    blend[y * w + x] = false;
+                }
+            }
+        }
+        let u = merged(&dark, &light, &blend);
+        let at = |x: usize, y: usize| u.data[y * w + x];
+        assert!(at(12, 12) && at(32, 32), "the missed centres are filled");
+        assert!(!at(52, 52), "the object stays out");
+        assert!(!at(2, 2), "the outside stays out");
+        // A hole larger than an element (the 4 squares at 58..78, 18..38,
+        // inside the board, emptied) stays, though its colour blends.
+        let mut big = board(w, h, 10, 8, 1, true);
+        let mut big_light = light.clone();
+        for y in 18..38 {
+            for x in 58..78 {
+                big.data[y * w + x] = false;
+                big_light.data[y * w + x] = false;
+            }
+        }
+        let u = merged(&big, &big_light, &vec![true; w * h]);
+        assert!(!u.data[28 * w + 68], "a hole of four squares stays");
+        assert!(u.data[12 * w + 12] && u.data[42 * w + 68]);
     }
 
     #[test]
