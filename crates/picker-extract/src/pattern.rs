@@ -29,7 +29,9 @@
 //!
 //! When all hold, the mask becomes the union of the two, with the thin soft
 //! edge between them (pixels within [`GAP_FILL`] of both whose colour is a
-//! blend of theirs, [`blend`]) filled.
+//! blend of theirs, [`blend`]) filled, and the union's enclosed holes that
+//! are missed bits of the pattern (no larger than an element, a blend of the
+//! two colours throughout) filled too.
 
 use crate::mask::Mask;
 use picker_render::io::Image;
