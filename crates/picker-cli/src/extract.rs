@@ -656,6 +656,7 @@ pub fn load_inputs_from(
         "channels_in_file": p.channels_in_file,
         "exif_orientation": format!("{:?}", p.orientation),
         "exif_focal_35mm": p.focal_35mm,
+        "colour_profile": p.colour_profile,
     });
     let focal_35mm = p.focal_35mm;
     timings.insert("read_photo".into(), json!(ms(t)));

@@ -31,6 +31,8 @@ pub struct Photo {
     pub linear_input: bool,
     /// The 35 mm-equivalent focal length the EXIF states, mm.
     pub focal_35mm: Option<f32>,
+    /// The file's colour profile and whether the pixels were converted from it to sRGB.
+    pub colour_profile: Option<lib::ColourProfile>,
 }
 
 impl From<lib::Photo> for Photo {
@@ -43,6 +45,7 @@ impl From<lib::Photo> for Photo {
             channels_in_file: p.channels_in_file,
             linear_input: p.linear_input,
             focal_35mm: p.focal_35mm,
+            colour_profile: p.colour_profile,
         }
     }
 }

@@ -125,6 +125,20 @@ pub struct Photo {
     /// then follows from the photo's diagonal
     /// ([`crate::Prepared::focal_35mm`]).
     pub focal_35mm: Option<f32>,
+    /// The colour profile (ICC) the file holds and what was done with it
+    /// ([`to_srgb`]); `None` when it holds none (its values are sRGB).
+    pub colour_profile: Option<ColourProfile>,
+}
+
+/// What [`to_srgb`] did with a photo's colour profile.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct ColourProfile {
+    /// The profile's description (its `desc` tag), when it has one.
+    pub description: Option<String>,
+    /// Whether the pixels were converted from it to sRGB.
+    pub converted: bool,
+    /// Why they were not, when they were not.
+    pub note: Option<String>,
 }
 
 /// Why a photo could not be read. Every message is one line that starts with
@@ -389,6 +403,7 @@ pub fn decode(bytes: &[u8], label: &Path, limits: &PhotoLimits) -> Result<Photo,
         bit_depth,
         channels_in_file,
         focal_35mm,
+        icc,
     } = decode_image(bytes, label, limits)?;
     // Native buffer + 12 B/px here; the native buffer is freed right after.
     let eight_bit_rgb = matches!(img, DynamicImage::ImageRgb8(_));
@@ -405,6 +420,10 @@ pub fn decode(bytes: &[u8], label: &Path, limits: &PhotoLimits) -> Result<Photo,
             *v = if v.is_nan() { 0.0 } else { v.clamp(0.0, 1.0) };
         }
     }
+    // Scene-linear formats carry no display profile worth applying.
+    let colour_profile = icc
+        .filter(|_| !kind.linear)
+        .map(|icc| to_srgb(&mut rgb, &icc, channels_in_file < 3));
     let rgb = orient(rgb, orientation);
     Ok(Photo {
         rgb,
@@ -414,6 +433,7 @@ pub fn decode(bytes: &[u8], label: &Path, limits: &PhotoLimits) -> Result<Photo,
         channels_in_file,
         linear_input: kind.linear,
         focal_35mm,
+        colour_profile,
     })
 }
 
@@ -426,6 +446,8 @@ struct Decoded {
     bit_depth: u16,
     channels_in_file: u8,
     focal_35mm: Option<f32>,
+    /// The file's colour profile (ICC), if it holds one.
+    icc: Option<Vec<u8>>,
 }
 
 /// The checks and the decoding [`decode`] and [`decode_mask`] share: the
@@ -576,6 +598,8 @@ fn decode_image(bytes: &[u8], label: &Path, limits: &PhotoLimits) -> Result<Deco
     // The JPEG decoder also fills in what a damaged file's blocks lack and
     // decodes changed bytes as whatever they say: its coded blocks are
     // walked (crate::jpeg) on a second thread while it decodes.
+    // A broken profile is not worth refusing the photo for ([`to_srgb`]).
+    let icc = decoder.icc_profile().ok().flatten();
     let (img, walked) = std::thread::scope(|s| {
         let check =
             (kind.image == ImageFormat::Jpeg).then(|| s.spawn(|| crate::jpeg::check(bytes)));
@@ -602,7 +626,97 @@ fn decode_image(bytes: &[u8], label: &Path, limits: &PhotoLimits) -> Result<Deco
         bit_depth,
         channels_in_file,
         focal_35mm,
+        icc,
     })
+}
+
+/// Converts `rgb` (interleaved RGB, sRGB-encoded-looking values in
+/// `[0, 1]`) from the colour space of the ICC profile `icc` to sRGB, in
+/// place (relative colorimetric; colours outside sRGB's gamut are clipped to
+/// it). A phone's Display P3 photo read as sRGB would give every material a
+/// duller colour than it has. Left as it is, with a note saying why: a
+/// profile that does not parse, one that is not RGB (a CMYK file's, which
+/// the decoder has already turned into RGB its own way), a grey picture
+/// (`grey`: a grey profile's tone curve is not applied), and a profile that
+/// is sRGB already (a probe of 27 colours moves by less than 1/500).
+pub fn to_srgb(rgb: &mut [f32], icc: &[u8], grey: bool) -> ColourProfile {
+    use moxcms::{ColorProfile, DataColorSpace, Layout, ProfileText, RenderingIntent};
+    use rayon::prelude::*;
+    let kept = |description: Option<String>, note: String| ColourProfile {
+        description,
+        converted: false,
+        note: Some(note),
+    };
+    let profile = match ColorProfile::new_from_slice(icc) {
+        Ok(p) => p,
+        Err(e) => {
+            let e = e
+                .to_string()
+                .split_whitespace()
+                .collect::<Vec<_>>()
+                .join(" ");
+            return kept(None, format!("unreadable ({e}): colours taken as sRGB"));
+        }
+    };
+    let description = profile.description.as_ref().and_then(|d| match d {
+        ProfileText::PlainString(s) => Some(s.trim().to_owned()),
+        ProfileText::Localizable(v) => v.first().map(|l| l.value.trim().to_owned()),
+        ProfileText::Description(d) => {
+            Some(d.ascii_string.trim_end_matches('\0').trim().to_owned())
+        }
+    });
+    if profile.color_space != DataColorSpace::Rgb {
+        return kept(
+            description,
+            format!("a {:?} profile, not RGB: not applied", profile.color_space),
+        );
+    }
+    if grey {
+        return kept(description, "a grey picture: not applied".into());
+    }
+    let options = moxcms::TransformOptions {
+        rendering_intent: RenderingIntent::RelativeColorimetric,
+        ..Default::default()
+    };
+    let srgb = ColorProfile::new_srgb();
+    let transform = match profile.create_transform_f32(Layout::Rgb, &srgb, Layout::Rgb, options) {
+        Ok(t) => t,
+        Err(e) => {
+            let e = e
+                .to_string()
+                .split_whitespace()
+                .collect::<Vec<_>>()
+                .join(" ");
+            return kept(
+                description,
+                format!("cannot be applied ({e}): colours taken as sRGB"),
+            );
+        }
+    };
+    let probe: Vec<f32> = (0..27)
+        .flat_map(|k| [k % 3, k / 3 % 3, k / 9].map(|v| v as f32 * 0.5))
+        .collect();
+    let mut probed = vec![0.0f32; probe.len()];
+    if transform.transform(&probe, &mut probed).is_ok()
+        && probe.iter().zip(&probed).all(|(a, b)| (a - b).abs() < 2e-3)
+    {
+        return kept(description, "sRGB already".into());
+    }
+    // Whole pixels per chunk; each chunk converted on its own.
+    rgb.par_chunks_mut(3 * 4096).for_each(|chunk| {
+        let src = chunk.to_vec();
+        if transform.transform(&src, chunk).is_err() {
+            chunk.copy_from_slice(&src);
+        }
+        for v in chunk.iter_mut() {
+            *v = if v.is_nan() { 0.0 } else { v.clamp(0.0, 1.0) };
+        }
+    });
+    ColourProfile {
+        description,
+        converted: true,
+        note: None,
+    }
 }
 
 /// Largest 35 mm-equivalent focal length taken from EXIF, mm (a 2000 mm

@@ -810,3 +810,210 @@ fn masks_from_grey_levels_or_alpha() {
         "{e}"
     );
 }
+
+/// The sRGB transfer function and its inverse (IEC 61966-2-1).
+fn srgb_to_linear(v: f64) -> f64 {
+    if v <= 0.04045 {
+        v / 12.92
+    } else {
+        ((v + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+fn linear_to_srgb(v: f64) -> f64 {
+    if v <= 0.0031308 {
+        v * 12.92
+    } else {
+        1.055 * v.powf(1.0 / 2.4) - 0.055
+    }
+}
+
+/// The RGB → XYZ matrix of primaries `(x, y)` with white D65 (the standard
+/// construction from chromaticities: columns scaled so that white maps to
+/// the white point).
+fn rgb_to_xyz(prim: [[f64; 2]; 3]) -> [[f64; 3]; 3] {
+    let (wx, wy) = (0.3127, 0.3290);
+    let white = [wx / wy, 1.0, (1.0 - wx - wy) / wy];
+    let col = |[x, y]: [f64; 2]| [x / y, 1.0, (1.0 - x - y) / y];
+    let m = [col(prim[0]), col(prim[1]), col(prim[2])]; // columns
+    let p = [
+        [m[0][0], m[1][0], m[2][0]],
+        [m[0][1], m[1][1], m[2][1]],
+        [m[0][2], m[1][2], m[2][2]],
+    ];
+    let s = solve3(p, white);
+    [
+        [p[0][0] * s[0], p[0][1] * s[1], p[0][2] * s[2]],
+        [p[1][0] * s[0], p[1][1] * s[1], p[1][2] * s[2]],
+        [p[2][0] * s[0], p[2][1] * s[1], p[2][2] * s[2]],
+    ]
+}
+
+/// `x` with `a x = b` (Cramer's rule).
+fn solve3(a: [[f64; 3]; 3], b: [f64; 3]) -> [f64; 3] {
+    let det = |m: [[f64; 3]; 3]| {
+        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+            - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
+    };
+    let d = det(a);
+    std::array::from_fn(|k| {
+        let mut m = a;
+        for r in 0..3 {
+            m[r][k] = b[r];
+        }
+        det(m) / d
+    })
+}
+
+fn invert3(a: [[f64; 3]; 3]) -> [[f64; 3]; 3] {
+    let cols: [[f64; 3]; 3] = std::array::from_fn(|k| {
+        let mut e = [0.0; 3];
+        e[k] = 1.0;
+        solve3(a, e)
+    });
+    std::array::from_fn(|r| std::array::from_fn(|c| cols[c][r]))
+}
+
+fn mul3(a: [[f64; 3]; 3], b: [[f64; 3]; 3]) -> [[f64; 3]; 3] {
+    std::array::from_fn(|r| std::array::from_fn(|c| (0..3).map(|k| a[r][k] * b[k][c]).sum()))
+}
+
+const SRGB_PRIMARIES: [[f64; 2]; 3] = [[0.64, 0.33], [0.30, 0.60], [0.15, 0.06]];
+
+/// What a colour-managed viewer shows for `rgb` (encoded values in a space
+/// of `primaries`, white D65, tone curve `decode`): the same light in sRGB,
+/// clipped to its gamut.
+fn reference_to_srgb(
+    rgb: [f64; 3],
+    primaries: [[f64; 2]; 3],
+    decode: impl Fn(f64) -> f64,
+) -> [f64; 3] {
+    let m = mul3(invert3(rgb_to_xyz(SRGB_PRIMARIES)), rgb_to_xyz(primaries));
+    let lin = rgb.map(&decode);
+    std::array::from_fn(|r| {
+        let v: f64 = (0..3).map(|k| m[r][k] * lin[k]).sum();
+        linear_to_srgb(v.clamp(0.0, 1.0))
+    })
+}
+
+/// A colour space for [`colour_profiles_are_converted_to_srgb`]: its name,
+/// its ICC profile, its primaries and its tone curve (encoded → linear).
+type ProfileCase = (
+    &'static str,
+    moxcms::ColorProfile,
+    [[f64; 2]; 3],
+    Box<dyn Fn(f64) -> f64>,
+);
+
+/// A PNG of `pixels` (8-bit RGB, one row) with the colour profile `icc`.
+fn png_with_profile(pixels: &[[u8; 3]], icc: Option<Vec<u8>>) -> Vec<u8> {
+    let mut out = Vec::new();
+    let mut enc = image::codecs::png::PngEncoder::new(&mut out);
+    if let Some(icc) = icc {
+        enc.set_icc_profile(icc).unwrap();
+    }
+    let raw: Vec<u8> = pixels.iter().flatten().copied().collect();
+    enc.write_image(&raw, pixels.len() as u32, 1, image::ExtendedColorType::Rgb8)
+        .unwrap();
+    out
+}
+
+/// Pixels of a Display P3 or Adobe RGB photo come out as the same colours
+/// in sRGB (against the standard construction from the spaces' primaries),
+/// an sRGB profile leaves them byte for byte, a grey picture and an
+/// unreadable profile are left alone and say why.
+#[test]
+fn colour_profiles_are_converted_to_srgb() {
+    let pixels: Vec<[u8; 3]> = vec![
+        [200, 100, 50],
+        [40, 160, 90],
+        [128, 128, 128],
+        [250, 240, 20],
+        [10, 20, 200],
+        [90, 60, 40],
+        [255, 0, 0],
+    ];
+    let adobe_gamma = 563.0 / 256.0;
+    let cases: [ProfileCase; 2] = [
+        (
+            "Display P3",
+            moxcms::ColorProfile::new_display_p3(),
+            [[0.680, 0.320], [0.265, 0.690], [0.150, 0.060]],
+            Box::new(srgb_to_linear),
+        ),
+        (
+            "Adobe RGB",
+            moxcms::ColorProfile::new_adobe_rgb(),
+            [[0.64, 0.33], [0.21, 0.71], [0.15, 0.06]],
+            Box::new(move |v: f64| v.powf(adobe_gamma)),
+        ),
+    ];
+    for (name, profile, primaries, decode) in cases {
+        let file = png_with_profile(&pixels, Some(profile.encode().unwrap()));
+        let p = dec(&file, "p3.png").unwrap();
+        let cp = p.colour_profile.as_ref().expect("a profile");
+        assert!(cp.converted, "{name}: {cp:?}");
+        for (k, px) in pixels.iter().enumerate() {
+            let want = reference_to_srgb(px.map(|v| f64::from(v) / 255.0), primaries, &decode);
+            let got = p.rgb.get_pixel(k as u32, 0).0;
+            for c in 0..3 {
+                assert!(
+                    (f64::from(got[c]) - want[c]).abs() < 3e-3,
+                    "{name} {px:?}: {got:?} vs {want:?}"
+                );
+            }
+        }
+    }
+    // A JPEG's profile (APP2 segments) is read too.
+    let mut jpg = Vec::new();
+    let mut enc = JpegEncoder::new_with_quality(&mut jpg, 95);
+    enc.set_icc_profile(moxcms::ColorProfile::new_display_p3().encode().unwrap())
+        .unwrap();
+    enc.write_image(
+        &[200, 100, 50].repeat(64),
+        8,
+        8,
+        image::ExtendedColorType::Rgb8,
+    )
+    .unwrap();
+    let p = dec(&jpg, "p3.jpg").unwrap();
+    assert!(
+        p.colour_profile.as_ref().is_some_and(|c| c.converted),
+        "{:?}",
+        p.colour_profile
+    );
+    // sRGB: untouched.
+    let plain = dec(&png_with_profile(&pixels, None), "plain.png").unwrap();
+    assert_eq!(plain.colour_profile, None);
+    let srgb = png_with_profile(
+        &pixels,
+        Some(moxcms::ColorProfile::new_srgb().encode().unwrap()),
+    );
+    let p = dec(&srgb, "srgb.png").unwrap();
+    assert_eq!(p.rgb, plain.rgb);
+    let cp = p.colour_profile.unwrap();
+    assert!(
+        !cp.converted && cp.note.as_deref() == Some("sRGB already"),
+        "{cp:?}"
+    );
+    // Unreadable: untouched, said so.
+    let junk = png_with_profile(
+        &pixels,
+        Some(b"not a colour profile at all, just bytes".repeat(4)),
+    );
+    let p = dec(&junk, "junk.png").unwrap();
+    assert_eq!(p.rgb, plain.rgb);
+    let note = p.colour_profile.unwrap().note.unwrap();
+    assert!(note.starts_with("unreadable ("), "{note}");
+    // A grey picture with an RGB profile: its grey stays grey.
+    let mut out = Vec::new();
+    let mut enc = image::codecs::png::PngEncoder::new(&mut out);
+    enc.set_icc_profile(moxcms::ColorProfile::new_display_p3().encode().unwrap())
+        .unwrap();
+    enc.write_image(&[10, 100, 200], 3, 1, image::ExtendedColorType::L8)
+        .unwrap();
+    let p = dec(&out, "grey.png").unwrap();
+    let note = p.colour_profile.unwrap().note.unwrap();
+    assert_eq!(note, "a grey picture: not applied");
+}
