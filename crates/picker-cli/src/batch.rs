@@ -21,8 +21,9 @@
 //!   A photo's folder appears whole: it is written as a hidden `.partial`
 //!   folder and renamed into place after its manifest.
 //! - **Resume**: the manifest holds the input's SHA-256, the weights' SHA-256,
-//!   every output-changing setting, the picks, the quad, the mask's SHA-256, the version and each file's
-//!   size; a re-run skips photos whose manifest matches and redoes the rest.
+//!   every output-changing setting, the picks, the quad, the mask's SHA-256, the version, the
+//!   SHA-256 of the `picker` binary itself ([`build_sha256`]: another build may write other
+//!   results) and each file's size; a re-run skips photos whose manifest matches and redoes the rest.
 //!   Batch outputs hold no timings, thread counts or absolute paths, so a
 //!   resumed run ends with the same bytes as an uninterrupted one.
 //! - **Sharding**: `--shard K/N` keeps the photos whose path hash is `K` mod `N`
@@ -442,6 +443,7 @@ fn manifest_key(
 ) -> Value {
     json!({
         "picker_version": env!("CARGO_PKG_VERSION"),
+        "picker_build_sha256": build_sha256(),
         "input_sha256": input_sha,
         "weights_sha256": weights.iter().map(|(_, h)| h.clone()).collect::<Vec<_>>(),
         "settings": flags.output_settings(),
@@ -452,6 +454,19 @@ fn manifest_key(
         "mask_sha256": mask_sha,
         "quad_mask": req.mask == Some(extract::MaskArg::Quad),
     })
+}
+
+/// The SHA-256 of the running `picker` binary (read once), so that a batch
+/// resumed with another build redoes every photo: the crate's version is not
+/// bumped with every change to what extraction writes. `None` when the
+/// binary cannot be read (the key then holds the version alone).
+pub fn build_sha256() -> Option<&'static str> {
+    static HASH: std::sync::OnceLock<Option<String>> = std::sync::OnceLock::new();
+    HASH.get_or_init(|| {
+        let exe = std::env::current_exe().ok()?;
+        sha256_file(&exe).ok()
+    })
+    .as_deref()
 }
 
 /// True when `dir` holds a manifest with `key` and every file it lists, at its size.

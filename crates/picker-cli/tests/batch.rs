@@ -7,6 +7,7 @@
 //! run with `cargo test --release -p picker-cli --test batch -- --ignored`)
 //! does the 300 photos with 5% broken files.
 
+use sha2::{Digest, Sha256};
 use std::collections::BTreeMap;
 use std::io::Cursor;
 use std::path::{Path, PathBuf};
@@ -471,6 +472,29 @@ fn shards_jobs_and_staleness() {
         let r = report(&full);
         assert_eq!(r["counts"]["up_to_date"], 0, "{flag}: {r:#}");
     }
+    // The key holds the running binary's digest: another build (here a
+    // manifest tampered to say so) redoes the photo, the rest stay.
+    let manifest_path = full.join("set0/photo_000.png.material/manifest.json");
+    let mut m: Value = serde_json::from_slice(&std::fs::read(&manifest_path).unwrap()).unwrap();
+    let exe = std::fs::read(env!("CARGO_BIN_EXE_picker")).unwrap();
+    let want: String = Sha256::digest(&exe)
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect();
+    assert_eq!(
+        m["key"]["picker_build_sha256"].as_str(),
+        Some(want.as_str())
+    );
+    m["key"]["picker_build_sha256"] = Value::from("0".repeat(64));
+    std::fs::write(&manifest_path, serde_json::to_vec_pretty(&m).unwrap()).unwrap();
+    run(batch_cmd(&input, &full, &["--seed", "5", "--keep-seams"]));
+    let r = report(&full);
+    assert_eq!(r["counts"]["ok"], 1, "{r:#}");
+    assert_eq!(
+        r["counts"]["up_to_date"],
+        r["counts"]["photos"].as_u64().unwrap() - 1 - r["counts"]["failed"].as_u64().unwrap(),
+        "{r:#}"
+    );
 }
 
 #[test]
@@ -551,7 +575,6 @@ fn usage_errors_exit_2() {
 
 #[test]
 fn embedded_default_weights_without_a_weights_flag() {
-    use sha2::{Digest, Sha256};
     let tmp = tempfile::tempdir().unwrap();
     let input = tmp.path().join("photos");
     std::fs::create_dir_all(&input).unwrap();
