@@ -16,7 +16,11 @@
 //!   as stored. 16-bit and float samples keep their precision.
 //! - **Display-referred inputs** (everything but EXR/HDR) are taken as
 //!   sRGB-encoded: integers are scaled to `[0, 1]`, float TIFF values are
-//!   clamped to `[0, 1]` and NaN becomes 0.
+//!   clamped to `[0, 1]` and NaN becomes 0; a colour profile (ICC) in the
+//!   file is applied first, converting the values to sRGB ([`to_srgb`]).
+//! - **JPEG data** is walked block by block ([`crate::jpeg`]) while it
+//!   decodes: a file whose data stops early or is damaged is refused rather
+//!   than decoded into grey or garbage.
 //! - **Linear inputs** (EXR, HDR; [`Photo::linear_input`]) hold scene-linear
 //!   radiance. They are brought to the sRGB-encoded range the networks were
 //!   trained on by [`expose_linear`]: NaN, infinities and negative values
