@@ -345,8 +345,8 @@ pub fn measure(mask: &Mask, companion: &Mask, blend: &[bool]) -> Interleaving {
 
 /// The union of `mask` and its `companion` (within the mask's [`reach`])
 /// with the soft edge between them filled ([`GAP_FILL`], `blend` pixels),
-/// and its holes that are missed bits of the pattern filled
-/// ([`enclosed_pattern_holes`]).
+/// and its holes that are missed bits of the pattern filled (enclosed, no
+/// larger than an element of either colour, a blend of the two throughout).
 pub fn merged(mask: &Mask, companion: &Mask, blend: &[bool]) -> Mask {
     let (other, mut union) = union_parts(mask, companion, blend);
     let (w, h) = (mask.width, mask.height);
