@@ -654,11 +654,7 @@ pub fn to_srgb(rgb: &mut [f32], icc: &[u8], grey: bool) -> ColourProfile {
     let profile = match ColorProfile::new_from_slice(icc) {
         Ok(p) => p,
         Err(e) => {
-            let e = e
-                .to_string()
-                .split_whitespace()
-                .collect::<Vec<_>>()
-                .join(" ");
+            let e = one_line(&e.to_string());
             return kept(None, format!("unreadable ({e}): colours taken as sRGB"));
         }
     };
@@ -686,11 +682,7 @@ pub fn to_srgb(rgb: &mut [f32], icc: &[u8], grey: bool) -> ColourProfile {
     let transform = match profile.create_transform_f32(Layout::Rgb, &srgb, Layout::Rgb, options) {
         Ok(t) => t,
         Err(e) => {
-            let e = e
-                .to_string()
-                .split_whitespace()
-                .collect::<Vec<_>>()
-                .join(" ");
+            let e = one_line(&e.to_string());
             return kept(
                 description,
                 format!("cannot be applied ({e}): colours taken as sRGB"),
@@ -721,6 +713,13 @@ pub fn to_srgb(rgb: &mut [f32], icc: &[u8], grey: bool) -> ColourProfile {
         converted: true,
         note: None,
     }
+}
+
+/// `text` on one line: its runs of whitespace (newlines included) become
+/// single spaces (decoders' and libraries' messages may span lines; every
+/// message of this module is one line).
+fn one_line(text: &str) -> String {
+    text.split_whitespace().collect::<Vec<_>>().join(" ")
 }
 
 /// Largest 35 mm-equivalent focal length taken from EXIF, mm (a 2000 mm
@@ -942,7 +941,7 @@ fn classify(e: ImageError, kind: Kind, path: &Path, mislabelled: Option<&str>) -
     };
     // Decoders' texts may hold newlines (e.g. zune-jpeg's "Not enough bytes…\n");
     // every message is one line.
-    let reason = reason.split_whitespace().collect::<Vec<_>>().join(" ");
+    let reason = one_line(&reason);
     if is_truncation(&e, &reason) {
         return PhotoError::Truncated {
             path: path.to_path_buf(),
