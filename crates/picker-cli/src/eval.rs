@@ -443,6 +443,7 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
             segmentation: rio::read_exr(&dir.join("segmentation.exr"))?,
             embedding: None,
             segmentation_estimated: false,
+            opaque: None,
             envmap: Some(
                 EnvMap::from_image(&rio::read_exr(&env_path)?)
                     .map_err(|e| anyhow!("{}: {e}", env_path.display()))?,

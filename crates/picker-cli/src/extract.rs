@@ -16,7 +16,7 @@ use std::time::Instant;
 
 use anyhow::{anyhow, bail, Context, Result};
 use picker_extract::export::{self, ExportOptions};
-use picker_extract::mask::MaskOptions;
+use picker_extract::mask::{Mask, MaskOptions};
 use picker_extract::report::{self, Tile};
 use picker_extract::{pipeline, Inputs, Material, Prepared, Quad, UserPlane, UvChoice};
 use picker_inpaint::{DiffusionInpainter, Inpainter, LearnedInpainter, PatchMatchInpainter};
@@ -657,8 +657,11 @@ pub fn load_inputs_from(
         "exif_orientation": format!("{:?}", p.orientation),
         "exif_focal_35mm": p.focal_35mm,
         "colour_profile": p.colour_profile,
+        "transparent_pixels": p.opaque.as_ref().map(|o| o.iter().filter(|&&v| !v).count()),
+        "alpha_ignored": p.alpha_ignored,
     });
     let focal_35mm = p.focal_35mm;
+    let opaque = opaque_mask(&p);
     timings.insert("read_photo".into(), json!(ms(t)));
     let t = Instant::now();
     let (inputs, source) = match source {
@@ -674,13 +677,14 @@ pub fn load_inputs_from(
                     embedding: msn.embedding,
                     segmentation_estimated: true,
                     envmap,
+                    opaque,
                 },
                 source,
             )
         }
         Source::Elements(dir) => {
             drop(p);
-            read_elements(dir, photo_img)?
+            read_elements(dir, photo_img, opaque)?
         }
     };
     timings.insert("inputs".into(), json!(ms(t)));
@@ -704,8 +708,18 @@ struct MsnImages {
     embedding: Option<Image>,
 }
 
+/// The photo's opaque pixels as a mask, when some are transparent.
+fn opaque_mask(p: &photo::Photo) -> Option<Mask> {
+    let (w, h) = p.rgb.dimensions();
+    p.opaque.clone().map(|data| Mask {
+        width: w as usize,
+        height: h as usize,
+        data,
+    })
+}
+
 /// Reads render elements from a folder.
-fn read_elements(dir: &Path, photo: Image) -> Result<(Inputs, Value)> {
+fn read_elements(dir: &Path, photo: Image, opaque: Option<Mask>) -> Result<(Inputs, Value)> {
     let elements = ElementImages::load(dir)
         .with_context(|| format!("reading render elements from {}", dir.display()))?;
     let seg_path = dir.join(format!("{}.exr", conv::SEGMENTATION));
@@ -738,6 +752,7 @@ fn read_elements(dir: &Path, photo: Image) -> Result<(Inputs, Value)> {
             embedding,
             segmentation_estimated,
             envmap,
+            opaque,
         },
         json!({"source": "elements", "elements": dir.display().to_string()}),
     ))
@@ -1473,6 +1488,7 @@ pub fn infer_inputs(models: &Models, photo_path: &Path, work_size: u32) -> Resul
         embedding: msn.embedding,
         segmentation_estimated: true,
         envmap,
+        opaque: opaque_mask(&p),
     })
 }
 

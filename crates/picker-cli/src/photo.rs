@@ -33,6 +33,11 @@ pub struct Photo {
     pub focal_35mm: Option<f32>,
     /// The file's colour profile and whether the pixels were converted from it to sRGB.
     pub colour_profile: Option<lib::ColourProfile>,
+    /// Which pixels are opaque, when some are transparent; see
+    /// [`picker_extract::photo::Photo::opaque`].
+    pub opaque: Option<Vec<bool>>,
+    /// The file's alpha was ignored (every pixel below ½).
+    pub alpha_ignored: bool,
 }
 
 impl From<lib::Photo> for Photo {
@@ -46,6 +51,8 @@ impl From<lib::Photo> for Photo {
             linear_input: p.linear_input,
             focal_35mm: p.focal_35mm,
             colour_profile: p.colour_profile,
+            opaque: p.opaque,
+            alpha_ignored: p.alpha_ignored,
         }
     }
 }

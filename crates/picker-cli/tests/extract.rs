@@ -1568,3 +1568,93 @@ fn the_exif_focal_length_sets_the_plane_modes() {
     assert!(m["photo"]["exif_focal_35mm"].is_null());
     assert_ne!(m["diagnostics"]["uv"]["focal_source"], "exif");
 }
+
+/// A cut-out (`fixtures/examples/room.png` with its left 120 columns
+/// transparent and black, as editors often store them): a pick there is
+/// refused, naming the file; picks and `--all` on the rest give masks with
+/// no transparent pixel in them; `material.json` counts the transparent pixels.
+#[test]
+fn a_cut_outs_transparent_pixels_are_never_the_material() {
+    let tmp = tempfile::tempdir().unwrap();
+    let room = image::open(repo().join("fixtures/examples/room.png"))
+        .unwrap()
+        .to_rgba8();
+    let (w, h) = room.dimensions();
+    let cut = image::RgbaImage::from_fn(w, h, |x, y| {
+        if x < 120 {
+            image::Rgba([0, 0, 0, 0])
+        } else {
+            *room.get_pixel(x, y)
+        }
+    });
+    let photo = tmp.path().join("cut.png");
+    cut.save(&photo).unwrap();
+    let out = tmp.path().join("x");
+    let o = run(&[
+        "extract",
+        photo.to_str().unwrap(),
+        "--pick",
+        "60,200",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("cut.png") && err.contains("(60, 200) is on a transparent pixel"),
+        "{err}"
+    );
+    assert!(!out.exists(), "nothing is written for a bad pick");
+    ok(&[
+        "extract",
+        photo.to_str().unwrap(),
+        "--pick",
+        "200,200",
+        "--pick",
+        "200,30",
+        "--out",
+        out.to_str().unwrap(),
+        "--max-size",
+        "64",
+    ]);
+    let all = tmp.path().join("all");
+    ok(&[
+        "extract",
+        photo.to_str().unwrap(),
+        "--all",
+        "--out",
+        all.to_str().unwrap(),
+        "--max-size",
+        "64",
+    ]);
+    let mut masks = vec![
+        out.join("material_0/mask.png"),
+        out.join("material_1/mask.png"),
+    ];
+    for e in std::fs::read_dir(&all).unwrap() {
+        let m = e.unwrap().path().join("mask.png");
+        if m.exists() {
+            masks.push(m);
+        }
+    }
+    assert!(masks.len() >= 4, "{masks:?}");
+    for m in &masks {
+        let mask = read_png(m).unwrap();
+        assert_eq!((mask.width, mask.height), (w as usize, h as usize));
+        let plane = mask.plane(0);
+        let inside = plane.iter().filter(|&&v| v > 0.5).count();
+        let leaked = (0..plane.len())
+            .filter(|&i| i % mask.width < 120 && plane[i] > 0.5)
+            .count();
+        assert!(inside > 0, "{}", m.display());
+        assert_eq!(leaked, 0, "{}: transparent pixels in the mask", m.display());
+    }
+    let j = json_file(&out.join("material_0/material.json"));
+    assert_eq!(
+        j["photo"]["transparent_pixels"],
+        120 * h as u64,
+        "{}",
+        j["photo"]
+    );
+    assert_eq!(j["photo"]["alpha_ignored"], false);
+}

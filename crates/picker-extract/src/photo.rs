@@ -11,9 +11,16 @@
 //!   (compare with [`format_for_extension`] to warn about it). A mislabelled
 //!   file only fails when its content does not decode, and then the message
 //!   says both what it is named and what it contains.
-//! - **Channels.** Greyscale is replicated to RGB. Alpha is *dropped*, not
-//!   composited over any background: the colour of transparent pixels is kept
-//!   as stored. 16-bit and float samples keep their precision.
+//! - **Channels.** Greyscale is replicated to RGB. 16-bit and float samples
+//!   keep their precision.
+//! - **Transparency.** Alpha is not composited over any background. A pixel
+//!   whose alpha is below ½ shows nothing of the scene (a cut-out's
+//!   background): it is listed in [`Photo::opaque`] as not opaque, and its
+//!   colour becomes [`TRANSPARENT_FILL`] (neutral grey: what it stored is
+//!   often black or left-over garbage, and the networks see it). Pixels at
+//!   ½ or above keep their colour as stored. A file whose every pixel is
+//!   below ½ has its alpha ignored ([`Photo::alpha_ignored`]): a viewer
+//!   shows nothing, so its colours are all there is.
 //! - **Display-referred inputs** (everything but EXR/HDR) are taken as
 //!   sRGB-encoded: integers are scaled to `[0, 1]`, float TIFF values are
 //!   clamped to `[0, 1]` and NaN becomes 0; a colour profile (ICC) in the
@@ -132,7 +139,20 @@ pub struct Photo {
     /// The colour profile (ICC) the file holds and what was done with it
     /// ([`to_srgb`]); `None` when it holds none (its values are sRGB).
     pub colour_profile: Option<ColourProfile>,
+    /// Which pixels are opaque (alpha at least ½), row-major as [`Photo::rgb`]
+    /// (orientation applied), when the file has an alpha channel and some
+    /// pixel below ½ but not all of them; `None` when every pixel counts.
+    /// The others' colours are [`TRANSPARENT_FILL`]; nothing is extracted
+    /// from them.
+    pub opaque: Option<Vec<bool>>,
+    /// The file has alpha but every pixel is below ½ (a viewer shows
+    /// nothing): the alpha was ignored and every pixel kept its colour.
+    pub alpha_ignored: bool,
 }
+
+/// The colour (sRGB-encoded, all three channels) that transparent pixels
+/// ([`Photo::opaque`]) take: neutral mid-grey.
+pub const TRANSPARENT_FILL: f32 = 0.5;
 
 /// What [`to_srgb`] did with a photo's colour profile.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
@@ -409,6 +429,11 @@ pub fn decode(bytes: &[u8], label: &Path, limits: &PhotoLimits) -> Result<Photo,
         focal_35mm,
         icc,
     } = decode_image(bytes, label, limits)?;
+    let alpha = opaque_plane(&img);
+    let alpha_ignored = alpha
+        .as_ref()
+        .is_some_and(|a| !a.is_empty() && !a.iter().any(|&o| o));
+    let opaque = alpha.filter(|a| a.iter().any(|&o| o) && !a.iter().all(|&o| o));
     // Native buffer + 12 B/px here; the native buffer is freed right after.
     let eight_bit_rgb = matches!(img, DynamicImage::ImageRgb8(_));
     let mut rgb = rgb32f(img);
@@ -416,7 +441,7 @@ pub fn decode(bytes: &[u8], label: &Path, limits: &PhotoLimits) -> Result<Photo,
         return Err(PhotoError::NoFiniteValues { path: path() });
     }
     if kind.linear {
-        expose_linear(&mut rgb);
+        expose_linear_where(&mut rgb, opaque.as_deref());
     } else if !eight_bit_rgb {
         // (8-bit values are k / 255, always in [0, 1].)
         // Float formats (e.g. 32-bit TIFF) may hold values outside [0, 1] or NaN.
@@ -428,6 +453,12 @@ pub fn decode(bytes: &[u8], label: &Path, limits: &PhotoLimits) -> Result<Photo,
     let colour_profile = icc
         .filter(|_| !kind.linear)
         .map(|icc| to_srgb(&mut rgb, &icc, channels_in_file < 3));
+    if let Some(opaque) = &opaque {
+        for (p, _) in rgb.pixels_mut().zip(opaque).filter(|(_, &o)| !o) {
+            p.0 = [TRANSPARENT_FILL; 3];
+        }
+    }
+    let opaque = opaque.map(|o| orient_flags(o, rgb.width(), rgb.height(), orientation));
     let rgb = orient(rgb, orientation);
     Ok(Photo {
         rgb,
@@ -438,7 +469,47 @@ pub fn decode(bytes: &[u8], label: &Path, limits: &PhotoLimits) -> Result<Photo,
         linear_input: kind.linear,
         focal_35mm,
         colour_profile,
+        opaque,
+        alpha_ignored,
     })
+}
+
+/// Whether each pixel of `img` is opaque (alpha at least ½; NaN is not),
+/// row-major as stored, when it has an alpha channel.
+fn opaque_plane(img: &DynamicImage) -> Option<Vec<bool>> {
+    fn plane<P: image::Pixel>(
+        b: &image::ImageBuffer<P, Vec<P::Subpixel>>,
+        on: impl Fn(P::Subpixel) -> bool,
+    ) -> Vec<bool> {
+        let a = usize::from(P::CHANNEL_COUNT) - 1;
+        b.pixels().map(|p| on(p.channels()[a])).collect()
+    }
+    Some(match img {
+        DynamicImage::ImageLumaA8(b) => plane(b, |a| a >= 128),
+        DynamicImage::ImageRgba8(b) => plane(b, |a| a >= 128),
+        DynamicImage::ImageLumaA16(b) => plane(b, |a| a >= 32768),
+        DynamicImage::ImageRgba16(b) => plane(b, |a| a >= 32768),
+        DynamicImage::ImageRgba32F(b) => plane(b, |a| a >= 0.5),
+        other if other.color().has_alpha() => plane(&other.to_rgba32f(), |a| a >= 0.5),
+        _ => return None,
+    })
+}
+
+/// `flags` (row-major, `w × h` as stored) with `orientation` applied, as
+/// [`orient`] applies it to the pixels.
+fn orient_flags(flags: Vec<bool>, w: u32, h: u32, orientation: Orientation) -> Vec<bool> {
+    if orientation == Orientation::NoTransforms {
+        return flags;
+    }
+    let grey = image::GrayImage::from_raw(w, h, flags.iter().map(|&o| u8::from(o)).collect())
+        .expect("one value per pixel");
+    let mut img = DynamicImage::ImageLuma8(grey);
+    img.apply_orientation(orientation);
+    img.into_luma8()
+        .into_raw()
+        .into_iter()
+        .map(|v| v != 0)
+        .collect()
 }
 
 /// What [`decode_image`] found: the decoded image as stored (not yet
@@ -895,14 +966,24 @@ fn orient(rgb: Rgb32FImage, orientation: Orientation) -> Rgb32FImage {
 /// 1 % clip); then each channel is sRGB-encoded and clamped to `[0, 1]`.
 /// Inputs whose 99th percentile is at most 1 are not rescaled.
 pub fn expose_linear(rgb: &mut Rgb32FImage) {
+    expose_linear_where(rgb, None);
+}
+
+/// [`expose_linear`] with the percentile taken over the pixels `counted`
+/// marks (row-major; all of them when `None` or when it marks none): a
+/// cut-out's transparent background does not set the exposure.
+fn expose_linear_where(rgb: &mut Rgb32FImage, counted: Option<&[bool]>) {
     for v in rgb.iter_mut() {
         if !v.is_finite() || *v < 0.0 {
             *v = 0.0;
         }
     }
+    let counted = counted.filter(|c| c.iter().any(|&o| o));
     let mut lum: Vec<f32> = rgb
         .pixels()
-        .map(|p| 0.2126 * p.0[0] + 0.7152 * p.0[1] + 0.0722 * p.0[2])
+        .enumerate()
+        .filter(|(i, _)| counted.is_none_or(|c| c[*i]))
+        .map(|(_, p)| 0.2126 * p.0[0] + 0.7152 * p.0[1] + 0.0722 * p.0[2])
         .collect();
     let p99 = if lum.is_empty() {
         0.0
@@ -1323,6 +1404,21 @@ mod tests {
             assert!(!jpeg_is_complete(&full[..cut]), "cut at {cut}");
         }
         assert!(!jpeg_is_complete(b"not a jpeg"));
+    }
+
+    #[test]
+    fn opacity_turns_with_the_pixels() {
+        // Every orientation moves the flags as it moves the pixels: a
+        // 5×3 image whose pixels are opaque where their red is odd.
+        let (w, h) = (5u32, 3u32);
+        let rgb = Rgb32FImage::from_fn(w, h, |x, y| image::Rgb([(x + w * y) as f32, 0.0, 0.0]));
+        let flags: Vec<bool> = rgb.pixels().map(|p| p.0[0] as u32 % 2 == 1).collect();
+        for o in 1..=8 {
+            let o = Orientation::from_exif(o).unwrap();
+            let turned = orient(rgb.clone(), o);
+            let want: Vec<bool> = turned.pixels().map(|p| p.0[0] as u32 % 2 == 1).collect();
+            assert_eq!(orient_flags(flags.clone(), w, h, o), want, "{o:?}");
+        }
     }
 
     #[test]

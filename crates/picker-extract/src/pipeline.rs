@@ -141,6 +141,13 @@ pub struct Inputs {
     pub segmentation_estimated: bool,
     /// The estimated environment map (camera space), if any.
     pub envmap: Option<EnvMap>,
+    /// The photo's opaque pixels at full resolution, when some are
+    /// transparent ([`crate::photo::Photo::opaque`]); `None`: all are.
+    /// Transparent pixels are never picked, masked or read: a pick on one is
+    /// refused, masks (automatic or given) keep only opaque pixels, and a
+    /// working pixel less than half opaque has no surface
+    /// ([`Prepared::valid`]).
+    pub opaque: Option<Mask>,
 }
 
 /// Options of one extraction.
@@ -250,11 +257,13 @@ pub struct Prepared {
     pub inputs: Inputs,
     /// The photo, linear RGB, full resolution.
     pub photo_linear: Image,
-    /// The photo, linear RGB, area-downsampled to the working resolution.
+    /// The photo, linear RGB, area-downsampled to the working resolution
+    /// (over its opaque pixels only, where some are transparent).
     pub photo_work: Image,
     /// Luma of the sRGB photo (the guide), full resolution.
     pub luma: Vec<f32>,
-    /// Pixels with a surface at the working resolution.
+    /// Pixels with a surface at the working resolution (and, where the photo
+    /// has transparent pixels, at least half opaque).
     pub valid: Vec<bool>,
     /// The photo has no colour: every pixel's three channels are equal (a
     /// greyscale file, or a colour file holding a greyscale picture). The
@@ -315,10 +324,34 @@ impl Prepared {
         if let Some(e) = &inputs.embedding {
             check_size("material embedding", e, 3, w, h)?;
         }
+        if let Some(o) = &inputs.opaque {
+            if (o.width, o.height) != (fw, fh) || o.data.len() != fw * fh {
+                return Err(Error::Shape {
+                    what: "opaque pixels".into(),
+                    expected: format!("{fw}x{fh} values"),
+                    found: format!("{}x{} ({} values)", o.width, o.height, o.data.len()),
+                });
+            }
+            if o.count() == 0 {
+                return Err(Error::Invalid(
+                    "every pixel of the photo is transparent".into(),
+                ));
+            }
+        }
         let embedding_mask = inputs.embedding.as_ref().map(mask::embedding_mask_space);
         let (photo_linear, luma) = linear_and_luma(&inputs.photo);
-        let photo_work = resample::area(&photo_linear, w, h);
-        let valid = (0..w * h).map(|i| inputs.elements.is_valid(i)).collect();
+        let mut valid: Vec<bool> = (0..w * h).map(|i| inputs.elements.is_valid(i)).collect();
+        let photo_work = match &inputs.opaque {
+            None => resample::area(&photo_linear, w, h),
+            Some(o) => {
+                let weight: Vec<f32> = o.data.iter().map(|&b| f32::from(u8::from(b))).collect();
+                let share = resample::area_plane(&weight, fw, fh, w, h);
+                for (v, &s) in valid.iter_mut().zip(&share) {
+                    *v &= s >= 0.5;
+                }
+                opaque_area(&photo_linear, &weight, &share, w, h)
+            }
+        };
         let n = fw * fh;
         let (r, rest) = inputs.photo.data.split_at(n);
         let (g, b) = rest.split_at(n);
@@ -385,16 +418,42 @@ impl Prepared {
         (cell_under(x, fw, w), cell_under(y, fh, h))
     }
 
-    /// Checks a pick given in photo pixels.
+    /// [`Prepared::to_work`] as an index into working-resolution planes.
+    fn to_work_index(&self, x: usize, y: usize) -> usize {
+        let (xw, yw) = self.to_work(x, y);
+        yw * self.work_size().0 + xw
+    }
+
+    /// Checks a pick given in photo pixels: inside the photo, on an opaque
+    /// pixel ([`Inputs::opaque`]).
     pub fn check_pick(&self, pick: [u32; 2]) -> Result<()> {
         let (fw, fh) = self.photo_size();
-        if pick[0] as usize >= fw || pick[1] as usize >= fh {
+        let [x, y] = pick.map(|v| v as usize);
+        if x >= fw || y >= fh {
             return Err(Error::Invalid(format!(
-                "pick ({}, {}) is outside the {fw}x{fh} photo (x must be < {fw}, y < {fh})",
-                pick[0], pick[1]
+                "pick ({x}, {y}) is outside the {fw}x{fh} photo (x must be < {fw}, y < {fh})"
             )));
         }
+        if let Some(o) = &self.inputs.opaque {
+            if !o.data[y * fw + x] {
+                return Err(Error::Invalid(format!(
+                    "pick ({x}, {y}) is on a transparent pixel of the photo (alpha below ½): \
+                     pick a visible one"
+                )));
+            }
+        }
         Ok(())
+    }
+
+    /// `mask` (photo resolution) without the photo's transparent pixels
+    /// ([`Inputs::opaque`]).
+    fn visible(&self, mut mask: Mask) -> Mask {
+        if let Some(o) = &self.inputs.opaque {
+            for (m, &o) in mask.data.iter_mut().zip(&o.data) {
+                *m &= o;
+            }
+        }
+        mask
     }
 
     /// The mask of the material at `pick` (photo pixels), at the working resolution.
@@ -525,8 +584,12 @@ impl Prepared {
     /// used). [`extract`] then uses `full` as the photo-resolution mask as it
     /// is.
     ///
+    /// The photo's transparent pixels ([`Inputs::opaque`]) are taken out of
+    /// `full` first.
+    ///
     /// # Errors
-    /// [`Error::Invalid`] when `full` is not the photo's size or is empty.
+    /// [`Error::Invalid`] when `full` is not the photo's size, is empty, or
+    /// holds only transparent pixels.
     pub fn given_mask(&self, full: Mask) -> Result<PickMask> {
         let (w, h) = self.work_size();
         let (fw, fh) = self.photo_size();
@@ -538,6 +601,12 @@ impl Prepared {
         }
         if full.count() == 0 {
             return Err(Error::Invalid("the given mask has no pixels".into()));
+        }
+        let full = self.visible(full);
+        if full.count() == 0 {
+            return Err(Error::Invalid(
+                "the given mask holds only transparent pixels of the photo".into(),
+            ));
         }
         // Share of each working pixel's photo pixels in the mask.
         let mut hit = vec![0u32; w * h];
@@ -606,7 +675,8 @@ impl Prepared {
     }
 
     /// The material palette: masks of every material covering at least
-    /// `min_fraction` of the image (greedy, largest segmentation-colour
+    /// `min_fraction` of the image (of its opaque part where some is
+    /// transparent: [`Inputs::opaque`]) (greedy, largest segmentation-colour
     /// cluster first; a pixel belongs to at most one material), at most `max`.
     /// With `patterns`, a material whose mask makes a two-colour pattern
     /// with a companion among the pixels not yet taken is the whole pattern
@@ -622,6 +692,7 @@ impl Prepared {
         let seg = self.mask_segmentation();
         let mut remaining = self.valid.clone();
         let mut out = Vec::new();
+        let area = self.inputs.opaque.as_ref().map_or(1.0, Mask::fraction) * (w * h) as f64;
         while out.len() < max {
             let mut bins = std::collections::HashMap::<u32, Vec<usize>>::new();
             for i in (0..w * h).filter(|&i| remaining[i]) {
@@ -640,7 +711,7 @@ impl Prepared {
             // bins (a white cup's shaded rim), so its mask grows past its
             // bin: bins down to PALETTE_SEED_SHARE of the area still seed
             // one, and only the mask must cover `min_fraction`.
-            if (members.len() as f64) < PALETTE_SEED_SHARE * min_fraction * (w * h) as f64 {
+            if (members.len() as f64) < PALETTE_SEED_SHARE * min_fraction * area {
                 break;
             }
             // The member nearest to the bin's median colour seeds the mask.
@@ -685,7 +756,7 @@ impl Prepared {
                 }
             }
             remaining[seed] = false;
-            if (got as f64) < min_fraction * (w * h) as f64 {
+            if (got as f64) < min_fraction * area {
                 continue;
             }
             let pick = [
@@ -696,6 +767,29 @@ impl Prepared {
         }
         out
     }
+}
+
+/// The area average of `linear` (photo resolution) over the pixels whose
+/// `weight` is 1, at `w × h`: `share` is the weight's own area average (the
+/// opaque share of each working pixel). A working pixel with no opaque
+/// pixel keeps the plain average.
+fn opaque_area(linear: &Image, weight: &[f32], share: &[f32], w: usize, h: usize) -> Image {
+    let (fw, fh) = (linear.width, linear.height);
+    let mut out = Image::zeros(3, h, w);
+    for c in 0..3 {
+        let plane = linear.plane(c);
+        let all = resample::area_plane(plane, fw, fh, w, h);
+        let weighted: Vec<f32> = plane.iter().zip(weight).map(|(v, k)| v * k).collect();
+        let kept = resample::area_plane(&weighted, fw, fh, w, h);
+        for (i, o) in out.data[c * w * h..(c + 1) * w * h].iter_mut().enumerate() {
+            *o = if share[i] > 0.0 {
+                kept[i] / share[i]
+            } else {
+                all[i]
+            };
+        }
+    }
+    out
 }
 
 /// `photo.map(srgb_decode)` and [`crate::guided::luma`]`(photo)` of a 3-channel
@@ -1181,14 +1275,17 @@ fn check_request(p: &Prepared, pm: &PickMask, opts: &Options) -> Result<()> {
 /// it is, else guided-upsampled to the photo's
 /// edges ([`mask::refine`]); a material thinner than a photo-resolution edge
 /// keeps its coarse mask, each masked working pixel also marking the photo
-/// pixel under its centre, so a non-empty mask never becomes empty.
+/// pixel under its centre, so a non-empty mask never becomes empty. The
+/// photo's transparent pixels ([`Inputs::opaque`]) are left out (a working
+/// pixel with a surface is at least half opaque, so a mask of them keeps
+/// some).
 pub fn photo_mask(p: &Prepared, pm: &PickMask) -> Mask {
     if let Some(full) = &pm.photo {
         return full.clone();
     }
     let (w, h) = p.work_size();
     let (fw, fh) = p.photo_size();
-    let full = mask::refine(&pm.mask, &p.luma, fw, fh);
+    let full = p.visible(mask::refine(&pm.mask, &p.luma, fw, fh));
     if full.count() == 0 {
         // A material thinner than a photo-resolution edge: keep the coarse mask.
         // Each masked working pixel also marks the photo pixel under its centre,
@@ -1200,10 +1297,29 @@ pub fn photo_mask(p: &Prepared, pm: &PickMask) -> Mask {
             let (fx, fy) = (cell_under(x, w, fw), cell_under(y, h, fh));
             data[fy * fw + fx] = true;
         }
-        Mask {
+        let coarse = Mask {
             width: fw,
             height: fh,
             data,
+        };
+        match &p.inputs.opaque {
+            None => coarse,
+            Some(_) => {
+                let seen = p.visible(coarse);
+                if seen.count() > 0 {
+                    seen
+                } else {
+                    // Every photo pixel the masked working pixels cover.
+                    let keep: Vec<bool> = (0..fw * fh)
+                        .map(|i| pm.mask.data[p.to_work_index(i % fw, i / fw)])
+                        .collect();
+                    p.visible(Mask {
+                        width: fw,
+                        height: fh,
+                        data: keep,
+                    })
+                }
+            }
         }
     } else {
         full
@@ -2664,6 +2780,7 @@ mod tests {
             embedding: None,
             segmentation_estimated: false,
             envmap: None,
+            opaque: None,
         })
         .unwrap()
     }
@@ -2695,6 +2812,7 @@ mod tests {
             embedding: embedded.then(|| Image::new(3, h, w, embedding).unwrap()),
             segmentation_estimated: estimated,
             envmap: None,
+            opaque: None,
         })
         .unwrap()
     }
@@ -2731,6 +2849,7 @@ mod tests {
             embedding: None,
             segmentation_estimated: false,
             envmap: None,
+            opaque: None,
         })
         .unwrap();
         // Bins 8 and 9 of channel 0 hold 4 and 6 columns: 12.5 % and 19 %.
@@ -2790,6 +2909,103 @@ mod tests {
         inputs.embedding = Some(Image::new(3, 12, 16, vec![0.0; 3 * 12 * 16]).unwrap());
         let e = Prepared::new(inputs).err().expect("refused").to_string();
         assert!(e.contains("material embedding"), "{e}");
+    }
+
+    /// A 64×48 photo (working resolution 32×24) of one flat material whose
+    /// columns left of `edge` are transparent (grey, as decoding leaves
+    /// them) and the rest show the sRGB grey `shown`.
+    fn cut_out(edge: usize, shown: f32) -> Prepared {
+        let (fw, fh) = (64, 48);
+        let data = (0..3 * fw * fh)
+            .map(|k| if k % fw < edge { 0.5 } else { shown })
+            .collect();
+        Prepared::new(Inputs {
+            photo: Image::new(3, fh, fw, data).unwrap(),
+            elements: flat_elements([0.0, 0.0, 1.0], None),
+            segmentation: flat(3, &[0.2, 0.5, 0.7]),
+            embedding: None,
+            segmentation_estimated: false,
+            envmap: None,
+            opaque: Some(Mask {
+                width: fw,
+                height: fh,
+                data: (0..fw * fh).map(|i| i % fw >= edge).collect(),
+            }),
+        })
+        .unwrap()
+    }
+
+    #[test]
+    fn transparent_pixels_are_never_picked_masked_or_read() {
+        // Column 21 on: working column 10 (photo columns 20, 21) is half
+        // opaque and keeps its surface, columns 0–9 lose theirs.
+        let p = cut_out(21, 0.8);
+        let (w, h) = p.work_size();
+        for i in 0..w * h {
+            assert_eq!(p.valid[i], i % w >= 10, "working pixel {i}");
+        }
+        // The working photo averages the opaque pixels only: the half-opaque
+        // column is the opaque colour, not a blend with the grey fill.
+        let lin = SrgbDecode8::new().decode(0.8);
+        for y in 0..h {
+            let v = p.photo_work.at(0, y * w + 10);
+            assert!((v - lin).abs() < 1e-6, "row {y}: {v} vs {lin}");
+        }
+        // Picks on transparent pixels are refused; on opaque ones taken.
+        let e = p.check_pick([20, 5]).unwrap_err().to_string();
+        assert!(e.contains("(20, 5)") && e.contains("transparent"), "{e}");
+        p.check_pick([21, 5]).unwrap();
+        assert!(p.pick_mask([3, 40], &MaskOptions::default()).is_err());
+        // The whole visible material, and nothing transparent.
+        let pm = p.pick_mask([40, 20], &MaskOptions::default()).unwrap();
+        let full = photo_mask(&p, &pm);
+        let opaque = p.inputs.opaque.as_ref().unwrap();
+        assert_eq!(full.count(), opaque.count());
+        assert!(full.data.iter().zip(&opaque.data).all(|(&m, &o)| !m || o));
+        // A given mask loses its transparent pixels; one of only those is refused.
+        let given = |keep: &dyn Fn(usize) -> bool| Mask {
+            width: 64,
+            height: 48,
+            data: (0..64 * 48).map(keep).collect(),
+        };
+        let pm = p.given_mask(given(&|i| i % 64 < 30)).unwrap();
+        assert_eq!(pm.photo.as_ref().unwrap().count(), 9 * 48);
+        let e = p
+            .given_mask(given(&|i| i % 64 < 21))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("only transparent"), "{e}");
+        // The material extracted from the opaque part is its colour, the
+        // grey fill nowhere in it.
+        let inpainter = picker_inpaint::DiffusionInpainter::default();
+        let pm = p.pick_mask([40, 20], &MaskOptions::default()).unwrap();
+        let opts = test_options(&inpainter, UvChoice::Auto);
+        let (m, _) = extract(&p, "m", Some([40, 20]), &pm, &opts).unwrap();
+        assert!(
+            (m.area_fraction - 43.0 / 64.0).abs() < 1e-9,
+            "{}",
+            m.area_fraction
+        );
+        // The palette's threshold is a share of the visible area: the one
+        // material covers all of it.
+        let all = p.palette(0.99, 4, false);
+        assert_eq!(all.len(), 1);
+        assert!(all[0]
+            .1
+            .mask
+            .data
+            .iter()
+            .zip(&p.valid)
+            .all(|(&m, &v)| !m || v));
+        // Misshaped or wholly transparent opacity is refused.
+        let mut inputs = p.inputs.clone();
+        inputs.opaque.as_mut().unwrap().data.pop();
+        let e = Prepared::new(inputs).err().expect("refused").to_string();
+        assert!(e.contains("opaque pixels"), "{e}");
+        let mut inputs = p.inputs.clone();
+        inputs.opaque.as_mut().unwrap().data.fill(false);
+        let e = Prepared::new(inputs).err().expect("refused").to_string();
+        assert!(e.contains("every pixel of the photo is transparent"), "{e}");
     }
 
     #[test]
@@ -2853,6 +3069,7 @@ mod tests {
             embedding: None,
             segmentation_estimated: false,
             envmap: None,
+            opaque: None,
         })
         .unwrap()
     }
@@ -3797,6 +4014,7 @@ mod tests {
             embedding: None,
             segmentation_estimated: false,
             envmap: None,
+            opaque: None,
         })
         .unwrap();
         let disc = Mask {
@@ -3887,6 +4105,7 @@ mod tests {
             embedding: None,
             segmentation_estimated: false,
             envmap: Some(env),
+            opaque: None,
         };
         let inpainter = picker_inpaint::DiffusionInpainter::default();
         let opts = Options {

@@ -62,7 +62,8 @@ fn jpeg(img: &DynamicImage) -> Vec<u8> {
 /// at `(x, y)`, exact in 8 bits.
 fn v8(x: u32, y: u32, c: u32) -> u8 {
     if c == 3 {
-        return (255 - x * 30 - y * 7) as u8; // varying alpha: must not matter
+        // Varying alpha, all of it at least ½: must not matter.
+        return (255 - x * 15 - y * 3) as u8;
     }
     (x * 16 + y * 20 + c * 35) as u8
 }
@@ -70,7 +71,7 @@ fn v8(x: u32, y: u32, c: u32) -> u8 {
 /// Values that use all 16 bits.
 fn v16(x: u32, y: u32, c: u32) -> u16 {
     if c == 3 {
-        return (65535 - x * 9000 - y * 1000) as u16;
+        return (65535 - x * 4000 - y * 1000) as u16;
     }
     (x * 4111 + y * 5003 + c * 9001 + 7) as u16
 }
@@ -334,7 +335,7 @@ fn exr_is_linear_exposed_at_the_99th_percentile() {
 }
 
 #[test]
-fn dim_exr_is_not_brightened_and_alpha_is_dropped() {
+fn dim_exr_is_not_brightened_and_alpha_is_not_composited() {
     let img = Rgba32FImage::from_fn(4, 3, |x, y| {
         Rgba([0.02 * x as f32, 0.5, 0.1 * y as f32, 0.25 * x as f32])
     });
@@ -344,12 +345,87 @@ fn dim_exr_is_not_brightened_and_alpha_is_dropped() {
     )
     .unwrap();
     assert_eq!(p.channels_in_file, 4);
+    // Alpha 0 and ¼ (x < 2) is transparent: grey; ½ and ¾ keep their colour.
+    let opaque = p.opaque.as_ref().expect("some pixels are transparent");
     for (x, y, px) in p.rgb.enumerate_pixels() {
         let src = img.get_pixel(x, y).0;
+        assert_eq!(opaque[(y * 4 + x) as usize], x >= 2, "({x}, {y})");
+        if x < 2 {
+            assert_eq!(px.0, [photo::TRANSPARENT_FILL; 3], "({x}, {y})");
+            continue;
+        }
         for (found, linear) in px.0.iter().zip(src) {
             assert!((found - srgb(linear)).abs() < 1e-5, "({x}, {y})");
         }
     }
+}
+
+/// An image with alpha: pixels below ½ are transparent (listed, their
+/// colour the grey fill), ½ and above keep their colour as stored; at 8
+/// bits the line is between 127 and 128, at 16 between 32767 and 32768.
+#[test]
+fn transparent_pixels_are_listed_and_filled_grey() {
+    let alpha8 = |x: u32| [0, 127, 128, 255, 60, 200, 255][x as usize];
+    let rgba8 = DynamicImage::ImageRgba8(ImageBuffer::from_fn(W, H, |x, y| {
+        Rgba([10 * x as u8, 20 + y as u8, 200, alpha8(x)])
+    }));
+    let alpha16 = |x: u32| [0, 32767, 32768, 65535, 1000, 50000, 65535][x as usize];
+    let la16 = DynamicImage::ImageLumaA16(ImageBuffer::from_fn(W, H, |x, y| {
+        LumaA([1000 * (x + y) as u16, alpha16(x)])
+    }));
+    for (img, fmt, name) in [
+        (&rgba8, ImageFormat::Png, "cut.png"),
+        (&rgba8, ImageFormat::WebP, "cut.webp"),
+        (&rgba8, ImageFormat::Tiff, "cut.tif"),
+        (&la16, ImageFormat::Png, "cut16.png"),
+    ] {
+        let p = dec(&encode(img, fmt), name).unwrap();
+        let stored = img.to_rgb32f();
+        let opaque = p.opaque.as_ref().unwrap_or_else(|| panic!("{name}"));
+        assert!(!p.alpha_ignored, "{name}");
+        for (x, y, px) in p.rgb.enumerate_pixels() {
+            let on = [false, false, true, true, false, true, true][x as usize];
+            assert_eq!(opaque[(y * W + x) as usize], on, "{name} ({x}, {y})");
+            let want = if on {
+                stored.get_pixel(x, y).0
+            } else {
+                [photo::TRANSPARENT_FILL; 3]
+            };
+            assert_eq!(px.0, want, "{name} ({x}, {y})");
+        }
+    }
+    // Opaque everywhere: nothing listed. Transparent everywhere (a viewer
+    // shows nothing): the alpha is ignored and the colours kept.
+    for (a, ignored) in [(255u8, false), (0, true)] {
+        let img = DynamicImage::ImageRgba8(ImageBuffer::from_fn(W, H, |x, y| {
+            Rgba([x as u8 * 30, y as u8 * 40, 7, a])
+        }));
+        let p = dec(&encode(&img, ImageFormat::Png), "all.png").unwrap();
+        assert!(p.opaque.is_none());
+        assert_eq!(p.alpha_ignored, ignored);
+        assert_eq!(p.rgb, img.to_rgb32f());
+    }
+    // No alpha channel: nothing listed.
+    let (rgb, _) = sample(3, 8);
+    let p = dec(&encode(&rgb, ImageFormat::Png), "rgb.png").unwrap();
+    assert!(p.opaque.is_none() && !p.alpha_ignored);
+}
+
+/// A linear image's transparent background does not set its exposure: the
+/// 99th percentile is over the opaque pixels.
+#[test]
+fn a_cut_outs_background_does_not_set_the_exposure() {
+    let img = Rgba32FImage::from_fn(20, 10, |x, _| {
+        if x < 15 {
+            Rgba([50.0, 50.0, 50.0, 0.0])
+        } else {
+            Rgba([0.25, 0.25, 0.25, 1.0])
+        }
+    });
+    let p = dec(&encode(&img.into(), ImageFormat::OpenExr), "cut.exr").unwrap();
+    let px = p.rgb.get_pixel(17, 3).0;
+    assert!((px[0] - srgb(0.25)).abs() < 1e-5, "{px:?}");
+    assert_eq!(p.rgb.get_pixel(3, 3).0, [photo::TRANSPARENT_FILL; 3]);
 }
 
 #[test]
