@@ -527,6 +527,7 @@ impl Models {
             .map_err(|e| anyhow!("making the input tensor: {e}"))?;
         conv::normalize_input(&mut x);
         let (mut elements, mut seg, mut env) = (None, None, None);
+        let mut seam: Option<f32> = None;
         let mut described = Vec::new();
         for n in &self.nets {
             let t = Instant::now();
@@ -561,9 +562,12 @@ impl Models {
                 Net::EnvMap(e) => {
                     let out = e.forward(&x).with_context(what)?;
                     let img = tensor_image(&conv::decode_envmap(&out.envmap));
-                    env = Some(
-                        EnvMap::from_image(&img).map_err(|e| anyhow!("environment map: {e}"))?,
-                    );
+                    let mut map =
+                        EnvMap::from_image(&img).map_err(|e| anyhow!("environment map: {e}"))?;
+                    // Its left and right edges are one direction, predicted
+                    // apart: a line in reflections looking behind the camera.
+                    seam = Some(map.close_wrap_seam());
+                    env = Some(map);
                 }
                 #[allow(unreachable_patterns)]
                 _ => bail!(
@@ -581,7 +585,16 @@ impl Models {
             elements,
             seg,
             env,
-            json!({"source": "networks", "nets": described, "working_size": {"width": ww, "height": wh}}),
+            json!({
+                "source": "networks",
+                "nets": described,
+                "working_size": {"width": ww, "height": wh},
+                "envmap_wrap_seam": seam.map(|f| json!({
+                    "closed": true,
+                    "largest_change": f,
+                    "rule": "the step across the left/right edges (straight behind the camera) made the mean of the steps beside it, in log radiance, spread over 1/8 of the width on each side",
+                })),
+            }),
         ))
     }
 }
@@ -744,6 +757,13 @@ fn read_elements(dir: &Path, photo: Image, opaque: Option<Mask>) -> Result<(Inpu
         None
     };
     let segmentation_estimated = segmentation_is_estimated(dir)?;
+    // A `picker infer` folder holds the network's map as predicted: its
+    // wrap seam is closed as when the networks run here.
+    let mut envmap = envmap;
+    let seam = match envmap.as_mut() {
+        Some(e) if segmentation_estimated => Some(e.close_wrap_seam()),
+        _ => None,
+    };
     Ok((
         Inputs {
             photo,
@@ -754,7 +774,11 @@ fn read_elements(dir: &Path, photo: Image, opaque: Option<Mask>) -> Result<(Inpu
             envmap,
             opaque,
         },
-        json!({"source": "elements", "elements": dir.display().to_string()}),
+        json!({
+            "source": "elements",
+            "elements": dir.display().to_string(),
+            "envmap_wrap_seam": seam.map(|f| json!({"closed": true, "largest_change": f})),
+        }),
     ))
 }
 

@@ -1658,3 +1658,50 @@ fn a_cut_outs_transparent_pixels_are_never_the_material() {
     );
     assert_eq!(j["photo"]["alpha_ignored"], false);
 }
+
+/// The estimated lighting's wrap seam (its left and right edges, both
+/// straight behind the camera) is closed: `envmap.exr` is the network's map
+/// as `picker infer` writes it, closed by `EnvMap::close_wrap_seam`, and
+/// `material.json` says so.
+#[test]
+fn the_estimated_envmaps_wrap_seam_is_closed() {
+    let (tmp, out) = extract_example_embedded_with("room.png", "200,150", &["--max-size", "64"]);
+    let raw = tmp.path().join("infer");
+    let photo = repo().join("fixtures/examples/room.png");
+    ok(&[
+        "infer",
+        photo.to_str().unwrap(),
+        "--out",
+        raw.to_str().unwrap(),
+    ]);
+    let read = |p: &Path| picker_render::EnvMap::read(p).unwrap();
+    let mut want = read(&raw.join("envmap.exr"));
+    let factor = want.close_wrap_seam();
+    assert!(factor > 1.0, "the raw map has a seam to close");
+    let got = read(&out.join("envmap.exr"));
+    assert_eq!((got.width(), got.height()), (want.width(), want.height()));
+    for (i, (g, w)) in got.data().iter().zip(want.data()).enumerate() {
+        assert!(
+            (*g - *w).abs().max_element() <= 1e-6 * w.max_element().max(1.0),
+            "pixel {i}: {g} vs {w}"
+        );
+    }
+    let m = json_file(&out.join("material.json"));
+    let seam = &m["inputs"]["envmap_wrap_seam"];
+    assert_eq!(seam["closed"], true, "{}", m["inputs"]);
+    assert!((seam["largest_change"].as_f64().unwrap() - f64::from(factor)).abs() < 1e-5);
+    // The `picker infer` folder as `--elements`: closed the same way.
+    let from_infer = tmp.path().join("from-infer");
+    ok(&[
+        "extract",
+        "--elements",
+        raw.to_str().unwrap(),
+        "--pick",
+        "200,150",
+        "--max-size",
+        "64",
+        "--out",
+        from_infer.to_str().unwrap(),
+    ]);
+    assert_eq!(read(&from_infer.join("envmap.exr")), got);
+}

@@ -17,6 +17,11 @@ use crate::io;
 /// of the map over the sphere stays finite in `f32`.
 pub const MAX_RADIANCE: f32 = 1e30;
 
+/// The share of an [`EnvMap`]'s width on each side of its wrap seam over
+/// which [`EnvMap::close_wrap_seam`] spreads its change (1/8: 45° of
+/// azimuth behind the camera, where a network sees nothing).
+pub const WRAP_SEAM_BAND: f32 = 0.125;
+
 /// A linear-RGB HDR radiance map, `height × width`, row-major.
 #[derive(Clone, Debug, PartialEq)]
 pub struct EnvMap {
@@ -201,6 +206,51 @@ impl EnvMap {
             acc += r * self.solid_angle(row);
         }
         (acc / (4.0 * std::f64::consts::PI)).as_vec3()
+    }
+
+    /// Closes the map's wrap seam: the left and right edges are one
+    /// direction (straight behind the camera) but a network predicts them
+    /// apart, so a reflection that looks behind (a sphere's centre) showed a
+    /// line where they meet. Per row, in the log of the radiance (with
+    /// `ε` = 10⁻³ of the map's mean added, so that black stays finite), the
+    /// step across the seam is made the mean of the steps just inside it on
+    /// either side; the change is spread over [`WRAP_SEAM_BAND`] of the
+    /// width on each side, falling linearly from half the excess step at the
+    /// edge to nothing at the band's end. A map continuous across the seam
+    /// (its seam step within 10⁻⁶ of that mean) is left as it is; columns outside
+    /// the bands never change. Maps narrower than 4 columns are left alone.
+    /// Returns the largest factor an edge pixel was changed by (1: none).
+    pub fn close_wrap_seam(&mut self) -> f32 {
+        let (w, h) = (self.width, self.height);
+        if w < 4 {
+            return 1.0;
+        }
+        let band = ((w as f32 * WRAP_SEAM_BAND).round() as usize).clamp(1, w / 2);
+        let eps = (self.mean() * 1e-3).max(Vec3::splat(1e-30));
+        let ln = |v: Vec3| Vec3::new((v.x + eps.x).ln(), (v.y + eps.y).ln(), (v.z + eps.z).ln());
+        let mut worst = 0.0f32;
+        for row in 0..h {
+            let at = |c: usize| ln(self.get(row, c));
+            let step = at(0) - at(w - 1);
+            let inside = 0.5 * ((at(1) - at(0)) + (at(w - 1) - at(w - 2)));
+            let excess = step - inside;
+            if excess.abs().max_element() < 1e-6 {
+                continue;
+            }
+            worst = worst.max(excess.abs().max_element() * 0.5);
+            for k in 0..band {
+                let f = 1.0 - k as f32 / band as f32;
+                let shift = excess * (0.5 * f);
+                for (c, sign) in [(k, -1.0f32), (w - 1 - k, 1.0)] {
+                    let v = &mut self.data[row * w + c];
+                    let l = ln(*v) + shift * sign;
+                    *v = (Vec3::new(l.x.exp(), l.y.exp(), l.z.exp()) - eps)
+                        .max(Vec3::ZERO)
+                        .min(Vec3::splat(MAX_RADIANCE));
+                }
+            }
+        }
+        worst.exp()
     }
 
     /// The map at `width × height`. Downsampling (either dimension smaller) is
@@ -517,6 +567,97 @@ mod tests {
             .data()
             .iter()
             .all(|v| (*v - Vec3::splat(2.0)).abs().max_element() < 1e-6));
+    }
+
+    #[test]
+    fn the_wrap_seam_is_closed_inside_its_bands_only() {
+        // A ramp in log radiance along the columns: steps of `a` inside, a
+        // drop of −a(w−1) across the seam, differently per channel and row.
+        let (w, h) = (40usize, 6usize);
+        let a = |row: usize| Vec3::new(0.05, -0.03, 0.1) * (1.0 + row as f32);
+        let ramp = |row: usize, col: usize| {
+            let l = a(row) * col as f32;
+            Vec3::new(l.x.exp(), l.y.exp(), l.z.exp())
+        };
+        let data = (0..w * h).map(|i| ramp(i / w, i % w)).collect();
+        let orig = EnvMap::new(w, h, data).unwrap();
+        let mut m = orig.clone();
+        let worst = m.close_wrap_seam();
+        let band = (w as f32 * WRAP_SEAM_BAND).round() as usize;
+        let eps = orig.mean() * 1e-3;
+        let ln = |v: Vec3| Vec3::new((v.x + eps.x).ln(), (v.y + eps.y).ln(), (v.z + eps.z).ln());
+        let mut biggest = 0.0f32;
+        for row in 0..h {
+            let at = |c: usize| ln(m.get(row, c));
+            let inside = |c: usize| ln(orig.get(row, c + 1)) - ln(orig.get(row, c));
+            // The seam's step is now the mean of the two steps beside it.
+            let want = 0.5 * (inside(0) + inside(w - 2));
+            let got = at(0) - at(w - 1);
+            assert!(
+                (got - want).abs().max_element() < 1e-4,
+                "row {row}: {got} vs {want}"
+            );
+            let excess = (ln(orig.get(row, 0)) - ln(orig.get(row, w - 1))) - want;
+            biggest = biggest.max(excess.abs().max_element() * 0.5);
+            for col in band..w - band {
+                assert_eq!(m.get(row, col), orig.get(row, col), "({row}, {col})");
+            }
+            // Inside the bands the change falls off linearly to the band's end.
+            let change = |c: usize| (ln(m.get(row, c)) - ln(orig.get(row, c))).x;
+            for k in 0..band {
+                let f = 1.0 - k as f32 / band as f32;
+                assert!(
+                    (change(k) + 0.5 * excess.x * f).abs() < 1e-4,
+                    "({row}, {k})"
+                );
+                assert!((change(w - 1 - k) - 0.5 * excess.x * f).abs() < 1e-4);
+            }
+        }
+        assert!(
+            (worst.ln() - biggest).abs() < 1e-4,
+            "{worst} vs exp({biggest})"
+        );
+        // Continuous maps, uniform or periodic along the columns, are left
+        // exactly as they were; so are maps under 4 columns.
+        for map in [
+            EnvMap::uniform(16, 8, Vec3::new(0.2, 3.0, 0.0)),
+            EnvMap::new(
+                16,
+                4,
+                (0..64)
+                    .map(|i| {
+                        let phi = std::f32::consts::TAU * ((i % 16) as f32 + 0.5) / 16.0;
+                        Vec3::splat(1.0 + 0.5 * phi.cos())
+                    })
+                    .collect(),
+            )
+            .unwrap(),
+            EnvMap::new(3, 2, (0..6).map(|i| Vec3::splat(i as f32)).collect()).unwrap(),
+        ] {
+            let mut closed = map.clone();
+            assert_eq!(closed.close_wrap_seam(), 1.0);
+            assert_eq!(closed, map);
+        }
+        // Black next to bright: finite, non-negative.
+        let mut m = EnvMap::new(
+            8,
+            2,
+            (0..16)
+                .map(|i| {
+                    if i % 8 < 4 {
+                        Vec3::ZERO
+                    } else {
+                        Vec3::splat(50.0)
+                    }
+                })
+                .collect(),
+        )
+        .unwrap();
+        assert!(m.close_wrap_seam() > 1.0);
+        assert!(m
+            .data()
+            .iter()
+            .all(|v| v.is_finite() && v.min_element() >= 0.0));
     }
 
     #[test]
