@@ -23,7 +23,7 @@ use picker_inpaint::{DiffusionInpainter, Inpainter, LearnedInpainter, PatchMatch
 use picker_nets::conventions as conv;
 use picker_nets::{Net, NetKind};
 use picker_render::io::{self as rio, Image};
-use picker_render::{ElementImages, EnvMap, Quality, Shader};
+use picker_render::{ElementImages, EnvMap, Shader};
 use picker_tensor::Tensor;
 use serde_json::{json, Value};
 
@@ -1160,7 +1160,7 @@ pub fn write_materials(
         .clone()
         .unwrap_or_else(|| EnvMap::uniform(64, 32, glam::Vec3::ONE));
     // One prefiltered lighting for every preview of the run and their exposure.
-    let preview_shader = Shader::new(&preview_env, Quality::Fast);
+    let preview_shader = Shader::resolving(&preview_env);
     let exposure = picker_render::preview_exposure(&preview_shader);
     let single = jobs.len() == 1 && !layout.always_subdirs;
     let export_opts = ExportOptions {

@@ -267,7 +267,7 @@ fn preview(a: &Args, env: &EnvMap, t_total: Instant) -> Result<()> {
         None => None,
     };
     let size = a.size as usize;
-    let shader = Shader::new(env, Quality::Fast);
+    let shader = Shader::resolving(env);
     let sphere = picker_render::render::preview_sphere_with(&material, &shader, size);
     let tile = picker_render::render::preview_tile_with(&material, &shader, size, texture.as_ref());
     let exposure = match a.exposure {

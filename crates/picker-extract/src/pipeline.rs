@@ -43,7 +43,7 @@ use glam::Vec3;
 use picker_inpaint::{make_seamless, seam_score, InpaintOptions, Inpainter};
 use picker_nets::conventions as conv;
 use picker_render::io::Image;
-use picker_render::{ElementImages, EnvMap, Quality, Shader};
+use picker_render::{ElementImages, EnvMap, Shader};
 use rayon::prelude::*;
 use serde::Serialize;
 
@@ -2213,7 +2213,7 @@ fn extract_as(
 
     // Re-render self-check at the working resolution.
     let rerender_psnr = p.inputs.envmap.as_ref().and_then(|env| {
-        let shader = Shader::new(env, Quality::Fast);
+        let shader = Shader::resolving(env);
         let mut render = Image::zeros(3, h, w);
         // Every pixel on its own (in parallel, the same values as in turn).
         let shaded: Vec<Vec3> = idx
@@ -2287,7 +2287,7 @@ pub fn material_preview_repeats(m: &Material, size: usize) -> f32 {
 /// texture wraps `repeats` times around the equator with the sphere's
 /// longitude/latitude mapping), shaded by eq. 3.7 with the fast path.
 pub fn preview_sphere(m: &Material, env: &EnvMap, size: usize, repeats: f32) -> Image {
-    preview_sphere_with(m, &Shader::new(env, Quality::Fast), size, repeats)
+    preview_sphere_with(m, &Shader::resolving(env), size, repeats)
 }
 
 /// [`preview_sphere`] with a prepared shader (one per lighting: several
@@ -2412,7 +2412,7 @@ fn restrict_to_work(full: &Mask, part: &[bool], w: usize, h: usize) -> Mask {
 /// The plain, sequential [`preview_sphere`].
 #[cfg(test)]
 fn preview_sphere_reference(m: &Material, env: &EnvMap, size: usize, repeats: f32) -> Image {
-    let shader = Shader::new(env, Quality::Fast);
+    let shader = Shader::resolving(env);
     let mut out = Image::zeros(3, size, size);
     let mut phong = m.params.phong();
     for row in 0..size {
@@ -2627,7 +2627,7 @@ mod tests {
 
     /// The exposure of the previews under `env` (the fast shader they use).
     fn preview_exposure(env: &EnvMap) -> f32 {
-        picker_render::preview_exposure(&Shader::new(env, Quality::Fast))
+        picker_render::preview_exposure(&Shader::new(env, picker_render::Quality::Fast))
     }
 
     #[test]

@@ -15,7 +15,17 @@
 //!
 //! Where the map cannot resolve a lobe (`n` above
 //! [`resolved_exponent`](crate::phong::resolved_exponent)) the finest level is
-//! the map itself, so the fast path aliases exactly as the exact quadrature does.
+//! the map itself, so the fast path aliases exactly as the exact quadrature does:
+//! a narrow lobe falls between pixel centres, and a glossy sphere shows the
+//! map's pixel grid as dark lines. [`PrefilteredEnv::resolving`] instead reads
+//! the map as the continuous function its bilinear sampling
+//! ([`EnvMap::sample`]) makes of it: levels finer than the map, its bilinear
+//! upsamplings, are made when a lobe first needs them (up to
+//! [`MAX_RESOLVING_ROWS`] rows), so every exponent up to the conventions'
+//! largest is resolved. Products shown to people (previews, re-renders of a
+//! photo) use it; the eq. 3.7 reference renders keep the map as it is.
+
+use std::sync::OnceLock;
 
 use glam::{DVec3, Vec3};
 use picker_nets::conventions as conv;
@@ -30,6 +40,9 @@ pub const IRRADIANCE_ROWS: usize = 32;
 pub const MIN_LEVEL_ROWS: usize = 16;
 /// Lobe weights below this fraction of the peak are skipped.
 pub const LOBE_CUTOFF: f64 = 1e-3;
+/// Rows of the finest level [`PrefilteredEnv::resolving`] makes: enough
+/// for the conventions' largest exponent, 8192 (`π·√8192 / (2/3)` = 427).
+pub const MAX_RESOLVING_ROWS: usize = 512;
 /// Largest ratio of pixel spacing to lobe width `1/√n` in the chosen level.
 const SPACING_PER_LOBE_WIDTH: f64 = 2.0 / 3.0;
 
@@ -119,7 +132,13 @@ impl Level {
 pub struct PrefilteredEnv {
     irradiance: EnvMap,
     levels: Vec<Level>,
+    /// With [`PrefilteredEnv::resolving`]: the map, and the rows of each
+    /// level finer than it with the level once a lobe has needed it.
+    finer: Option<(EnvMap, Vec<FinerLevel>)>,
 }
+
+/// A level finer than the map: its rows, and the level once made.
+type FinerLevel = (usize, OnceLock<Level>);
 
 /// `env` area-averaged down to at most `rows × 2·rows` (as is if already smaller).
 fn at_most(env: &EnvMap, rows: usize) -> EnvMap {
@@ -176,7 +195,31 @@ impl PrefilteredEnv {
         Self {
             irradiance: irradiance_map(env),
             levels,
+            finer: None,
         }
+    }
+
+    /// [`PrefilteredEnv::new`] reading `env` as a continuous function (module
+    /// docs): lobes narrower than the map resolves are summed over its
+    /// bilinear upsampling to the next level of the chain that resolves them
+    /// (rows `16·2^(j/2)`, up to [`MAX_RESOLVING_ROWS`]), made the first time
+    /// one is needed. Lobes the map resolves are summed as by `new`, to the
+    /// same bits.
+    pub fn resolving(env: &EnvMap) -> Self {
+        let mut p = Self::new(env);
+        let h = env.height();
+        if h < MAX_RESOLVING_ROWS {
+            let finer = (0..)
+                .map(|j| (MIN_LEVEL_ROWS as f64 * (j as f64 / 2.0).exp2()).round() as usize)
+                .filter(|&rows| rows > h)
+                .map(|rows| rows.min(MAX_RESOLVING_ROWS))
+                .take_while(|&rows| rows < MAX_RESOLVING_ROWS)
+                .chain([MAX_RESOLVING_ROWS])
+                .map(|rows| (rows, OnceLock::new()))
+                .collect();
+            p.finer = Some((env.clone(), finer));
+        }
+        p
     }
 
     /// The irradiance `E(N) = ∫ L(ω) max(0, ω·N) dω` for a unit normal (bilinear lookup).
@@ -198,11 +241,22 @@ impl PrefilteredEnv {
         let e = material.exponent.max(0.0) as f64;
         // Finest spacing needed: π/H ≤ (2/3)/√n.
         let need = std::f64::consts::PI * e.sqrt() / SPACING_PER_LOBE_WIDTH;
-        let level = self
-            .levels
-            .iter()
-            .find(|l| l.rows as f64 >= need)
-            .unwrap_or(&self.levels[self.levels.len() - 1]);
+        let level = match self.levels.iter().find(|l| l.rows as f64 >= need) {
+            Some(l) => l,
+            None => match &self.finer {
+                Some((env, finer)) => {
+                    let (rows, cell) = finer
+                        .iter()
+                        .find(|(rows, _)| *rows as f64 >= need)
+                        .unwrap_or(&finer[finer.len() - 1]);
+                    cell.get_or_init(|| {
+                        let cols = (rows * env.width()).div_ceil(env.height()).max(1);
+                        Level::new(&env.resample(cols, *rows).expect("sizes are positive"))
+                    })
+                }
+                None => &self.levels[self.levels.len() - 1],
+            },
+        };
         let r = 2.0 * v.dot(n) * n - v;
         let s = level.lobe_sum(r, n, e) * ((e + 2.0) / (2.0 * std::f64::consts::PI));
         diffuse + material.specular * s.as_vec3()

@@ -41,6 +41,13 @@ impl Shader {
         }
     }
 
+    /// The fast path reading `env` as a continuous function, so that lobes
+    /// narrower than its pixels do not alias ([`PrefilteredEnv::resolving`]):
+    /// for images shown to people (previews, re-renders of a photo).
+    pub fn resolving(env: &EnvMap) -> Self {
+        Shader::Fast(PrefilteredEnv::resolving(env))
+    }
+
     /// Eq. 3.7 at one point (unit camera-space `normal` and `view`; zero normal → black).
     pub fn shade(&self, normal: Vec3, view: Vec3, material: &PhongMaterial) -> Vec3 {
         match self {

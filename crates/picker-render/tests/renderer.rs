@@ -410,3 +410,78 @@ fn preview_exposure_is_set_by_the_lighting() {
     let dark = Shader::new(&EnvMap::uniform(8, 4, Vec3::ZERO), Quality::Fast);
     assert_eq!(preview_exposure(&dark), 1.0);
 }
+
+/// `PrefilteredEnv::resolving`: exponents the map resolves give the same
+/// bits as the plain fast path; narrower lobes, which alias on the map itself
+/// (a uniform sky's specular furnace falls to nothing between pixel
+/// centres), give the exact quadrature over the map's bilinear upsampling
+/// fine enough to resolve them, and the furnace's 1 everywhere.
+#[test]
+fn the_resolving_fast_path_does_not_alias_narrow_lobes() {
+    let mut rng = Rng::new(48);
+    let (w, h) = (40, 30);
+    let env = random_env(&mut rng, w, h);
+    let plain = PrefilteredEnv::new(&env);
+    let smooth = PrefilteredEnv::resolving(&env);
+    let n_max = resolved_exponent(h) as f32;
+    for _ in 0..50 {
+        let n = random_unit(&mut rng);
+        let v = random_view(&mut rng, n, 0.2);
+        let m = random_material(&mut rng, n_max);
+        assert_eq!(
+            plain.shade(n, v, &m),
+            smooth.shade(n, v, &m),
+            "n = {}",
+            m.exponent
+        );
+    }
+    // A uniform sky, ρs = 1, view along the normal: exactly 1 for any lobe.
+    let sky = EnvMap::uniform(w, h, Vec3::ONE);
+    let (plain_sky, smooth_sky) = (PrefilteredEnv::new(&sky), PrefilteredEnv::resolving(&sky));
+    for e in [200.0f32, 1000.0, 3000.0, 8192.0] {
+        let m = PhongMaterial {
+            diffuse: Vec3::ZERO,
+            specular: Vec3::ONE,
+            exponent: e,
+        };
+        let (mut lo, mut hi) = (f32::MAX, 0.0f32);
+        let mut plain_lo = f32::MAX;
+        for _ in 0..200 {
+            let n = random_unit(&mut rng);
+            let s = smooth_sky.shade(n, n, &m).x;
+            (lo, hi) = (lo.min(s), hi.max(s));
+            plain_lo = plain_lo.min(plain_sky.shade(n, n, &m).x);
+        }
+        assert!(lo > 0.97 && hi < 1.03, "n = {e}: {lo} … {hi}");
+        if e >= 1000.0 {
+            assert!(
+                plain_lo < 0.5,
+                "n = {e}: the map itself aliases ({plain_lo})"
+            );
+        }
+    }
+    // Against the exact quadrature over the upsampled map.
+    for e in [300.0f32, 2000.0] {
+        let rows = (std::f64::consts::PI * (e as f64).sqrt() * 1.5).ceil() as usize;
+        let rows = [16usize, 23, 32, 45, 64, 91, 128, 181, 256, 362, 512]
+            .into_iter()
+            .find(|&r| r >= rows)
+            .unwrap();
+        let fine = env.resample((rows * w).div_ceil(h), rows).unwrap();
+        let q = EnvQuadrature::new(&fine);
+        for _ in 0..10 {
+            let n = random_unit(&mut rng);
+            let v = random_view(&mut rng, n, 0.3);
+            let m = PhongMaterial {
+                diffuse: Vec3::ZERO,
+                specular: Vec3::ONE,
+                exponent: e,
+            };
+            let (f, x) = (smooth.shade(n, v, &m), q.shade(n, v, &m));
+            assert!(
+                ((f - x).abs() / x.max(Vec3::splat(1e-3))).max_element() < FAST_REL,
+                "n = {e}: {f} vs exact {x}"
+            );
+        }
+    }
+}
