@@ -41,8 +41,14 @@ pub struct Args {
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
     /// Use the fast (prefiltered) renderer instead of exact quadrature.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "continuous")]
     pub fast: bool,
+    /// Read the env map as the continuous function its bilinear sampling makes of it (the fast
+    /// renderer over upsamplings of the map fine enough for each glossy lobe), as `picker synth`
+    /// renders `direct_env` and previews are rendered: exact quadrature over the map's own pixels
+    /// shows its pixel grid in lobes narrower than them.
+    #[arg(long)]
+    pub continuous: bool,
     /// Render a material preview (sphere and tile; fast renderer) instead of re-rendering elements.
     #[arg(long, requires_all = ["diffuse", "specular", "exponent"])]
     pub preview: bool,
@@ -190,10 +196,12 @@ pub fn run(a: Args) -> Result<()> {
         None => None,
     };
 
-    let quality = if a.fast {
-        Quality::Fast
+    let (quality, quality_name) = if a.continuous {
+        (Quality::Continuous, "continuous")
+    } else if a.fast {
+        (Quality::Fast, "fast")
     } else {
-        Quality::Exact
+        (Quality::Exact, "exact")
     };
     let t = Instant::now();
     let shader = Shader::new(&env, quality);
@@ -210,16 +218,12 @@ pub fn run(a: Args) -> Result<()> {
         "format_version": 1,
         "elements": dir.display().to_string(),
         "envmap": {"path": a.envmap.display().to_string(), "width": env.width(), "height": env.height()},
-        "quality": if a.fast { "fast" } else { "exact" },
+        "quality": quality_name,
         "width": w,
         "height": h,
         "files": ["render.exr", "render.png"],
     });
-    let mut line = format!(
-        "rendered {h}x{w} ({}) to {}",
-        if a.fast { "fast" } else { "exact" },
-        a.out.display()
-    );
+    let mut line = format!("rendered {h}x{w} ({quality_name}) to {}", a.out.display());
     if let (Some(reference), Some(path)) = (&reference, &a.reference) {
         let mask: Vec<bool> = (0..h * w).map(|i| elements.is_valid(i)).collect();
         let score = picker_render::compare(&render, reference, Some(&mask))?;

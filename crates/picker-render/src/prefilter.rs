@@ -212,11 +212,19 @@ impl PrefilteredEnv {
     /// docs): lobes narrower than the map resolves are summed over its
     /// bilinear upsampling to the next level of the chain that resolves them
     /// (rows `16·2^(j/2)`, up to [`MAX_RESOLVING_ROWS`]), made the first time
-    /// one is needed. Lobes the map resolves are summed as by `new`, to the
-    /// same bits.
+    /// one is needed; the irradiance of a map under 64 rows is that of its
+    /// bilinear upsampling to 64. Lobes the map resolves are summed as by
+    /// `new`, to the same bits.
     pub fn resolving(env: &EnvMap) -> Self {
         let mut p = Self::new(env);
         let h = env.height();
+        // The irradiance of the continuous map: a map coarser than the
+        // irradiance's source grid is upsampled to it first.
+        let rows = 2 * IRRADIANCE_ROWS;
+        if h < rows {
+            let cols = (rows * env.width()).div_ceil(h).max(1);
+            p.irradiance = irradiance_map(&env.resample(cols, rows).expect("sizes are positive"));
+        }
         if h < MAX_RESOLVING_ROWS {
             let finer = (0..)
                 .map(|j| (MIN_LEVEL_ROWS as f64 * (j as f64 / 2.0).exp2()).round() as usize)

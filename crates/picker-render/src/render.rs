@@ -21,6 +21,11 @@ pub enum Quality {
     Exact,
     /// The prefiltered fast path ([`PrefilteredEnv`]).
     Fast,
+    /// The prefiltered fast path reading the map as the continuous function
+    /// its bilinear sampling makes of it, so that lobes narrower than its
+    /// pixels do not alias ([`PrefilteredEnv::resolving`]): `picker synth`'s
+    /// images, previews, re-renders of a photo.
+    Continuous,
 }
 
 /// An environment map prepared for shading many points at one [`Quality`].
@@ -38,6 +43,7 @@ impl Shader {
         match quality {
             Quality::Exact => Shader::Exact(EnvQuadrature::new(env)),
             Quality::Fast => Shader::Fast(PrefilteredEnv::new(env)),
+            Quality::Continuous => Shader::Fast(PrefilteredEnv::resolving(env)),
         }
     }
 
@@ -45,7 +51,7 @@ impl Shader {
     /// narrower than its pixels do not alias ([`PrefilteredEnv::resolving`]):
     /// for images shown to people (previews, re-renders of a photo).
     pub fn resolving(env: &EnvMap) -> Self {
-        Shader::Fast(PrefilteredEnv::resolving(env))
+        Shader::new(env, Quality::Continuous)
     }
 
     /// Eq. 3.7 at one point (unit camera-space `normal` and `view`; zero normal → black).

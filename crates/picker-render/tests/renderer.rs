@@ -412,7 +412,8 @@ fn preview_exposure_is_set_by_the_lighting() {
 }
 
 /// `PrefilteredEnv::resolving`: exponents the map resolves give the same
-/// bits as the plain fast path; narrower lobes, which alias on the map itself
+/// specular bits as the plain fast path, and the diffuse term of the map
+/// upsampled to 64 rows; narrower lobes, which alias on the map itself
 /// (a uniform sky's specular furnace falls to nothing between pixel
 /// centres), give the exact quadrature over the map's bilinear upsampling
 /// fine enough to resolve them, and the furnace's 1 everywhere.
@@ -424,15 +425,30 @@ fn the_resolving_fast_path_does_not_alias_narrow_lobes() {
     let plain = PrefilteredEnv::new(&env);
     let smooth = PrefilteredEnv::resolving(&env);
     let n_max = resolved_exponent(h) as f32;
+    // The diffuse term is the irradiance of the map upsampled to 64 rows.
+    let q64 = EnvQuadrature::new(&env.resample((64 * w).div_ceil(h), 64).unwrap());
     for _ in 0..50 {
         let n = random_unit(&mut rng);
         let v = random_view(&mut rng, n, 0.2);
         let m = random_material(&mut rng, n_max);
+        let glossy = PhongMaterial {
+            diffuse: Vec3::ZERO,
+            ..m
+        };
         assert_eq!(
-            plain.shade(n, v, &m),
-            smooth.shade(n, v, &m),
+            plain.shade(n, v, &glossy),
+            smooth.shade(n, v, &glossy),
             "n = {}",
             m.exponent
+        );
+        let matte = PhongMaterial {
+            specular: Vec3::ZERO,
+            ..m
+        };
+        let (f, x) = (smooth.shade(n, v, &matte), q64.shade(n, v, &matte));
+        assert!(
+            ((f - x).abs() / x.max(Vec3::splat(1e-3))).max_element() < FAST_REL,
+            "diffuse {f} vs exact {x}"
         );
     }
     // A uniform sky, ρs = 1, view along the normal: exactly 1 for any lobe.
