@@ -527,7 +527,7 @@ impl Models {
             .map_err(|e| anyhow!("making the input tensor: {e}"))?;
         conv::normalize_input(&mut x);
         let (mut elements, mut seg, mut env) = (None, None, None);
-        let mut seam: Option<f32> = None;
+        let mut seam: Option<Value> = None;
         let mut described = Vec::new();
         for n in &self.nets {
             let t = Instant::now();
@@ -564,9 +564,7 @@ impl Models {
                     let img = tensor_image(&conv::decode_envmap(&out.envmap));
                     let mut map =
                         EnvMap::from_image(&img).map_err(|e| anyhow!("environment map: {e}"))?;
-                    // Its left and right edges are one direction, predicted
-                    // apart: a line in reflections looking behind the camera.
-                    seam = Some(map.close_wrap_seam());
+                    seam = Some(regularise(&mut map));
                     env = Some(map);
                 }
                 #[allow(unreachable_patterns)]
@@ -589,11 +587,7 @@ impl Models {
                 "source": "networks",
                 "nets": described,
                 "working_size": {"width": ww, "height": wh},
-                "envmap_wrap_seam": seam.map(|f| json!({
-                    "closed": true,
-                    "largest_change": f,
-                    "rule": "the step across the left/right edges (straight behind the camera) made the mean of the steps beside it, in log radiance, spread over 1/8 of the width on each side",
-                })),
+                "envmap_regularised": seam,
             }),
         ))
     }
@@ -713,6 +707,21 @@ pub fn load_inputs_from(
     })
 }
 
+/// Makes the networks' environment map whole where it is one direction:
+/// its left and right edges (straight behind the camera, predicted apart: a
+/// line in reflections looking behind) and each pole's row (every column
+/// within half a row of straight up or down: a pinched cone in a glossy
+/// sphere's reflection of the zenith). What was done, for `material.json`.
+fn regularise(map: &mut EnvMap) -> Value {
+    let seam = map.close_wrap_seam();
+    let poles = map.regularise_poles();
+    json!({
+        "wrap_seam_largest_change": seam,
+        "poles_largest_change": poles,
+        "rule": "wrap seam: the log step across the left/right edges made the mean of the steps beside it, spread over 1/8 of the width on each side; poles: in the 1/8 of the rows nearest each pole, harmonic m >= 1 of each row's log radiance around the pole scaled by (theta/theta_band)^m",
+    })
+}
+
 /// The MSN's outputs as images at the working resolution.
 struct MsnImages {
     /// Segmentation colours in `[0, 1]`.
@@ -761,7 +770,7 @@ fn read_elements(dir: &Path, photo: Image, opaque: Option<Mask>) -> Result<(Inpu
     // wrap seam is closed as when the networks run here.
     let mut envmap = envmap;
     let seam = match envmap.as_mut() {
-        Some(e) if segmentation_estimated => Some(e.close_wrap_seam()),
+        Some(e) if segmentation_estimated => Some(regularise(e)),
         _ => None,
     };
     Ok((
@@ -777,7 +786,7 @@ fn read_elements(dir: &Path, photo: Image, opaque: Option<Mask>) -> Result<(Inpu
         json!({
             "source": "elements",
             "elements": dir.display().to_string(),
-            "envmap_wrap_seam": seam.map(|f| json!({"closed": true, "largest_change": f})),
+            "envmap_regularised": seam,
         }),
     ))
 }

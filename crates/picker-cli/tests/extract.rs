@@ -1659,10 +1659,11 @@ fn a_cut_outs_transparent_pixels_are_never_the_material() {
     assert_eq!(j["photo"]["alpha_ignored"], false);
 }
 
-/// The estimated lighting's wrap seam (its left and right edges, both
-/// straight behind the camera) is closed: `envmap.exr` is the network's map
-/// as `picker infer` writes it, closed by `EnvMap::close_wrap_seam`, and
-/// `material.json` says so.
+/// The estimated lighting is made whole where it is one direction:
+/// `envmap.exr` is the network's map as `picker infer` writes it, with its
+/// wrap seam closed (`EnvMap::close_wrap_seam`: the left and right edges are
+/// both straight behind the camera) and its poles regularised
+/// (`EnvMap::regularise_poles`), and `material.json` says so.
 #[test]
 fn the_estimated_envmaps_wrap_seam_is_closed() {
     let (tmp, out) = extract_example_embedded_with("room.png", "200,150", &["--max-size", "64"]);
@@ -1678,6 +1679,8 @@ fn the_estimated_envmaps_wrap_seam_is_closed() {
     let mut want = read(&raw.join("envmap.exr"));
     let factor = want.close_wrap_seam();
     assert!(factor > 1.0, "the raw map has a seam to close");
+    let poles = want.regularise_poles();
+    assert!(poles > 1.0, "the raw map's poles vary around them");
     let got = read(&out.join("envmap.exr"));
     assert_eq!((got.width(), got.height()), (want.width(), want.height()));
     for (i, (g, w)) in got.data().iter().zip(want.data()).enumerate() {
@@ -1687,9 +1690,10 @@ fn the_estimated_envmaps_wrap_seam_is_closed() {
         );
     }
     let m = json_file(&out.join("material.json"));
-    let seam = &m["inputs"]["envmap_wrap_seam"];
-    assert_eq!(seam["closed"], true, "{}", m["inputs"]);
-    assert!((seam["largest_change"].as_f64().unwrap() - f64::from(factor)).abs() < 1e-5);
+    let done = &m["inputs"]["envmap_regularised"];
+    let close = |key: &str, want: f32| (done[key].as_f64().unwrap() - f64::from(want)).abs() < 1e-5;
+    assert!(close("wrap_seam_largest_change", factor), "{}", m["inputs"]);
+    assert!(close("poles_largest_change", poles), "{}", m["inputs"]);
     // The `picker infer` folder as `--elements`: closed the same way.
     let from_infer = tmp.path().join("from-infer");
     ok(&[

@@ -22,6 +22,11 @@ pub const MAX_RADIANCE: f32 = 1e30;
 /// azimuth behind the camera, where a network sees nothing).
 pub const WRAP_SEAM_BAND: f32 = 0.125;
 
+/// The share of an [`EnvMap`]'s rows at each pole over which
+/// [`EnvMap::regularise_poles`] smooths the map around the pole (1/8: the
+/// 22.5° nearest each pole).
+pub const POLE_BAND: f32 = 0.125;
+
 /// A linear-RGB HDR radiance map, `height × width`, row-major.
 #[derive(Clone, Debug, PartialEq)]
 pub struct EnvMap {
@@ -247,6 +252,66 @@ impl EnvMap {
                     *v = (Vec3::new(l.x.exp(), l.y.exp(), l.z.exp()) - eps)
                         .max(Vec3::ZERO)
                         .min(Vec3::splat(MAX_RADIANCE));
+                }
+            }
+        }
+        worst.exp()
+    }
+
+    /// Makes the map regular at its poles: every pixel of the top (bottom)
+    /// row lies within half a row of straight up (down), so the map cannot
+    /// vary much around a pole, but a network predicts each column apart,
+    /// and a glossy sphere's reflection of the zenith showed a pinched cone.
+    /// In the [`POLE_BAND`] of rows nearest each pole, each row's log
+    /// radiance (with `ε` = 10⁻³ of the map's mean added) is split into its
+    /// harmonics around the pole (a discrete Fourier series over the
+    /// columns) and harmonic `m ≥ 1` is scaled by `(θ/θ_b)^m`, `θ` the row's
+    /// angle from the pole and `θ_b` the band's: a function smooth on the
+    /// sphere has its `m`-th harmonic shrink like `θ^m` there. Each row's
+    /// mean (its 0th harmonic) and the rows outside the bands are kept.
+    /// Maps under 8 rows or 4 columns are left alone. Returns the largest
+    /// factor a pixel was changed by (1: none).
+    pub fn regularise_poles(&mut self) -> f32 {
+        let (w, h) = (self.width, self.height);
+        if h < 8 || w < 4 {
+            return 1.0;
+        }
+        let band = ((h as f32 * POLE_BAND).round() as usize).clamp(1, h / 2);
+        let eps = (self.mean() * 1e-3).max(Vec3::splat(1e-30));
+        let theta_b = band as f64;
+        let mut worst = 0.0f32;
+        let tau = std::f64::consts::TAU;
+        let rows = (0..band)
+            .map(|k| (k, k))
+            .chain((0..band).map(|k| (h - 1 - k, k)));
+        for (row, k) in rows {
+            // Angle from the pole in rows: the row's centre.
+            let ratio = (k as f64 + 0.5) / theta_b;
+            for c in 0..3 {
+                let logs: Vec<f64> = (0..w)
+                    .map(|x| f64::from(self.data[row * w + x][c] + eps[c]).ln())
+                    .collect();
+                let mut out: Vec<f64> = vec![0.0; w];
+                // Harmonics 0..=w/2 (real series); the Nyquist one once.
+                for m in 0..=w / 2 {
+                    let (mut a, mut b) = (0.0f64, 0.0f64);
+                    for (x, l) in logs.iter().enumerate() {
+                        let ph = tau * (m * x) as f64 / w as f64;
+                        a += l * ph.cos();
+                        b += l * ph.sin();
+                    }
+                    let norm = if m == 0 || 2 * m == w { 1.0 } else { 2.0 } / w as f64;
+                    let scale = if m == 0 { 1.0 } else { ratio.powi(m as i32) };
+                    for (x, o) in out.iter_mut().enumerate() {
+                        let ph = tau * (m * x) as f64 / w as f64;
+                        *o += norm * scale * (a * ph.cos() + b * ph.sin());
+                    }
+                }
+                for (x, o) in out.iter().enumerate() {
+                    let v = &mut self.data[row * w + x][c];
+                    let change = (o - logs[x]) as f32;
+                    worst = worst.max(change.abs());
+                    *v = ((o.exp() - f64::from(eps[c])) as f32).clamp(0.0, MAX_RADIANCE);
                 }
             }
         }
@@ -567,6 +632,75 @@ mod tests {
             .data()
             .iter()
             .all(|v| (*v - Vec3::splat(2.0)).abs().max_element() < 1e-6));
+    }
+
+    #[test]
+    fn the_poles_lose_their_azimuthal_detail_as_a_smooth_map_would() {
+        let (w, h) = (40usize, 30usize);
+        let mut rng = picker_tensor::Rng::new(7);
+        let data: Vec<Vec3> = (0..w * h)
+            .map(|_| {
+                Vec3::new(
+                    rng.uniform(0.1, 3.0),
+                    rng.uniform(0.1, 3.0),
+                    rng.uniform(0.1, 3.0),
+                )
+            })
+            .collect();
+        let orig = EnvMap::new(w, h, data).unwrap();
+        let mut m = orig.clone();
+        let worst = m.regularise_poles();
+        assert!(worst > 1.0);
+        let band = (h as f32 * POLE_BAND).round() as usize;
+        let eps = orig.mean() * 1e-3;
+        let logs = |map: &EnvMap, row: usize, c: usize| -> Vec<f64> {
+            (0..w)
+                .map(|x| f64::from(map.get(row, x)[c] + eps[c]).ln())
+                .collect()
+        };
+        let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+        let spread = |v: &[f64]| {
+            let m = mean(v);
+            (v.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / v.len() as f64).sqrt()
+        };
+        for (row, k) in (0..band)
+            .map(|k| (k, k))
+            .chain((0..band).map(|k| (h - 1 - k, k)))
+        {
+            let ratio = (k as f64 + 0.5) / band as f64;
+            for c in 0..3 {
+                let (a, b) = (logs(&orig, row, c), logs(&m, row, c));
+                // The row's mean (the value at the pole) is kept; its
+                // variation around the pole shrinks at least as its first
+                // harmonic must.
+                assert!((mean(&a) - mean(&b)).abs() < 1e-4, "row {row}");
+                assert!(
+                    spread(&b) <= ratio * spread(&a) + 1e-6,
+                    "row {row}: {} vs {}",
+                    spread(&b),
+                    spread(&a)
+                );
+            }
+        }
+        for row in band..h - band {
+            for x in 0..w {
+                assert_eq!(m.get(row, x), orig.get(row, x), "({row}, {x})");
+            }
+        }
+        // A uniform map stays uniform; small maps are left alone.
+        let mut u = EnvMap::uniform(40, 30, Vec3::new(0.5, 2.0, 0.0));
+        u.regularise_poles();
+        for v in u.data() {
+            assert!(
+                (*v - Vec3::new(0.5, 2.0, 0.0)).abs().max_element() < 1e-5,
+                "{v}"
+            );
+        }
+        let mut small =
+            EnvMap::new(5, 7, (0..35).map(|i| Vec3::splat(i as f32)).collect()).unwrap();
+        let before = small.clone();
+        assert_eq!(small.regularise_poles(), 1.0);
+        assert_eq!(small, before);
     }
 
     #[test]
