@@ -1165,12 +1165,17 @@ pub fn write_materials(
         opts.quad_size_m = req.quad_size_m;
     }
     let env = prepared.inputs.envmap.clone();
-    let preview_env = env
-        .clone()
-        .unwrap_or_else(|| EnvMap::uniform(64, 32, glam::Vec3::ONE));
-    // One prefiltered lighting for every preview of the run and their exposure.
-    let preview_shader = Shader::resolving(&preview_env);
-    let exposure = picker_render::preview_exposure(&preview_shader);
+    // One prefiltered lighting for every preview of the run and their
+    // exposure: the one the re-render self-checks use, or a white sky.
+    let white_sky;
+    let preview_shader = match prepared.shader() {
+        Some(s) => s,
+        None => {
+            white_sky = Shader::resolving(&EnvMap::uniform(64, 32, glam::Vec3::ONE));
+            &white_sky
+        }
+    };
+    let exposure = picker_render::preview_exposure(preview_shader);
     let single = jobs.len() == 1 && !layout.always_subdirs;
     let export_opts = ExportOptions {
         sixteen_bit: flags.sixteen_bit,
@@ -1195,7 +1200,7 @@ pub fn write_materials(
             || -> Result<_> {
                 let t = Instant::now();
                 let preview = exposed(
-                    &pipeline::preview_sphere_with(&m, &preview_shader, PREVIEW_SIZE, repeats),
+                    &pipeline::preview_sphere_with(&m, preview_shader, PREVIEW_SIZE, repeats),
                     exposure,
                 );
                 rio::write_png(&dir.join("preview.png"), &preview)?;

@@ -295,6 +295,8 @@ pub struct Prepared {
     /// The mask's leak-guard relief of the mask segmentation, made at the
     /// first automatic pick ([`mask::leak_guard_relief`]).
     relief: std::sync::OnceLock<Vec<f32>>,
+    /// The estimated lighting prepared for shading ([`Prepared::shader`]).
+    shader: std::sync::OnceLock<Option<Shader>>,
 }
 
 fn check_size(what: &str, img: &Image, c: usize, w: usize, h: usize) -> Result<()> {
@@ -385,7 +387,17 @@ impl Prepared {
             embedding_mask,
             smoothed: std::sync::OnceLock::new(),
             relief: std::sync::OnceLock::new(),
+            shader: std::sync::OnceLock::new(),
         })
+    }
+
+    /// The estimated lighting ([`Inputs::envmap`]) prepared once for shading
+    /// as a continuous map ([`Shader::resolving`]): the re-render self-check
+    /// of every pick and the previews share it. `None` without a map.
+    pub fn shader(&self) -> Option<&Shader> {
+        self.shader
+            .get_or_init(|| self.inputs.envmap.as_ref().map(Shader::resolving))
+            .as_ref()
     }
 
     /// The photo's downsampled luma and its focal length from its straight
@@ -2212,8 +2224,7 @@ fn extract_as(
     };
 
     // Re-render self-check at the working resolution.
-    let rerender_psnr = p.inputs.envmap.as_ref().and_then(|env| {
-        let shader = Shader::resolving(env);
+    let rerender_psnr = p.shader().and_then(|shader| {
         let mut render = Image::zeros(3, h, w);
         // Every pixel on its own (in parallel, the same values as in turn).
         let shaded: Vec<Vec3> = idx

@@ -21,8 +21,8 @@
 //! the map as the continuous function its bilinear sampling
 //! ([`EnvMap::sample`]) makes of it: levels finer than the map, its bilinear
 //! upsamplings, are made when a lobe first needs them (up to
-//! [`MAX_RESOLVING_ROWS`] rows), so every exponent up to the conventions'
-//! largest is resolved. Products shown to people (previews, re-renders of a
+//! [`MAX_RESOLVING_ROWS`] rows, pixel spacing at most one lobe width), so
+//! every exponent up to the conventions' largest is resolved. Products shown to people (previews, re-renders of a
 //! photo) use it; the eq. 3.7 reference renders keep the map as it is.
 
 use std::sync::OnceLock;
@@ -41,8 +41,16 @@ pub const MIN_LEVEL_ROWS: usize = 16;
 /// Lobe weights below this fraction of the peak are skipped.
 pub const LOBE_CUTOFF: f64 = 1e-3;
 /// Rows of the finest level [`PrefilteredEnv::resolving`] makes: enough
-/// for the conventions' largest exponent, 8192 (`π·√8192 / (2/3)` = 427).
+/// for the conventions' largest exponent, 8192 (`π·√8192` = 284 at one
+/// lobe width per pixel; 427 at the map's own levels' 2/3).
 pub const MAX_RESOLVING_ROWS: usize = 512;
+/// Largest ratio of pixel spacing to lobe width `1/√n` in the chosen level
+/// finer than the map ([`PrefilteredEnv::resolving`]): the map's bilinear
+/// upsampling is smooth between its own pixels, so samples one lobe width
+/// apart sum the lobe to within about `exp(−2π²)` ≈ 3·10⁻⁹ of its integral
+/// (Poisson summation of the near-Gaussian lobe), with 0.44× the pixels of
+/// the map's own levels' spacing.
+const FINER_SPACING_PER_LOBE_WIDTH: f64 = 1.0;
 /// Largest ratio of pixel spacing to lobe width `1/√n` in the chosen level.
 const SPACING_PER_LOBE_WIDTH: f64 = 2.0 / 3.0;
 
@@ -78,9 +86,9 @@ impl Level {
     }
 
     /// `Σ L_i ΔΩ_i cosⁿ(ω_i·R) max(0, ω_i·N)` over the lobe's support around
-    /// unit `r`; with `fast`, `cosⁿ` is `exp(n·ln cos)` in `f32` (a quarter
-    /// of the time of the `f64` power, within 10⁻⁵ relative over a lobe's
-    /// support: the levels finer than the map, whose bits nothing older fixed).
+    /// unit `r`; with `fast`, `cosⁿ` and the sum are `f32` (a quarter of the
+    /// time of the `f64` power, within 10⁻⁵ relative over a lobe's support:
+    /// the levels finer than the map, whose bits nothing older fixed).
     fn lobe_sum(&self, r: DVec3, n: DVec3, exponent: f64, fast: bool) -> DVec3 {
         use std::f64::consts::{FRAC_PI_2, PI};
         let c_min = LOBE_CUTOFF.powf(1.0 / exponent.max(1e-3));
@@ -101,6 +109,7 @@ impl Level {
         let (x, _) = conv::envmap_position(r.to_array(), self.rows, sw);
         let centre = x.floor() as i64;
         let mut acc = DVec3::ZERO;
+        let mut acc32 = Vec3::ZERO;
         let exponent_f32 = exponent as f32;
         let mut visit = |i: usize| {
             let d = self.dirs[i];
@@ -112,14 +121,20 @@ impl Level {
             if ci <= 0.0 {
                 return;
             }
-            let lobe = if fast {
-                f64::from((ca.ln() * exponent_f32).exp())
+            if fast {
+                acc32 += self.weighted[i] * (ca.powf(exponent_f32) * ci);
             } else {
-                (ca as f64).powf(exponent)
-            };
-            acc += self.weighted[i].as_dvec3() * (lobe * ci as f64);
+                acc += self.weighted[i].as_dvec3() * ((ca as f64).powf(exponent) * ci as f64);
+            }
         };
-        for (row, &lat) in self.lat.iter().enumerate() {
+        // Rows whose latitude is within `alpha + margin` of the lobe's
+        // (lat = π/2 − π(row + ½)/H), one more each side for rounding; the
+        // test below decides, as over every row.
+        let h = self.rows as f64;
+        let row_of = |lat: f64| (FRAC_PI_2 - lat) / PI * h - 0.5;
+        let first = (row_of(lat_r + alpha + margin).floor() - 1.0).max(0.0) as usize;
+        let last = (row_of(lat_r - alpha - margin).ceil() + 1.0).clamp(0.0, h - 1.0) as usize;
+        for (row, &lat) in self.lat.iter().enumerate().take(last + 1).skip(first) {
             if (lat - lat_r).abs() > alpha + margin {
                 continue;
             }
@@ -132,7 +147,7 @@ impl Level {
                 }
             }
         }
-        acc
+        acc + acc32.as_dvec3()
     }
 }
 
@@ -262,6 +277,9 @@ impl PrefilteredEnv {
             Some(l) => (l, false),
             None => match &self.finer {
                 Some((env, finer)) => {
+                    // The upsampled map is smooth at its own pixels' scale:
+                    // a spacing of one lobe width samples the lobe well.
+                    let need = need * SPACING_PER_LOBE_WIDTH / FINER_SPACING_PER_LOBE_WIDTH;
                     let (rows, cell) = finer
                         .iter()
                         .find(|(rows, _)| *rows as f64 >= need)

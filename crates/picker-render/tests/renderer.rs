@@ -478,10 +478,11 @@ fn the_resolving_fast_path_does_not_alias_narrow_lobes() {
     }
     // Against the exact quadrature over the upsampled map.
     for e in [300.0f32, 2000.0] {
-        let rows = (std::f64::consts::PI * (e as f64).sqrt() * 1.5).ceil() as usize;
+        // One lobe width per pixel in the levels finer than the map.
+        let rows = (std::f64::consts::PI * (e as f64).sqrt()).ceil() as usize;
         let rows = [16usize, 23, 32, 45, 64, 91, 128, 181, 256, 362, 512]
             .into_iter()
-            .find(|&r| r >= rows)
+            .find(|&r| r > h && r >= rows)
             .unwrap();
         let fine = env.resample((rows * w).div_ceil(h), rows).unwrap();
         let q = EnvQuadrature::new(&fine);

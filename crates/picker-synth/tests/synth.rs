@@ -230,7 +230,8 @@ const RERENDER_MEAN_REL: f32 = 0.01;
 /// The exact quadrature of eq. 3.7 per pixel over the map `PrefilteredEnv::
 /// resolving` reads for its lobe: the map itself where it resolves the lobe
 /// (rows at least `π·√n / (2/3)`), else its bilinear upsampling to the first
-/// level of the chain `16·2^(j/2)` (up to 512 rows) above the map that does.
+/// level of the chain `16·2^(j/2)` (up to 512 rows) above the map with at
+/// least `π·√n` rows (one lobe width per pixel).
 fn continuous_reference(el: &ElementImages, env: &EnvMap) -> Image {
     let (h, w) = (env.height(), env.width());
     let mut maps: BTreeMap<usize, EnvQuadrature> = BTreeMap::new();
@@ -247,7 +248,7 @@ fn continuous_reference(el: &ElementImages, env: &EnvMap) -> Image {
             (0..)
                 .map(|j| (16.0 * (j as f64 / 2.0).exp2()).round() as usize)
                 .map(|r| r.min(512))
-                .find(|&r| (r > h && r as f64 >= need) || r == 512)
+                .find(|&r| (r > h && r as f64 >= need / 1.5) || r == 512)
                 .unwrap()
         };
         let q = maps.entry(rows).or_insert_with(|| {
