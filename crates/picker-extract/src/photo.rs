@@ -18,7 +18,9 @@
 //!   background): it is listed in [`Photo::opaque`] as not opaque, and its
 //!   colour becomes [`TRANSPARENT_FILL`] (neutral grey: what it stored is
 //!   often black or left-over garbage, and the networks see it). Pixels at
-//!   ½ or above keep their colour as stored. A file whose every pixel is
+//!   ½ or above keep their colour as stored (straight alpha), except in
+//!   OpenEXR files, whose colours are premultiplied by alpha by the
+//!   format's convention and are divided by it. A file whose every pixel is
 //!   below ½ has its alpha ignored ([`Photo::alpha_ignored`]): a viewer
 //!   shows nothing, so its colours are all there is.
 //! - **Display-referred inputs** (everything but EXR/HDR) are taken as
@@ -429,6 +431,10 @@ pub fn decode(bytes: &[u8], label: &Path, limits: &PhotoLimits) -> Result<Photo,
         focal_35mm,
         icc,
     } = decode_image(bytes, label, limits)?;
+    let mut img = img;
+    if kind.image == ImageFormat::OpenExr {
+        unpremultiply(&mut img);
+    }
     let alpha = opaque_plane(&img);
     let alpha_ignored = alpha
         .as_ref()
@@ -472,6 +478,24 @@ pub fn decode(bytes: &[u8], label: &Path, limits: &PhotoLimits) -> Result<Photo,
         opaque,
         alpha_ignored,
     })
+}
+
+/// Divides the colour of every opaque pixel (alpha from ½ to 1) of a float
+/// RGBA image by its alpha: OpenEXR stores colours premultiplied by alpha
+/// (associated alpha, the format's convention), so a render's anti-aliased
+/// edge pixel holds its colour times its coverage. Other pixels and layouts
+/// are left as they are.
+fn unpremultiply(img: &mut DynamicImage) {
+    if let DynamicImage::ImageRgba32F(buf) = img {
+        for p in buf.pixels_mut() {
+            let a = p.0[3];
+            if (0.5..1.0).contains(&a) {
+                for c in &mut p.0[..3] {
+                    *c /= a;
+                }
+            }
+        }
+    }
 }
 
 /// Whether each pixel of `img` is opaque (alpha at least ½; NaN is not),

@@ -345,7 +345,8 @@ fn dim_exr_is_not_brightened_and_alpha_is_not_composited() {
     )
     .unwrap();
     assert_eq!(p.channels_in_file, 4);
-    // Alpha 0 and ¼ (x < 2) is transparent: grey; ½ and ¾ keep their colour.
+    // Alpha 0 and ¼ (x < 2) is transparent: grey; ½ and ¾ are opaque, their
+    // colours premultiplied by alpha (OpenEXR's convention): divided by it.
     let opaque = p.opaque.as_ref().expect("some pixels are transparent");
     for (x, y, px) in p.rgb.enumerate_pixels() {
         let src = img.get_pixel(x, y).0;
@@ -354,8 +355,9 @@ fn dim_exr_is_not_brightened_and_alpha_is_not_composited() {
             assert_eq!(px.0, [photo::TRANSPARENT_FILL; 3], "({x}, {y})");
             continue;
         }
-        for (found, linear) in px.0.iter().zip(src) {
-            assert!((found - srgb(linear)).abs() < 1e-5, "({x}, {y})");
+        for (found, linear) in px.0.iter().zip(&src[..3]) {
+            let want = srgb(linear / src[3]);
+            assert!((found - want).abs() < 1e-5, "({x}, {y}): {found} vs {want}");
         }
     }
 }
