@@ -907,6 +907,28 @@ fn direction_colours(img: &Image) -> Image {
     out
 }
 
+/// `photo` with its transparent pixels (not in `opaque`) shown as the usual
+/// light and dark grey checkerboard (sRGB 0.6 / 0.4, squares a 48th of the
+/// photo's longer side), as image editors show transparency.
+fn checkered(photo: &Image, opaque: &Mask) -> Image {
+    let (w, h) = (photo.width, photo.height);
+    let side = (w.max(h) / 48).max(1);
+    let mut out = photo.clone();
+    let n = w * h;
+    for (i, _) in opaque.data.iter().enumerate().filter(|(_, &o)| !o) {
+        let (x, y) = (i % w, i / w);
+        let v = if (x / side + y / side) % 2 == 0 {
+            0.6
+        } else {
+            0.4
+        };
+        for c in 0..3 {
+            out.data[c * n + i] = v;
+        }
+    }
+    out
+}
+
 /// The report sheet (thesis fig. 6.7 and more). The photo-resolution tiles
 /// (photo + pick, mask overlay) and the 2×2 tiling are made row by row at
 /// the tile size ([`report::LazyTile`]): the same sheet as resizing copies of
@@ -914,7 +936,12 @@ fn direction_colours(img: &Image) -> Image {
 /// A given quadrilateral (`--quad`, pick convention) is outlined on the photo.
 fn report_sheet(p: &Prepared, m: &Material, preview: &Image, quad: Option<[[f32; 2]; 4]>) -> Image {
     let el = &p.inputs.elements;
-    let photo = &p.inputs.photo;
+    let checkered = p
+        .inputs
+        .opaque
+        .as_ref()
+        .map(|o| checkered(&p.inputs.photo, o));
+    let photo = checkered.as_ref().unwrap_or(&p.inputs.photo);
     let shown = |label: &str, image: Image| {
         report::LazyTile::from(Tile {
             label: label.into(),
@@ -1533,6 +1560,38 @@ pub fn infer_inputs(models: &Models, photo_path: &Path, work_size: u32) -> Resul
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn transparent_pixels_show_as_a_checkerboard_in_the_report() {
+        // 96 × 10: squares of 2 pixels; the left half transparent.
+        let (w, h) = (96usize, 10usize);
+        let photo = Image::new(
+            3,
+            h,
+            w,
+            (0..3 * w * h).map(|i| (i % 7) as f32 / 7.0).collect(),
+        )
+        .unwrap();
+        let opaque = Mask {
+            width: w,
+            height: h,
+            data: (0..w * h).map(|i| i % w >= 48).collect(),
+        };
+        let shown = checkered(&photo, &opaque);
+        for i in 0..w * h {
+            let (x, y) = (i % w, i / w);
+            for c in 0..3 {
+                let want = if x >= 48 {
+                    photo.data[c * w * h + i]
+                } else if (x / 2 + y / 2) % 2 == 0 {
+                    0.6
+                } else {
+                    0.4
+                };
+                assert_eq!(shown.data[c * w * h + i], want, "({x}, {y})");
+            }
+        }
+    }
 
     #[test]
     fn quad_sizes_parse_in_every_unit() {
