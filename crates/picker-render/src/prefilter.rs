@@ -22,8 +22,9 @@
 //! ([`EnvMap::sample`]) makes of it: levels finer than the map, its bilinear
 //! upsamplings, are made when a lobe first needs them (up to
 //! [`MAX_RESOLVING_ROWS`] rows, pixel spacing at most one lobe width), so
-//! every exponent up to the conventions' largest is resolved. Products shown to people (previews, re-renders of a
-//! photo) use it; the eq. 3.7 reference renders keep the map as it is.
+//! every exponent up to the conventions' largest is resolved. Products shown
+//! to people (previews, re-renders of a photo) and `picker synth`'s images
+//! use it; the eq. 3.7 reference renders keep the map as it is.
 
 use std::sync::OnceLock;
 
@@ -175,6 +176,22 @@ fn at_most(env: &EnvMap, rows: usize) -> EnvMap {
     }
 }
 
+/// The specular chain of `env`: its area-correct downsamplings to rows
+/// `16·2^(j/2)` below its own, then the map itself.
+fn levels(env: &EnvMap) -> Vec<Level> {
+    let mut levels = Vec::new();
+    let mut j = 0;
+    loop {
+        let rows = (MIN_LEVEL_ROWS as f64 * (j as f64 / 2.0).exp2()).round() as usize;
+        if rows >= env.height() {
+            levels.push(Level::new(env));
+            return levels;
+        }
+        levels.push(Level::new(&at_most(env, rows)));
+        j += 1;
+    }
+}
+
 /// The irradiance `E(N)` on an `IRRADIANCE_ROWS × 2·IRRADIANCE_ROWS` grid of normals.
 fn irradiance_map(env: &EnvMap) -> EnvMap {
     let src = at_most(env, 2 * IRRADIANCE_ROWS);
@@ -205,20 +222,9 @@ impl PrefilteredEnv {
     /// Prepares `env`: the irradiance grid (rayon over normals) and the chain
     /// of downsampled levels. Deterministic.
     pub fn new(env: &EnvMap) -> Self {
-        let mut levels = Vec::new();
-        let mut j = 0;
-        loop {
-            let rows = (MIN_LEVEL_ROWS as f64 * (j as f64 / 2.0).exp2()).round() as usize;
-            if rows >= env.height() {
-                levels.push(Level::new(env));
-                break;
-            }
-            levels.push(Level::new(&at_most(env, rows)));
-            j += 1;
-        }
         Self {
             irradiance: irradiance_map(env),
-            levels,
+            levels: levels(env),
             finer: None,
         }
     }
@@ -231,15 +237,21 @@ impl PrefilteredEnv {
     /// bilinear upsampling to 64. Lobes the map resolves are summed as by
     /// `new`, to the same bits.
     pub fn resolving(env: &EnvMap) -> Self {
-        let mut p = Self::new(env);
         let h = env.height();
         // The irradiance of the continuous map: a map coarser than the
         // irradiance's source grid is upsampled to it first.
         let rows = 2 * IRRADIANCE_ROWS;
-        if h < rows {
+        let irradiance = if h < rows {
             let cols = (rows * env.width()).div_ceil(h).max(1);
-            p.irradiance = irradiance_map(&env.resample(cols, rows).expect("sizes are positive"));
-        }
+            irradiance_map(&env.resample(cols, rows).expect("sizes are positive"))
+        } else {
+            irradiance_map(env)
+        };
+        let mut p = Self {
+            irradiance,
+            levels: levels(env),
+            finer: None,
+        };
         if h < MAX_RESOLVING_ROWS {
             let finer = (0..)
                 .map(|j| (MIN_LEVEL_ROWS as f64 * (j as f64 / 2.0).exp2()).round() as usize)
