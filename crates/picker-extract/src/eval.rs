@@ -25,7 +25,12 @@
 //! both images are box-downsampled by 2 until the smaller side of the
 //! extracted one is below 32 texels, every shift is tried at that coarsest
 //! level, and the best [`ALIGN_CANDIDATES`] shifts are refined level by level
-//! in a ±[`ALIGN_REFINE_RADIUS`] window around their projection. The tiling's
+//! in a ±[`ALIGN_REFINE_RADIUS`] window around their projection; the search
+//! runs for the texture and for it rolled by one texel down, across and both,
+//! so that every shift is seen aligned at the coarse levels by one of them (a
+//! finely patterned texture at half-texel misalignment could rank a shift by
+//! a whole number of the truth's periods above its true one, and a cyclic
+//! roll of it moved the score by 0.5 dB). The tiling's
 //! offset is continuous, so whole-texel shifts are not enough where the
 //! truth is finer than the extracted texture (a 16-texel tile of a 128-pixel
 //! truth may be off by any fraction of a texel): for every scale within 3 dB
@@ -35,7 +40,7 @@
 //! the truth has at least [`SUBTEXEL_MIN_RATIO`] texels per extracted texel
 //! (a moved area average stays as sharp as the unmoved one; where the truth
 //! is coarser, moving would interpolate, blur it and flatter blurry
-//! textures). A 256² pair takes a few tens of milliseconds. Rotations by 90° and mirror images are
+//! textures). A 256² pair takes well under a second. Rotations by 90° and mirror images are
 //! **not** searched (the extracted texture's orientation follows the
 //! recovered UVs, which keep the handedness and orientation of the truth in
 //! the synthetic data).
@@ -252,9 +257,9 @@ fn score_turns(extracted: &Image, truth: &Image, turns: usize) -> Vec<AlignedSco
                 .iter()
                 .map(|c_pyr| {
                     if tiles(&e, (c_pyr[0].height, c_pyr[0].width)) {
-                        best_shift(c_pyr, &e_pyr)
+                        best_shift_phased(c_pyr, &e_pyr)
                     } else {
-                        best_shift(&e_pyr, c_pyr)
+                        best_shift_phased(&e_pyr, c_pyr)
                     }
                 })
                 .collect();
@@ -520,6 +525,28 @@ impl Extended {
         }
         total / (self.planes.len() * h * w) as f64
     }
+}
+
+/// [`best_shift`] of `win_pyr` and of the window rolled by one texel down,
+/// across and both (each coarse level sees every other shift at half-texel
+/// misalignment, where a finely patterned texture can rank its true shift
+/// below a shift by a whole number of periods of the truth; one of the four
+/// phases sees it aligned), the best of the four mapped back to the unrolled
+/// window (ties keep the unrolled one). A single level is searched whole.
+fn best_shift_phased(win_pyr: &[Image], per_pyr: &[Image]) -> (f64, (usize, usize)) {
+    let mut best = best_shift(win_pyr, per_pyr);
+    if win_pyr.len() < 2 {
+        return best;
+    }
+    let (ph, pw) = (per_pyr[0].height, per_pyr[0].width);
+    for (ry, rx) in [(1usize, 0usize), (0, 1), (1, 1)] {
+        let rolled = crate::pipeline::roll(&win_pyr[0], [rx, ry]);
+        let (m, (sy, sx)) = best_shift(&pyramid(&rolled, win_pyr.len() - 1), per_pyr);
+        if m < best.0 {
+            best = (m, ((sy + ph - ry % ph) % ph, (sx + pw - rx % pw) % pw));
+        }
+    }
+    best
 }
 
 /// The smallest mean squared error over cyclic shifts of the candidate
