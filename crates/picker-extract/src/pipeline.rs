@@ -788,16 +788,19 @@ impl Prepared {
 fn opaque_area(linear: &Image, weight: &[f32], share: &[f32], w: usize, h: usize) -> Image {
     let (fw, fh) = (linear.width, linear.height);
     let mut out = Image::zeros(3, h, w);
+    // The plain average only where no pixel is opaque (often nowhere).
+    let all = share
+        .iter()
+        .any(|&s| s <= 0.0)
+        .then(|| resample::area(linear, w, h));
     for c in 0..3 {
         let plane = linear.plane(c);
-        let all = resample::area_plane(plane, fw, fh, w, h);
         let weighted: Vec<f32> = plane.iter().zip(weight).map(|(v, k)| v * k).collect();
         let kept = resample::area_plane(&weighted, fw, fh, w, h);
         for (i, o) in out.data[c * w * h..(c + 1) * w * h].iter_mut().enumerate() {
-            *o = if share[i] > 0.0 {
-                kept[i] / share[i]
-            } else {
-                all[i]
+            *o = match &all {
+                Some(all) if share[i] <= 0.0 => all.at(c, i),
+                _ => kept[i] / share[i],
             };
         }
     }

@@ -213,6 +213,12 @@ impl EnvMap {
         (acc / (4.0 * std::f64::consts::PI)).as_vec3()
     }
 
+    /// The `ε` added before taking logs of radiance ([`Self::close_wrap_seam`],
+    /// [`Self::regularise_poles`]): 10⁻³ of the map's mean, so black stays finite.
+    fn log_floor(&self) -> Vec3 {
+        (self.mean() * 1e-3).max(Vec3::splat(1e-30))
+    }
+
     /// Closes the map's wrap seam: the left and right edges are one
     /// direction (straight behind the camera) but a network predicts them
     /// apart, so a reflection that looks behind (a sphere's centre) showed a
@@ -231,7 +237,7 @@ impl EnvMap {
             return 1.0;
         }
         let band = ((w as f32 * WRAP_SEAM_BAND).round() as usize).clamp(1, w / 2);
-        let eps = (self.mean() * 1e-3).max(Vec3::splat(1e-30));
+        let eps = self.log_floor();
         let ln = |v: Vec3| Vec3::new((v.x + eps.x).ln(), (v.y + eps.y).ln(), (v.z + eps.z).ln());
         let mut worst = 0.0f32;
         for row in 0..h {
@@ -277,7 +283,7 @@ impl EnvMap {
             return 1.0;
         }
         let band = ((h as f32 * POLE_BAND).round() as usize).clamp(1, h / 2);
-        let eps = (self.mean() * 1e-3).max(Vec3::splat(1e-30));
+        let eps = self.log_floor();
         let theta_b = band as f64;
         let mut worst = 0.0f32;
         let tau = std::f64::consts::TAU;
