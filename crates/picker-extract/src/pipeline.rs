@@ -1610,7 +1610,8 @@ fn extract_as(
                             diag_grain: &mut (Option<crate::grain::Grain>, bool),
                             diag_user: &mut Option<UserPlaneUsed>,
                             side_out: &mut Option<f32>,
-                            rest_src: &mut Option<Mask>|
+                            rest_src: &mut Option<Mask>,
+                            replan: &mut Option<(Vec3, f32, Option<Vec3>)>|
          -> Option<Coords> {
             let quad = match opts.plane {
                 Some(UserPlane::Quad(q)) => Some(q),
@@ -1724,6 +1725,13 @@ fn extract_as(
             // A plane seen edge-on or from behind at every picked pixel
             // gives no coordinates: no plane.
             let rest = rest_plane();
+            // With the fold, the whole square first (the most periods to
+            // find); the covered one replaces it when nothing repeats.
+            let framing = if opts.fold_period {
+                plane::Framing::Whole
+            } else {
+                plane::Framing::Covered
+            };
             let coords_along = |along: Option<Vec3>| {
                 plane::plane_coords_with_side(
                     fw,
@@ -1733,16 +1741,19 @@ fn extract_as(
                     n,
                     f,
                     along,
+                    framing,
                 )
             };
             let (mut c, mut side) = coords_along(along);
+            let mut along = along;
             // No axis from the lines: the pattern's own direction, if clear.
             if along.is_none() && opts.align_grain {
                 let g = crate::grain::measure(&c, &full.data, &p.luma);
                 if let Some(g) = g.filter(crate::grain::Grain::decisive) {
                     let (e1, e2) = plane::plane_basis(n, None);
                     // Texture direction (du, dv) is e1·du − e2·dv on the plane.
-                    (c, side) = coords_along(Some(e1 * g.along[0] - e2 * g.along[1]));
+                    along = Some(e1 * g.along[0] - e2 * g.along[1]);
+                    (c, side) = coords_along(along);
                     diag_grain.1 = true;
                 }
                 diag_grain.0 = g;
@@ -1750,6 +1761,7 @@ fn extract_as(
             let usable = c.u.iter().zip(&full.data).any(|(u, &m)| m && u.is_finite());
             *rest_src = rest;
             *side_out = side;
+            *replan = (framing == plane::Framing::Whole).then_some((n, f, along));
             usable.then_some(c)
         };
         // Why auto finds no coordinates, if it finds none.
@@ -1766,6 +1778,7 @@ fn extract_as(
         let mut plane_rest = None;
         let mut user_plane = None;
         let mut square_side = None;
+        let mut replan = None;
         let (mode, coords) =
             match uv_choice {
                 UvChoice::Net => match net_coords {
@@ -1775,7 +1788,7 @@ fn extract_as(
                             .into(),
                     )),
                 },
-                UvChoice::Plane => match plane_coords(&mut focal, &mut lines, &mut grain, &mut user_plane, &mut square_side, &mut plane_rest) {
+                UvChoice::Plane => match plane_coords(&mut focal, &mut lines, &mut grain, &mut user_plane, &mut square_side, &mut plane_rest, &mut replan) {
                     Some(c) => (UvMode::Plane, c),
                     None if opts.plane.is_some() => {
                         return Err(Error::Invalid(
@@ -1800,11 +1813,11 @@ fn extract_as(
                             Some(c) => (UvMode::Net, c),
                             None => (
                                 UvMode::Plane,
-                                plane_coords(&mut focal, &mut lines, &mut grain, &mut user_plane, &mut square_side, &mut plane_rest).ok_or_else(neither)?,
+                                plane_coords(&mut focal, &mut lines, &mut grain, &mut user_plane, &mut square_side, &mut plane_rest, &mut replan).ok_or_else(neither)?,
                             ),
                         }
                     } else {
-                        match plane_coords(&mut focal, &mut lines, &mut grain, &mut user_plane, &mut square_side, &mut plane_rest) {
+                        match plane_coords(&mut focal, &mut lines, &mut grain, &mut user_plane, &mut square_side, &mut plane_rest, &mut replan) {
                             Some(c) => (UvMode::Plane, c),
                             None => (
                                 UvMode::Net,
@@ -1820,7 +1833,7 @@ fn extract_as(
         // holes another repeat showed are filled from it before inpainting.
         // The observed density, measured once: the coordinates keep it
         // unless the plane mode folds them.
-        let sizing_area = coords.sizing_area(&full.data);
+        let mut sizing_area = coords.sizing_area(&full.data);
         // The networks' UVs of the rest of the mask, upsampled within the
         // whole mask (its pixels lie outside the surest part the texture's
         // UVs were upsampled in); made when first needed.
@@ -1899,6 +1912,31 @@ fn extract_as(
             }
         } else {
             (coords, None, None)
+        };
+        // A rectified plane that does not repeat: the square the photo
+        // covers best replaces the whole one the periods were looked for in
+        // (`plane::Framing`), and the texture is sized by its pixels.
+        let coords = match replan {
+            Some((n, f, along)) if mode == UvMode::Plane && fold.is_none() => {
+                let (c, side) = plane::plane_coords_with_side(
+                    fw,
+                    fh,
+                    &full.data,
+                    plane_rest.as_ref().map(|m| &m.data[..]),
+                    n,
+                    f,
+                    along,
+                    plane::Framing::Covered,
+                );
+                if c.u.iter().zip(&full.data).any(|(u, &m)| m && u.is_finite()) {
+                    square_side = side;
+                    sizing_area = c.sizing_area(&full.data);
+                    c
+                } else {
+                    coords
+                }
+            }
+            _ => coords,
         };
         // The centring is only used when asked for.
         let fold = fold.map(|f| crate::period::Fold {
@@ -3819,9 +3857,10 @@ mod tests {
         }
     }
 
-    /// A diagonal strip of a ramp (a table seen along its length): no wrap
-    /// edge has both sides observed, so the observed texels cannot tell the
-    /// seam; the first inpainting shows it (ratio ~20), and the square is
+    /// A thin diagonal strip of a ramp (a table seen along its length; no
+    /// axis-aligned square is mostly covered by it, so the square framed is
+    /// the best covered, `plane::Framing::Covered`): no wrap edge has both
+    /// sides observed, so the observed texels cannot tell the seam; the first inpainting shows it (ratio ~20), and the square is
     /// inpainted again with the band cleared, which tiles (ratio ~1).
     #[test]
     fn a_strip_whose_edges_were_not_both_observed_gets_a_second_look() {
@@ -3832,7 +3871,7 @@ mod tests {
                 ((i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 40) as f32 / (1u64 << 24) as f32;
             0.1 + 0.8 * (x + y) / (w + h) as f32 + 0.01 * n
         });
-        let strip = |i: usize| ((i % w) as i64 - (i / w) as i64).abs() < 14;
+        let strip = |i: usize| ((i % w) as i64 - (i / w) as i64).abs() < 6;
         let pm = mask_of(w, h, &strip, &strip);
         let run = |heal_seams| plane_crop(&p, &pm, [48, 48], heal_seams);
         let (kept, kept_diag) = run(false);
