@@ -931,6 +931,10 @@ pub struct UvDecision {
     /// space), before any refinement by the photo's lines (`None` when a
     /// plane was given: see `user_plane`).
     pub plane_normal: Option<[f32; 3]>,
+    /// Plane mode: the texture square framed on the plane (before any
+    /// fold): its side as a share of the picked region's and the share of
+    /// it the picked pixels cover ([`plane::Framing`]).
+    pub square: Option<plane::Square>,
     /// The plane given instead of the predicted one ([`Options::plane`]),
     /// as it was used.
     pub user_plane: Option<UserPlaneUsed>,
@@ -1609,7 +1613,7 @@ fn extract_as(
                             diag_lines: &mut Option<crate::lines::LineRefinement>,
                             diag_grain: &mut (Option<crate::grain::Grain>, bool),
                             diag_user: &mut Option<UserPlaneUsed>,
-                            side_out: &mut Option<f32>,
+                            side_out: &mut Option<plane::Square>,
                             rest_src: &mut Option<Mask>,
                             replan: &mut Option<(Vec3, f32, Option<Vec3>)>|
          -> Option<Coords> {
@@ -1946,8 +1950,8 @@ fn extract_as(
         // The texture's size on the surface, when a quad's real size gave
         // the plane its scale: the square (or the folded tile) in metres.
         let size_m = match (user_plane.as_ref().and_then(|u| u.unit_m), square_side) {
-            (Some(unit), Some(side)) if mode == UvMode::Plane => {
-                let side = f64::from(side) * unit;
+            (Some(unit), Some(sq)) if mode == UvMode::Plane => {
+                let side = f64::from(sq.side) * unit;
                 let t = fold.map_or([1.0, 1.0], |f| f.tile);
                 Some([side * f64::from(t[0]), side * f64::from(t[1])])
             }
@@ -1970,6 +1974,7 @@ fn extract_as(
             plane_normal: normal
                 .filter(|_| mode == UvMode::Plane && opts.plane.is_none())
                 .map(|n| n.to_array()),
+            square: square_side.filter(|_| mode == UvMode::Plane),
             user_plane,
         });
         lap("coordinates", &mut timings);
