@@ -1198,6 +1198,16 @@ mod tests {
         let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
         assert_eq!(bits(&c.u), bits(&r.u));
         assert_eq!(bits(&c.v), bits(&r.v));
+        // The same square whatever the thread count.
+        for threads in [1, 3] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            let t = pool.install(|| plane_coords(w, h, &mask, n, focal, None));
+            assert_eq!(bits(&t.u), bits(&c.u), "{threads} threads");
+            assert_eq!(bits(&t.v), bits(&c.v), "{threads} threads");
+        }
         // The framed pixels are the near ones (the lower rows), they fill
         // the square, and the far rows (which see it coarsely) are left out.
         let rows: Vec<usize> = (0..w * h)
@@ -1310,6 +1320,30 @@ mod tests {
         // Still a usable part of it.
         let framed = c.u.iter().filter(|u| u.is_finite()).count();
         assert!(framed as u64 >= FRAME_MIN_PIXELS, "{framed} framed");
+    }
+
+    #[test]
+    fn a_region_too_elongated_for_the_grid_is_framed_on_its_box() {
+        // One row of a frontal wall: the box is 100 pixels by (almost)
+        // nothing, the square's side the geometric mean of the two, far
+        // more than FRAME_MAX_CELLS cells along the row; it is centred on the
+        // box (and reported without a cell count), as before the search.
+        let (w, h) = (120, 40);
+        let mask: Vec<bool> = (0..w * h)
+            .map(|i| i / w == 20 && (10..110).contains(&(i % w)))
+            .collect();
+        for framing in [Framing::Whole, Framing::Covered] {
+            let (c, sq) = plane_coords_with_side(w, h, &mask, None, Vec3::Z, 100.0, None, framing);
+            let r = plane_coords_reference(w, h, &mask, None, Vec3::Z, 100.0, None, framing);
+            let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&c.u), bits(&r.u));
+            let sq = sq.expect("a square");
+            assert_eq!((sq.side_share, sq.cells_observed), (1.0, None), "{sq:?}");
+            let framed: Vec<usize> = (0..w * h).filter(|&i| c.u[i].is_finite()).collect();
+            assert!(!framed.is_empty() && framed.len() < 5, "{framed:?}");
+            let mid = framed[framed.len() / 2] % w;
+            assert!(mid.abs_diff(60) <= 2, "framed at column {mid}");
+        }
     }
 
     #[test]
