@@ -352,9 +352,9 @@ pub fn plane_coords_with(
 }
 
 /// [`plane_coords_with`] with the square placed as `framing` says, and the
-/// texture square's side in plane units (the plane through `N·P = −1`,
-/// camera space: units of the plane's distance from the camera); `None` when
-/// no picked pixel sees the plane's front (every coordinate is then NaN).
+/// square ([`Square`]: its side in plane units, and how it was framed);
+/// `None` when no picked pixel sees the plane's front (every coordinate is
+/// then NaN).
 ///
 /// # Panics
 /// If `mask` or `extra` does not hold `w·h` values.
@@ -425,39 +425,39 @@ pub fn plane_coords_with_side(
         return (none, None);
     };
     let side0 = ((s1 - s0).max(1e-9) * (t1 - t0).max(1e-9)).sqrt();
-    let side = side0;
-    let (side, sc, tc, cells) = match frame_square(&s, &t, mask, w, [s0, s1, t0, t1], side, framing)
-    {
-        Some((side, sc, tc, cover)) => (side, sc, tc, Some(cover)),
-        None => {
-            let (mut sc, mut tc) = box_centred([s0, s1, t0, t1], side);
-            // Separate clusters (two parallel surfaces taken as one) can leave the
-            // box's centre empty: then the square is centred on the median pixel.
-            let inside = |v: f32, c: f32| (0.0..1.0).contains(&((v - c) / side));
-            let framed: usize = s
-                .par_chunks(step)
-                .zip(t.par_chunks(step))
-                .zip(mask.par_chunks(step))
-                .map(|((rs, rt), rm)| {
-                    rs.iter()
-                        .zip(rt)
-                        .zip(rm)
-                        .filter(|&((&a, &b), &m)| {
-                            m && a.is_finite() && inside(a, sc) && inside(b, tc)
-                        })
-                        .count()
-                })
-                .sum();
-            if framed == 0 {
-                if let (Some((sm, _)), Some((tm, _))) =
-                    rayon::join(|| pct2(&s, 0.5, 0.5), || pct2(&t, 0.5, 0.5))
-                {
-                    (sc, tc) = (sm - side / 2.0, tm - side / 2.0);
+    let (side, sc, tc, cells) =
+        match frame_square(&s, &t, mask, w, [s0, s1, t0, t1], side0, framing) {
+            Some((side, sc, tc, cover)) => (side, sc, tc, Some(cover)),
+            None => {
+                let side = side0;
+                let (mut sc, mut tc) = box_centred([s0, s1, t0, t1], side);
+                // Separate clusters (two parallel surfaces taken as one) can leave the
+                // box's centre empty: then the square is centred on the median pixel.
+                let inside = |v: f32, c: f32| (0.0..1.0).contains(&((v - c) / side));
+                let framed: usize = s
+                    .par_chunks(step)
+                    .zip(t.par_chunks(step))
+                    .zip(mask.par_chunks(step))
+                    .map(|((rs, rt), rm)| {
+                        rs.iter()
+                            .zip(rt)
+                            .zip(rm)
+                            .filter(|&((&a, &b), &m)| {
+                                m && a.is_finite() && inside(a, sc) && inside(b, tc)
+                            })
+                            .count()
+                    })
+                    .sum();
+                if framed == 0 {
+                    if let (Some((sm, _)), Some((tm, _))) =
+                        rayon::join(|| pct2(&s, 0.5, 0.5), || pct2(&t, 0.5, 0.5))
+                    {
+                        (sc, tc) = (sm - side / 2.0, tm - side / 2.0);
+                    }
                 }
+                (side, sc, tc, None)
             }
-            (side, sc, tc, None)
-        }
-    };
+        };
     // The plane coordinates become the texture coordinates in place (NaN
     // where a pixel has none or falls outside the square).
     s.par_chunks_mut(step)
