@@ -703,11 +703,18 @@ impl Prepared {
         let (fw, fh) = self.photo_size();
         let seg = self.mask_segmentation();
         let mut remaining = self.valid.clone();
+        // Pixels that may still seed a material: a bin whose most typical
+        // pixel grew no material (or one under `min_fraction`) seeds no more
+        // (its pixels stay free for other materials' masks). Before, only the
+        // seed (and the small mask) left, and a noisy segmentation — random
+        // weights on a 64 × 48 photo — made thousands of one-pixel attempts,
+        // a minute each photo.
+        let mut seedable = self.valid.clone();
         let mut out = Vec::new();
         let area = self.inputs.opaque.as_ref().map_or(1.0, Mask::fraction) * (w * h) as f64;
         while out.len() < max {
             let mut bins = std::collections::HashMap::<u32, Vec<usize>>::new();
-            for i in (0..w * h).filter(|&i| remaining[i]) {
+            for i in (0..w * h).filter(|&i| remaining[i] && seedable[i]) {
                 let q = |c: usize| (seg.at(c, i).clamp(0.0, 1.0) * 15.999) as u32;
                 bins.entry(q(0) << 8 | q(1) << 4 | q(2))
                     .or_default()
@@ -754,6 +761,7 @@ impl Prepared {
             .and_then(|pm| self.with_raw_sure(pm, &remaining, x, y));
             let Ok(pm) = pm else {
                 remaining[seed] = false;
+                members.iter().for_each(|&i| seedable[i] = false);
                 continue;
             };
             let pm = if patterns {
@@ -769,6 +777,7 @@ impl Prepared {
             }
             remaining[seed] = false;
             if (got as f64) < min_fraction * area {
+                members.iter().for_each(|&i| seedable[i] = false);
                 continue;
             }
             let pick = [
