@@ -56,6 +56,7 @@ use sha2::{Digest, Sha256};
 use crate::extract::{self, Flags, Layout, Models, Request, Source};
 use crate::UsageError;
 use picker_extract::quad::Quad;
+use picker_extract::UserPlane;
 
 /// Arguments of `picker batch`.
 #[derive(Debug, clap::Args)]
@@ -76,6 +77,12 @@ pub struct Args {
     /// the photo's one pick in --picks, else the quad's centre, is the material.
     #[arg(long, value_name = "CSV", conflicts_with = "all")]
     pub quads: Option<PathBuf>,
+    /// Surface orientations: a CSV file with rows `file,front` or `file,X,Y,Z`, the plane
+    /// of that photo's materials instead of the predicted one (as `picker extract --normal`:
+    /// `front` for a scan or a head-on photo, else the normal in camera space). One row per
+    /// photo; a row overrides --normal for its photo; not for a photo with a quad in --quads.
+    #[arg(long, value_name = "CSV")]
+    pub normals: Option<PathBuf>,
     /// Masks: a folder where the photo IN_DIR/a/b.jpg finds its material's mask as
     /// MASK_DIR/a/b.png (or .tif, .tiff, .webp, .bmp, .exr, .jpg, .jpeg, .hdr: one of them), as
     /// `picker extract --mask` reads it; that photo gets that one material (its one pick in
@@ -231,7 +238,10 @@ type Picks = BTreeMap<String, Vec<(String, [u32; 2])>>;
 /// metres, if given).
 type Quads = BTreeMap<String, (Quad, Option<[f32; 2]>)>;
 
-/// The CSV reader both `--picks` and `--quads` use: no required header,
+/// A photo's given plane normal (relative path → the plane, `--normals`).
+type Normals = BTreeMap<String, UserPlane>;
+
+/// The CSV reader `--picks`, `--quads` and `--normals` use: no required header,
 /// rows of varying length, fields trimmed, `#` comments.
 fn csv_reader(path: &Path, flag: &str) -> Result<csv::Reader<std::fs::File>> {
     csv::ReaderBuilder::new()
@@ -290,6 +300,46 @@ fn read_quads(path: &Path) -> Result<Quads> {
         if out.insert(file, (quad, size)).is_some() {
             return Err(at(format!(
                 "{:?} has a quad already (one plane per photo)",
+                &rec[0]
+            )));
+        }
+    }
+    Ok(out)
+}
+
+/// Reads `normals.csv`: rows `file,front` or `file,X,Y,Z`, an optional header
+/// row, one row per photo.
+fn read_normals(path: &Path) -> Result<Normals> {
+    let usage = |msg: String| anyhow::Error::new(UsageError(msg));
+    let mut out = Normals::new();
+    for (i, rec) in csv_reader(path, "--normals")?.records().enumerate() {
+        let rec = rec.map_err(|e| usage(format!("{}: {e}", path.display())))?;
+        let line = rec.position().map(|p| p.line()).unwrap_or(i as u64 + 1);
+        if rec.iter().all(|f| f.is_empty()) {
+            continue;
+        }
+        let at = |msg: String| usage(format!("{} line {line}: {msg}", path.display()));
+        // A header row: a first row that names no image and gives no value.
+        let value_like = |f: &str| f.eq_ignore_ascii_case("front") || f.parse::<f64>().is_ok();
+        if i == 0
+            && rec.len() > 1
+            && !is_supported_extension(Path::new(&rec[0]))
+            && !value_like(&rec[1])
+        {
+            continue;
+        }
+        if rec.len() != 2 && rec.len() != 4 {
+            return Err(at(format!(
+                "expected file,front or file,X,Y,Z, got {} fields",
+                rec.len()
+            )));
+        }
+        let file = photo_field(&rec[0]).map_err(at)?;
+        let value: Vec<&str> = rec.iter().skip(1).collect();
+        let plane = crate::extract::parse_normal(&value.join(",")).map_err(at)?;
+        if out.insert(file, plane).is_some() {
+            return Err(at(format!(
+                "{:?} has a normal already (one plane per photo)",
                 &rec[0]
             )));
         }
@@ -451,6 +501,10 @@ fn manifest_key(
         "all": req.all,
         "quad": req.quad.map(|q| q.0),
         "quad_size_m": req.quad_size_m,
+        "normal": req.normal.map(|p| match p {
+            UserPlane::Normal(n) => json!(n.to_array()),
+            UserPlane::Quad(q) => json!(q.0),
+        }),
         "mask_sha256": mask_sha,
         "quad_mask": req.mask == Some(extract::MaskArg::Quad),
     })
@@ -797,6 +851,11 @@ pub fn run(a: Args) -> Result<ExitCode> {
             "--quads gives the planes to rectify: it cannot be used with --uv net".into(),
         ));
     }
+    if a.normals.is_some() && a.flags.uv == crate::extract::UvArg::Net {
+        return Err(usage(
+            "--normals gives the planes to rectify: it cannot be used with --uv net".into(),
+        ));
+    }
     if !a.in_dir.is_dir() {
         return Err(usage(format!("{}: not a folder", a.in_dir.display())));
     }
@@ -808,6 +867,15 @@ pub fn run(a: Args) -> Result<ExitCode> {
         Some(p) => read_quads(p)?,
         None => BTreeMap::new(),
     };
+    let normals = match &a.normals {
+        Some(p) => read_normals(p)?,
+        None => BTreeMap::new(),
+    };
+    if let Some(file) = normals.keys().find(|f| quads.contains_key(*f)) {
+        return Err(usage(format!(
+            "{file}: has both a quad in --quads and a normal in --normals (one plane per photo)"
+        )));
+    }
     let in_picks_csv: BTreeSet<String> = picks.keys().cloned().collect();
     if let Some(m) = &a.masks {
         if !m.is_dir() {
@@ -871,6 +939,22 @@ pub fn run(a: Args) -> Result<ExitCode> {
             (f.clone(), format!("{}: {why}", p.display()))
         })
         .collect();
+    // Normals for files that are not there, likewise.
+    missing.extend(
+        normals
+            .keys()
+            .filter(|f| !known.contains(f.as_str()) && !picks.contains_key(*f))
+            .filter(|f| a.shard.is_none_or(|(k, n)| shard_of(f, n) == k))
+            .map(|f| {
+                let p = a.in_dir.join(f);
+                let why = if p.exists() {
+                    "listed in --normals but not a supported image (by extension) under IN_DIR"
+                } else {
+                    "listed in --normals but not found under IN_DIR"
+                };
+                (f.clone(), format!("{}: {why}", p.display()))
+            }),
+    );
     missing.sort();
     let photos: Vec<(Photo, Request)> = all_photos
         .into_iter()
@@ -890,6 +974,7 @@ pub fn run(a: Args) -> Result<ExitCode> {
                 all: a.all,
                 quad: quads.get(&p.rel).map(|q| q.0),
                 quad_size_m: quads.get(&p.rel).and_then(|q| q.1),
+                normal: normals.get(&p.rel).copied(),
                 mask_label: mask.as_ref().and_then(|m| {
                     let dir = a.masks.as_deref()?;
                     let rel = m.strip_prefix(dir).ok()?;
@@ -1226,6 +1311,43 @@ mod tests {
             let msg = format!("{e:#}");
             assert!(
                 msg.contains(want) && msg.contains("quads.csv"),
+                "{bad:?}: {msg}"
+            );
+        }
+    }
+
+    #[test]
+    fn normals_csv() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("normals.csv");
+        std::fs::write(
+            &p,
+            "file,normal\n# a comment\na.jpg,front\nsub/b.png, 0,1, 0.2\n\"c,d.jpg\",FRONT\n",
+        )
+        .unwrap();
+        let m = read_normals(&p).unwrap();
+        assert_eq!(m.len(), 3);
+        let n = |f: &str| match m[f] {
+            UserPlane::Normal(n) => n,
+            UserPlane::Quad(_) => panic!("{f}: a quad"),
+        };
+        assert_eq!(n("a.jpg"), glam::Vec3::Z);
+        assert!((n("sub/b.png") - glam::Vec3::new(0.0, 1.0, 0.2).normalize()).length() < 1e-6);
+        assert_eq!(n("c,d.jpg"), glam::Vec3::Z);
+        for (bad, want) in [
+            ("a.jpg\n", "got 1 fields"),
+            ("a.jpg,1,2\n", "got 3 fields"),
+            ("a.jpg,front\nb.jpg,0,0,0\n", "line 2"),
+            ("a.jpg,sideways\n", "line 1"),
+            ("../a.jpg,front\n", "inside IN_DIR"),
+            ("a.jpg,front\n./a.jpg,0,0,1\n", "one plane per photo"),
+        ] {
+            std::fs::write(&p, bad).unwrap();
+            let e = read_normals(&p).unwrap_err();
+            assert!(e.downcast_ref::<UsageError>().is_some());
+            let msg = format!("{e:#}");
+            assert!(
+                msg.contains(want) && msg.contains("normals.csv"),
                 "{bad:?}: {msg}"
             );
         }

@@ -1022,6 +1022,9 @@ pub struct Request {
     pub quad: Option<Quad>,
     /// The quad's real size in metres (`--quad-size`).
     pub quad_size_m: Option<[f32; 2]>,
+    /// The plane of this photo's materials, instead of `--normal`'s
+    /// (`picker batch --normals`).
+    pub normal: Option<UserPlane>,
     /// The material's pixels given (`--mask`): one material, the pick (if
     /// any) inside it.
     pub mask: Option<MaskArg>,
@@ -1187,6 +1190,9 @@ pub fn write_materials(
         bail!("{label}: nothing to extract (no pick and no --all)");
     }
     let mut opts = flags.options(inpainter);
+    if let Some(n) = req.normal {
+        opts.plane = Some(n);
+    }
     if let Some(q) = req.quad {
         opts.plane = Some(UserPlane::Quad(q));
         opts.quad_size_m = req.quad_size_m;
@@ -1481,6 +1487,7 @@ pub fn run(a: Args) -> Result<()> {
         all: a.all,
         quad: a.quad,
         quad_size_m: a.quad_size,
+        normal: None,
         mask: a.mask.clone(),
         mask_label: None,
     };

@@ -887,6 +887,162 @@ fn quads_give_each_photo_its_plane() {
     }
 }
 
+/// `--normals`: a listed photo's material is rectified on its given plane
+/// (`front`, or a normal) and the others on the predicted one; a row
+/// overrides `--normal`; the normal is in the manifest (a changed one redoes
+/// the photo, the others stay up to date); a photo with both a quad and a
+/// normal, a listed photo that is not there, and `--uv net` are refused.
+#[test]
+fn normals_give_each_photo_its_plane() {
+    let tmp = tempfile::tempdir().unwrap();
+    let input = tmp.path().join("photos");
+    std::fs::create_dir_all(input.join("sub")).unwrap();
+    photo(6, 64, 48).save(input.join("sub/scan.png")).unwrap();
+    photo(7, 64, 48).save(input.join("floor.png")).unwrap();
+    photo(8, 64, 48).save(input.join("other.png")).unwrap();
+    let picks = tmp.path().join("picks.csv");
+    std::fs::write(
+        &picks,
+        "sub/scan.png,30,20\nfloor.png,30,30\nother.png,20,20\n",
+    )
+    .unwrap();
+    let normals = tmp.path().join("normals.csv");
+    let write_normals = |floor: &str| {
+        std::fs::write(
+            &normals,
+            format!("file,normal\nsub/scan.png,front\nfloor.png,{floor}\n"),
+        )
+        .unwrap();
+    };
+    write_normals("0,1,0.3");
+    let out = tmp.path().join("out");
+    let batch = |extra: &[&str]| {
+        picker()
+            .args(["batch", input.to_str().unwrap(), "--out"])
+            .arg(&out)
+            .args(["--picks", picks.to_str().unwrap()])
+            .args(["--normals", normals.to_str().unwrap()])
+            .args(["--weights", &weights(), "--max-size", "32", "--quiet"])
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    let used = |rel: &str| -> Value {
+        let m: Value = serde_json::from_slice(
+            &std::fs::read(out.join(format!("{rel}.material/material_0/material.json"))).unwrap(),
+        )
+        .unwrap();
+        m["diagnostics"]["uv"]["user_plane"].clone()
+    };
+    let o = batch(&[]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(report(&out)["counts"]["ok"], 3);
+    let scan = used("sub/scan.png");
+    assert_eq!(scan["source"], "normal", "{scan}");
+    assert_eq!(scan["normal"], serde_json::json!([0.0, 0.0, 1.0]));
+    let floor = used("floor.png");
+    let n: Vec<f64> = floor["normal"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    let len = (1.0f64 + 0.09).sqrt();
+    assert!(
+        (n[1] - 1.0 / len).abs() < 1e-5 && (n[2] - 0.3 / len).abs() < 1e-5,
+        "{floor}"
+    );
+    assert!(used("other.png").is_null());
+
+    // A changed normal redoes that photo only; --normal sets the others'
+    // (a changed setting: all are redone), the rows still win.
+    write_normals("0,1,0.5");
+    batch(&[]);
+    let r = report(&out);
+    assert_eq!(
+        (
+            r["counts"]["ok"].as_u64(),
+            r["counts"]["up_to_date"].as_u64()
+        ),
+        (Some(1), Some(2)),
+        "{r:#}"
+    );
+    batch(&["--normal", "1,0,0.2"]);
+    assert_eq!(report(&out)["counts"]["ok"], 3);
+    assert_eq!(
+        used("sub/scan.png")["normal"],
+        serde_json::json!([0.0, 0.0, 1.0])
+    );
+    let other: Vec<f64> = used("other.png")["normal"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    assert!(other[0] > 0.9, "{other:?}");
+
+    // Refused before any photo is made.
+    let quads = tmp.path().join("quads.csv");
+    std::fs::write(&quads, "floor.png,5,5,40,5,40,40,5,40\n").unwrap();
+    let missing = tmp.path().join("missing.csv");
+    std::fs::write(&missing, "gone.png,front\n").unwrap();
+    let fresh = tmp.path().join("fresh");
+    for (extra, want, code) in [
+        (
+            vec!["--quads", quads.to_str().unwrap()],
+            "one plane per photo",
+            2,
+        ),
+        (vec!["--uv", "net"], "--uv net", 2),
+    ] {
+        let o = picker()
+            .args(["batch", input.to_str().unwrap(), "--out"])
+            .arg(&fresh)
+            .args([
+                "--normals",
+                normals.to_str().unwrap(),
+                "--picks",
+                picks.to_str().unwrap(),
+                "--weights",
+                &weights(),
+            ])
+            .args(&extra)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(code), "{extra:?}: {err}");
+        assert!(err.contains(want), "{extra:?}: {err}");
+        assert!(!fresh.join("floor.png.material").exists(), "{extra:?}");
+    }
+    let o = picker()
+        .args(["batch", input.to_str().unwrap(), "--out"])
+        .arg(&fresh)
+        .args([
+            "--picks",
+            picks.to_str().unwrap(),
+            "--normals",
+            missing.to_str().unwrap(),
+            "--weights",
+            &weights(),
+        ])
+        .args(["--max-size", "32", "--quiet"])
+        .output()
+        .unwrap();
+    assert_eq!(
+        o.status.code(),
+        Some(1),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(
+        report(&fresh)
+            .to_string()
+            .contains("listed in --normals but not found"),
+        "{}",
+        report(&fresh)
+    );
+}
+
 /// `--masks`: a photo with a mask in MASK_DIR (same relative path, its own
 /// extension) gets that material exactly, pick or none; a photo without one
 /// follows --picks; the mask is in the manifest (a new mask redoes the
