@@ -269,37 +269,41 @@ fn photo_field(field: &str) -> std::result::Result<String, String> {
     Ok(file)
 }
 
-/// Reads `quads.csv`: rows `file,X1,Y1,X2,Y2,X3,Y3,X4,Y4[,WxH]`, an
-/// optional header row, one row per photo.
-fn read_quads(path: &Path) -> Result<Quads> {
+/// Reads a CSV file of one row per photo (`--quads`, `--normals`): `file`
+/// then `fields` (one of `lengths` fields in all), an optional header row
+/// (`is_header`, first row only), each row's value made by `parse`; `what`
+/// names the value in the error for a second row of one photo.
+fn read_per_photo<T>(
+    path: &Path,
+    flag: &str,
+    (lengths, fields): (&[usize], &str),
+    what: &str,
+    is_header: impl Fn(&csv::StringRecord) -> bool,
+    parse: impl Fn(&csv::StringRecord) -> std::result::Result<T, String>,
+) -> Result<BTreeMap<String, T>> {
     let usage = |msg: String| anyhow::Error::new(UsageError(msg));
-    let mut out = Quads::new();
-    for (i, rec) in csv_reader(path, "--quads")?.records().enumerate() {
+    let mut out = BTreeMap::new();
+    for (i, rec) in csv_reader(path, flag)?.records().enumerate() {
         let rec = rec.map_err(|e| usage(format!("{}: {e}", path.display())))?;
         let line = rec.position().map(|p| p.line()).unwrap_or(i as u64 + 1);
         if rec.iter().all(|f| f.is_empty()) {
             continue;
         }
         let at = |msg: String| usage(format!("{} line {line}: {msg}", path.display()));
-        if i == 0 && rec.len() > 1 && rec[1].parse::<f64>().is_err() {
-            continue; // a header row
+        if i == 0 && rec.len() > 1 && is_header(&rec) {
+            continue;
         }
-        if !(9..=10).contains(&rec.len()) {
+        if !lengths.contains(&rec.len()) {
             return Err(at(format!(
-                "expected file,X1,Y1,X2,Y2,X3,Y3,X4,Y4[,WxH], got {} fields",
+                "expected file,{fields}, got {} fields",
                 rec.len()
             )));
         }
         let file = photo_field(&rec[0]).map_err(at)?;
-        let corners: Vec<&str> = rec.iter().skip(1).take(8).collect();
-        let quad = crate::extract::parse_quad(&corners.join(",")).map_err(at)?;
-        let size = match rec.get(9).filter(|f| !f.is_empty()) {
-            Some(f) => Some(crate::extract::parse_size_m(f).map_err(at)?),
-            None => None,
-        };
-        if out.insert(file, (quad, size)).is_some() {
+        let value = parse(&rec).map_err(at)?;
+        if out.insert(file, value).is_some() {
             return Err(at(format!(
-                "{:?} has a quad already (one plane per photo)",
+                "{:?} has a {what} already (one plane per photo)",
                 &rec[0]
             )));
         }
@@ -307,44 +311,45 @@ fn read_quads(path: &Path) -> Result<Quads> {
     Ok(out)
 }
 
+/// Reads `quads.csv`: rows `file,X1,Y1,X2,Y2,X3,Y3,X4,Y4[,WxH]`, an
+/// optional header row, one row per photo.
+fn read_quads(path: &Path) -> Result<Quads> {
+    read_per_photo(
+        path,
+        "--quads",
+        (&[9, 10], "X1,Y1,X2,Y2,X3,Y3,X4,Y4[,WxH]"),
+        "quad",
+        |rec| rec[1].parse::<f64>().is_err(),
+        |rec| {
+            let corners: Vec<&str> = rec.iter().skip(1).take(8).collect();
+            let quad = crate::extract::parse_quad(&corners.join(","))?;
+            let size = match rec.get(9).filter(|f| !f.is_empty()) {
+                Some(f) => Some(crate::extract::parse_size_m(f)?),
+                None => None,
+            };
+            Ok((quad, size))
+        },
+    )
+}
+
 /// Reads `normals.csv`: rows `file,front` or `file,X,Y,Z`, an optional header
 /// row, one row per photo.
 fn read_normals(path: &Path) -> Result<Normals> {
-    let usage = |msg: String| anyhow::Error::new(UsageError(msg));
-    let mut out = Normals::new();
-    for (i, rec) in csv_reader(path, "--normals")?.records().enumerate() {
-        let rec = rec.map_err(|e| usage(format!("{}: {e}", path.display())))?;
-        let line = rec.position().map(|p| p.line()).unwrap_or(i as u64 + 1);
-        if rec.iter().all(|f| f.is_empty()) {
-            continue;
-        }
-        let at = |msg: String| usage(format!("{} line {line}: {msg}", path.display()));
+    read_per_photo(
+        path,
+        "--normals",
+        (&[2, 4], "front or file,X,Y,Z"),
+        "normal",
         // A header row: a first row that names no image and gives no value.
-        let value_like = |f: &str| f.eq_ignore_ascii_case("front") || f.parse::<f64>().is_ok();
-        if i == 0
-            && rec.len() > 1
-            && !is_supported_extension(Path::new(&rec[0]))
-            && !value_like(&rec[1])
-        {
-            continue;
-        }
-        if rec.len() != 2 && rec.len() != 4 {
-            return Err(at(format!(
-                "expected file,front or file,X,Y,Z, got {} fields",
-                rec.len()
-            )));
-        }
-        let file = photo_field(&rec[0]).map_err(at)?;
-        let value: Vec<&str> = rec.iter().skip(1).collect();
-        let plane = crate::extract::parse_normal(&value.join(",")).map_err(at)?;
-        if out.insert(file, plane).is_some() {
-            return Err(at(format!(
-                "{:?} has a normal already (one plane per photo)",
-                &rec[0]
-            )));
-        }
-    }
-    Ok(out)
+        |rec| {
+            let value_like = |f: &str| f.eq_ignore_ascii_case("front") || f.parse::<f64>().is_ok();
+            !is_supported_extension(Path::new(&rec[0])) && !value_like(&rec[1])
+        },
+        |rec| {
+            let value: Vec<&str> = rec.iter().skip(1).collect();
+            crate::extract::parse_normal(&value.join(","))
+        },
+    )
 }
 
 /// Reads `picks.csv`: rows `file,x,y[,name]`, an optional header row.
