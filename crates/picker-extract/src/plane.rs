@@ -590,13 +590,13 @@ impl FrameGrid {
         // Summed-area tables of the counts and of the cells holding any,
         // (nx + 1) × (ny + 1).
         let mut sat = vec![0u64; (nx + 1) * (ny + 1)];
-        let mut hit = vec![0u32; (nx + 1) * (ny + 1)];
+        let mut hit = vec![0u64; (nx + 1) * (ny + 1)];
         for y in 0..ny {
-            let (mut run, mut run_hit) = (0u64, 0u32);
+            let (mut run, mut run_hit) = (0u64, 0u64);
             for x in 0..nx {
                 let c = hist[y * nx + x];
                 run += u64::from(c);
-                run_hit += u32::from(c > 0);
+                run_hit += u64::from(c > 0);
                 let (k, above) = ((y + 1) * (nx + 1) + x + 1, y * (nx + 1) + x + 1);
                 sat[k] = sat[above] + run;
                 hit[k] = hit[above] + run_hit;
@@ -606,7 +606,6 @@ impl FrameGrid {
             let at = |x: usize, y: usize| t[y * (nx + 1) + x];
             at(x + g, y + g) + at(x, y) - at(x + g, y) - at(x, y + g)
         };
-        let hit: Vec<u64> = hit.into_iter().map(u64::from).collect();
         let mut best = (0u64, u64::MAX, self.centre[0], self.centre[1]);
         for oy in 0..=ny - g {
             for ox in 0..=nx - g {
