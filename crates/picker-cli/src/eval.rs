@@ -113,6 +113,12 @@ pub struct Args {
     /// (by default a band across each such edge is inpainted so the texture tiles without a seam).
     #[arg(long)]
     pub keep_seams: bool,
+    /// Inpaint a band across a rectified crop's wrap edges where its sides differ instead of
+    /// first cutting each edge through the crop's observed surroundings where the two sides look
+    /// alike (the cut keeps the observed texels; an edge whose surroundings were not seen gets
+    /// the band either way).
+    #[arg(long)]
+    pub no_seam_cut: bool,
     /// Even out broad light and dark patches in each texture, as `extract --even-out [SCALE]`.
     #[arg(long, value_name = "SCALE", num_args = 0..=1, default_missing_value = "0.125")]
     pub even_out: Option<f64>,
@@ -476,6 +482,7 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
         fold_centring: !a.no_centring,
         fill_from_mask: !a.no_mask_fill,
         heal_seams: !a.keep_seams,
+        cut_seams: !a.no_seam_cut,
         wrap_placement: !a.no_wrap_placement,
         tileable: true,
         seamless: false,

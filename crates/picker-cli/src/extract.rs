@@ -120,6 +120,12 @@ pub struct Flags {
     /// (by default a band across each such edge is inpainted so the texture tiles without a seam).
     #[arg(long)]
     pub keep_seams: bool,
+    /// Inpaint a band across a rectified crop's wrap edges where its sides differ instead of
+    /// first cutting each edge through the crop's observed surroundings where the two sides look
+    /// alike (the cut keeps the observed texels; an edge whose surroundings were not seen gets
+    /// the band either way).
+    #[arg(long)]
+    pub no_seam_cut: bool,
     /// Texture side in texels (default: the observed texel density, capped by --max-size). A side
     /// above the observed density is made at that side where the photo's pixels cover it (many
     /// repeats, a near view), else at the observed side and enlarged (bicubic) at the end.
@@ -207,6 +213,7 @@ impl Flags {
             fold_centring: !self.no_centring,
             fill_from_mask: !self.no_mask_fill,
             heal_seams: !self.keep_seams,
+            cut_seams: !self.no_seam_cut,
             wrap_placement: true,
             tileable: !self.no_tile,
             seamless: self.seamless,
@@ -257,6 +264,7 @@ impl Flags {
             "centring": !self.no_centring,
             "mask_fill": !self.no_mask_fill,
             "heal_seams": !self.keep_seams,
+            "seam_cut": !self.no_seam_cut,
             "size": self.size,
             "max_size": self.max_size,
             "tileable": !self.no_tile,

@@ -219,6 +219,12 @@ pub struct Options<'a> {
     /// better. Wrapped UVs join at the edges by construction and are left
     /// alone.
     pub heal_seams: bool,
+    /// With `heal_seams`, for a rectified plane that does not repeat (its
+    /// square a crop of the photo's region): reproject the square's
+    /// surroundings too and cut each wrap edge where the square's two sides
+    /// look alike ([`picker_inpaint::wrap_cut`]), keeping the observed
+    /// texels; an axis whose surroundings were not observed gets the band.
+    pub cut_seams: bool,
     /// Put a folded tile's wrap edges where its observed texels change least
     /// (any cyclic shift of a repeating tile is the same texture), so that a
     /// pattern's edge is not taken for a seam ([`smoothest_wrap`]).
@@ -1013,6 +1019,46 @@ struct Observed {
     repeat_filled: Option<f64>,
 }
 
+/// How one axis's wrap edge was cut ([`picker_inpaint::AxisCut`]).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct SeamCutAxis {
+    /// Width of the overlap band the cut runs through, in texels.
+    pub overlap: usize,
+    /// Share of the overlap's texel pairs observed on both sides.
+    pub both_known: f64,
+    /// The two sides' difference where cut over the difference between
+    /// neighbouring texels (0: they agree exactly; about 1: as much as
+    /// neighbours).
+    pub ratio: Option<f64>,
+}
+
+/// The wrap edges cut through a rectified square's surroundings
+/// ([`Options::cut_seams`]); an axis `None` was not cut (too little of its
+/// surroundings observed) and gets the seam band when its sides differ.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct SeamCut {
+    /// The columns' wrap edge (left against right).
+    pub columns: Option<SeamCutAxis>,
+    /// The rows' wrap edge (top against bottom).
+    pub rows: Option<SeamCutAxis>,
+}
+
+impl SeamCut {
+    fn from_cut(c: &picker_inpaint::WrapCut) -> Self {
+        let axis = |a: Option<picker_inpaint::AxisCut>| {
+            a.map(|a| SeamCutAxis {
+                overlap: a.overlap,
+                both_known: a.both_known,
+                ratio: a.ratio,
+            })
+        };
+        Self {
+            columns: axis(c.columns),
+            rows: axis(c.rows),
+        }
+    }
+}
+
 /// Diagnostics of one extraction, beyond the [`Material`].
 #[derive(Clone, Debug, Serialize)]
 pub struct Diagnostics {
@@ -1068,6 +1114,15 @@ pub struct Diagnostics {
     /// the first inpainted texture's; absent when no band was.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub seam_band: Option<f64>,
+    /// How the wrap edges were cut through the square's surroundings
+    /// ([`Options::cut_seams`]); absent when they were not.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub seam_cut: Option<SeamCut>,
+    /// Share of the texture's texels (at the side it was made at) that hold
+    /// observed colours; the rest were inpainted: the unobserved ones, and
+    /// a seam band's. Absent without a texture.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub observed_kept: Option<f64>,
     /// The smallest and largest gain [`Options::even_out`] applied to the
     /// texture's texels; absent when it was off or had nothing to do.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -1477,6 +1532,8 @@ fn extract_as(
         pattern: pm.pattern.clone(),
         greyscale_photo: p.greyscale,
         seam_band: None,
+        seam_cut: None,
+        observed_kept: None,
         even_out_gain: None,
         timings_ms: Default::default(),
     };
@@ -1624,7 +1681,7 @@ fn extract_as(
                             diag_user: &mut Option<UserPlaneUsed>,
                             side_out: &mut Option<plane::Square>,
                             rest_src: &mut Option<Mask>,
-                            replan: &mut Option<(Vec3, f32, Option<Vec3>)>|
+                            replan: &mut Option<(Vec3, f32, Option<Vec3>, bool)>|
          -> Option<Coords> {
             let quad = match opts.plane {
                 Some(UserPlane::Quad(q)) => Some(q),
@@ -1774,7 +1831,7 @@ fn extract_as(
             let usable = c.u.iter().zip(&full.data).any(|(u, &m)| m && u.is_finite());
             *rest_src = rest;
             *side_out = side;
-            *replan = (framing == plane::Framing::Whole).then_some((n, f, along));
+            *replan = Some((n, f, along, framing == plane::Framing::Whole));
             usable.then_some(c)
         };
         // Why auto finds no coordinates, if it finds none.
@@ -1930,7 +1987,7 @@ fn extract_as(
         // covers best replaces the whole one the periods were looked for in
         // (`plane::Framing`), and the texture is sized by its pixels.
         let coords = match replan {
-            Some((n, f, along)) if mode == UvMode::Plane && fold.is_none() => {
+            Some((n, f, along, true)) if mode == UvMode::Plane && fold.is_none() => {
                 let (c, side) = plane::plane_coords_with_side(
                     fw,
                     fh,
@@ -1958,7 +2015,7 @@ fn extract_as(
         });
         // The texture's size on the surface, when a quad's real size gave
         // the plane its scale: the square (or the folded tile) in metres.
-        let size_m = match (user_plane.as_ref().and_then(|u| u.unit_m), square_side) {
+        let mut size_m = match (user_plane.as_ref().and_then(|u| u.unit_m), square_side) {
             (Some(unit), Some(sq)) if mode == UvMode::Plane => {
                 let side = f64::from(sq.side) * unit;
                 let t = fold.map_or([1.0, 1.0], |f| f.tile);
@@ -1996,7 +2053,7 @@ fn extract_as(
         } else {
             observed_cap
         };
-        let observed = {
+        let mut observed = {
             let area = if fold.is_some() {
                 coords.sizing_area(&full.data)
             } else {
@@ -2011,9 +2068,66 @@ fn extract_as(
             (UvMode::Net, Some(rest)) if uv_fold.is_some() => rest_uv().map(|c| (rest, Some(c))),
             _ => None,
         };
+        // A rectified crop that does not repeat: its wrap edges are cut
+        // through the square's surroundings (`Options::cut_seams`), which
+        // are reprojected with it: a square `cut_margin` texels larger on
+        // every side, whose centre is the texture's square (the same texel
+        // grid). The last one made is kept for the cut.
+        let around = match (replan, square_side) {
+            (Some((n, f, along, _)), Some(sq))
+                if mode == UvMode::Plane
+                    && fold.is_none()
+                    && opts.tileable
+                    && opts.heal_seams
+                    && opts.cut_seams =>
+            {
+                Some((n, f, along, sq))
+            }
+            _ => None,
+        };
+        let around_made: std::cell::RefCell<Option<(usize, reproject::Reprojected)>> =
+            std::cell::RefCell::new(None);
+        let reproject_around = |size: usize| -> Option<reproject::Reprojected> {
+            let (n, f, along, sq) = around?;
+            let m = picker_inpaint::cut_margin(size);
+            let big = size + 2 * m;
+            let grow = sq.side * m as f32 / size as f32;
+            let c = plane::plane_coords_in(
+                fw,
+                fh,
+                &full.data,
+                n,
+                f,
+                along,
+                [sq.origin[0] - grow, sq.origin[1] - grow],
+                sq.side * big as f32 / size as f32,
+            );
+            Some(reproject::reproject(
+                &c,
+                &full.data,
+                &delit,
+                &confidence,
+                big,
+            ))
+        };
         // The picked pixels reprojected into a square of `size` texels a
         // side, completed from the rest of the mask and from other repeats.
         let observe = |size: usize| -> Observed {
+            if let Some(r) = reproject_around(size) {
+                let m = picker_inpaint::cut_margin(size);
+                let inner = r.crop(m, m, size);
+                *around_made.borrow_mut() = Some((size, r));
+                let fraction = inner.known_fraction();
+                return Observed {
+                    texture: inner.texture,
+                    known: inner.known,
+                    coverage: inner.coverage,
+                    fraction,
+                    own_fraction: fraction,
+                    from_mask: None,
+                    repeat_filled: None,
+                };
+            }
             // The pixels through `c`, and again shifted by the centring
             // when the plane's fold has one.
             let splat = |c: &Coords, shift: Option<[f32; 2]>, m: &[bool]| match shift {
@@ -2107,7 +2221,7 @@ fn extract_as(
         } else {
             observe(size)
         };
-        let out_size = opts.size.unwrap_or(size);
+        let mut out_size = opts.size.unwrap_or(size);
         diag.texture_size = Some(out_size);
         diag.texture_observed_size = Some(observed);
         diag.texture_made_size = Some(size);
@@ -2125,54 +2239,10 @@ fn extract_as(
                 }
             )));
         }
-        let inpaint =
-            |t: &Image, known: &[bool], band: &mut Option<f64>| -> picker_inpaint::Result<Image> {
-                // A band across the wrap edges where the observed sides differ:
-                // only for a rectified plane, whose square is a crop of the
-                // photo's region (folded, its tile's sides meet only as well as
-                // the measured period is right). Wrapped UVs meet themselves at
-                // the edges by construction (a texture whose period ends on a
-                // strong edge, a brick's mortar, has a high seam ratio of its
-                // own: banding them cost 0.5–0.7 dB with ground-truth UVs).
-                let heal = opts.tileable && opts.heal_seams && mode == UvMode::Plane;
-                let healed = heal.then(|| picker_inpaint::seam_band(t, known)).flatten();
-                let healed = healed.map(|(k, ratio)| {
-                    *band = Some(ratio);
-                    k
-                });
-                let io = InpaintOptions {
-                    toroidal: opts.tileable,
-                    seed: opts.seed,
-                    ..InpaintOptions::default()
-                };
-                let out = opts
-                    .inpainter
-                    .inpaint(t, healed.as_deref().unwrap_or(known), &io)?;
-                if !heal || healed.is_some() {
-                    return Ok(out);
-                }
-                // The observed texels could not tell (an edge whose other side
-                // was not observed) and the inpainted square still shows its
-                // seams: inpainted again with the band cleared, kept when it
-                // tiles better.
-                let first = picker_inpaint::seam_score(&out).ratio;
-                if first <= picker_inpaint::SEAM_BAND_MIN_RATIO {
-                    return Ok(out);
-                }
-                let Some(k) = picker_inpaint::clear_seam_band(known, t.width, t.height) else {
-                    return Ok(out);
-                };
-                let again = opts.inpainter.inpaint(t, &k, &io)?;
-                if picker_inpaint::seam_score(&again).ratio < first {
-                    *band = Some(first);
-                    Ok(again)
-                } else {
-                    Ok(out)
-                }
-            };
         // What the report and coverage.png show as observed: the
         // reprojection, with the texels filled from other repeats (at the
-        // tile's coverage there) when the square repeats.
+        // tile's coverage there) when the square repeats; for a crop whose
+        // wrap edges were cut through its surroundings, the cut square.
         let Observed {
             texture: raw,
             known,
@@ -2180,6 +2250,121 @@ fn extract_as(
             fraction: known_fraction,
             ..
         } = seen;
+        // (Made again when a larger size was looked at last.)
+        let made = match around_made.into_inner() {
+            Some((side, r)) if side == size => Some(r),
+            _ => reproject_around(size),
+        };
+        let (raw, known, coverage, band_axes, known_fraction) = match made {
+            Some(r) => {
+                let m = picker_inpaint::cut_margin(size);
+                let cut = |side| {
+                    picker_inpaint::wrap_cut(&r.texture, &r.known, &r.coverage, side, side, m)
+                };
+                let n_cut = |c: &picker_inpaint::WrapCut| {
+                    usize::from(c.columns.is_some()) + usize::from(c.rows.is_some())
+                };
+                let mut c = cut(size);
+                // An axis whose surroundings were not seen: a tile folded
+                // within the observed square instead (smaller by the overlap,
+                // rounded down to a multiple of 4), when it cuts more axes
+                // and the side is the automatic one. The texels per unit of
+                // the (smaller) texture square follow.
+                // (Only where the square's own edges do not join: they would
+                // get no band.)
+                let inner = size.saturating_sub(m) / 4 * 4;
+                let uncut = [c.columns.is_none(), c.rows.is_none()];
+                let joins = picker_inpaint::known_seam_ratio_axes(&c.texture, &c.known, uncut)
+                    .is_some_and(|r| r <= picker_inpaint::SEAM_BAND_MIN_RATIO);
+                if n_cut(&c) < 2 && !joins && opts.size.is_none() && inner >= 16 {
+                    let within = cut(inner);
+                    if n_cut(&within) > n_cut(&c) {
+                        c = within;
+                    }
+                }
+                let side = c.texture.width;
+                if side != size {
+                    let k = side as f64 / size as f64;
+                    size_m = size_m.map(|[a, b]| [a * k, b * k]);
+                    (size, out_size, observed) = (side, side, side);
+                    diag.texture_size = Some(side);
+                    diag.texture_observed_size = Some(side);
+                    diag.texture_made_size = Some(side);
+                }
+                diag.seam_cut = Some(SeamCut::from_cut(&c));
+                let axes = [c.columns.is_none(), c.rows.is_none()];
+                let fraction =
+                    c.known.iter().filter(|&&k| k).count() as f64 / c.known.len().max(1) as f64;
+                (c.texture, c.known, c.coverage, axes, fraction)
+            }
+            None => (raw, known, coverage, [true, true], known_fraction),
+        };
+        let inpaint = |t: &Image,
+                       known: &[bool],
+                       band: &mut Option<f64>|
+         -> picker_inpaint::Result<(Image, f64)> {
+            let share =
+                |k: &[bool]| k.iter().filter(|&&b| b).count() as f64 / k.len().max(1) as f64;
+            // A band across the wrap edges where the observed sides differ:
+            // only for a rectified plane, whose square is a crop of the
+            // photo's region (folded, its tile's sides meet only as well as
+            // the measured period is right). Wrapped UVs meet themselves at
+            // the edges by construction (a texture whose period ends on a
+            // strong edge, a brick's mortar, has a high seam ratio of its
+            // own: banding them cost 0.5–0.7 dB with ground-truth UVs).
+            // (Only across the edges not cut through the surroundings.)
+            let heal = opts.tileable
+                && opts.heal_seams
+                && mode == UvMode::Plane
+                && band_axes.iter().any(|&a| a);
+            let healed = heal
+                .then(|| {
+                    let r = picker_inpaint::known_seam_ratio_axes(t, known, band_axes)?;
+                    if r <= picker_inpaint::SEAM_BAND_MIN_RATIO {
+                        return None;
+                    }
+                    picker_inpaint::clear_seam_band_axes(known, t.width, t.height, band_axes)
+                        .map(|k| (k, r))
+                })
+                .flatten();
+            let healed = healed.map(|(k, ratio)| {
+                *band = Some(ratio);
+                k
+            });
+            let io = InpaintOptions {
+                toroidal: opts.tileable,
+                seed: opts.seed,
+                ..InpaintOptions::default()
+            };
+            let used = healed.as_deref().unwrap_or(known);
+            let out = opts.inpainter.inpaint(t, used, &io)?;
+            if !heal || healed.is_some() {
+                return Ok((out, share(used)));
+            }
+            // The observed texels could not tell (an edge whose other side
+            // was not observed) and the inpainted square still shows its
+            // seams: inpainted again with the band cleared, kept when it
+            // tiles better.
+            let all = vec![true; out.plane_len()];
+            let ratio = |img: &Image| {
+                picker_inpaint::known_seam_ratio_axes(img, &all, band_axes).unwrap_or(1.0)
+            };
+            let first = ratio(&out);
+            if first <= picker_inpaint::SEAM_BAND_MIN_RATIO {
+                return Ok((out, share(known)));
+            }
+            let Some(k) = picker_inpaint::clear_seam_band_axes(known, t.width, t.height, band_axes)
+            else {
+                return Ok((out, share(known)));
+            };
+            let again = opts.inpainter.inpaint(t, &k, &io)?;
+            if ratio(&again) < first {
+                *band = Some(first);
+                Ok((again, share(&k)))
+            } else {
+                Ok((out, share(known)))
+            }
+        };
         // A folded tile repeats: any cyclic shift of it is the same texture.
         // Its wrap edges are put where the observed texels change least, so
         // that a pattern's edge (a chessboard's square) does not lie on them,
@@ -2195,7 +2380,8 @@ fn extract_as(
             }
             _ => (raw, known, coverage),
         };
-        let final_tex = inpaint(&raw, &known, &mut diag.seam_band)?;
+        let (final_tex, kept) = inpaint(&raw, &known, &mut diag.seam_band)?;
+        diag.observed_kept = Some(kept);
         if let Some(d) = diag.uv.as_mut() {
             d.repeats = uv_fold.as_ref().map(|f| f.1);
         }
@@ -2524,6 +2710,7 @@ mod tests {
             fill_from_mask: true,
             tileable: true,
             heal_seams: true,
+            cut_seams: true,
             wrap_placement: true,
             seamless: false,
             even_out: None,
@@ -3370,11 +3557,13 @@ mod tests {
     }
 
     /// A frontal plane whose photo is a ramp with fine bars (a crop: its left
-    /// and right edges are two different places): the plane mode inpaints a
-    /// band across the wrap edges, and the texture tiles with a seam ratio
-    /// far below that of the texture that keeps its observed edges.
+    /// and right edges are two different places): the plane mode cuts the
+    /// columns' wrap edge through the square's surroundings (or, without the
+    /// cut, inpaints a band across it), and the texture tiles with a seam
+    /// ratio far below that of the texture that keeps its observed edges;
+    /// the cut keeps more observed texels than the band.
     #[test]
-    fn a_rectified_crop_gets_its_seams_inpainted() {
+    fn a_rectified_crop_gets_its_seams_healed() {
         let (h, w) = (64, 96);
         let p = frontal_plane(w, h, &|i| {
             let (x, y) = (i % w, i / w);
@@ -3382,15 +3571,99 @@ mod tests {
         });
         let pm = p.pick_mask([40, 30], &MaskOptions::default()).unwrap();
         assert_eq!(pm.mask.count(), w * h);
-        let run = |heal_seams| plane_crop(&p, &pm, [40, 30], heal_seams);
-        let (healed, diag) = run(true);
-        let (kept, kept_diag) = run(false);
-        assert!(diag
+        let run = |heal_seams, cut_seams| plane_crop_with(&p, &pm, [40, 30], heal_seams, cut_seams);
+        let (cut, cut_diag) = run(true, true);
+        let (banded, band_diag) = run(true, false);
+        let (kept, kept_diag) = run(false, true);
+        // The square's left and right surroundings were seen: cut there.
+        let seam_cut = cut_diag.seam_cut.expect("cut");
+        assert!(seam_cut.columns.is_some(), "{seam_cut:?}");
+        assert!(band_diag.seam_cut.is_none());
+        assert!(band_diag
             .seam_band
             .is_some_and(|r| r > picker_inpaint::SEAM_BAND_MIN_RATIO));
-        assert!(kept_diag.seam_band.is_none());
-        let (a, b) = (healed.texture.unwrap().seam, kept.texture.unwrap().seam);
-        assert!(b.ratio > 2.0 && a.ratio < b.ratio / 2.0, "{b:?} -> {a:?}");
+        assert!(kept_diag.seam_band.is_none() && kept_diag.seam_cut.is_none());
+        let b = kept.texture.unwrap().seam;
+        for (what, t) in [("cut", &cut), ("band", &banded)] {
+            let a = t.texture.as_ref().unwrap().seam;
+            assert!(
+                b.ratio > 2.0 && a.ratio < b.ratio / 2.0,
+                "{what}: {b:?} -> {a:?}"
+            );
+        }
+        let (kc, kb) = (
+            cut_diag.observed_kept.unwrap(),
+            band_diag.observed_kept.unwrap(),
+        );
+        assert!(kc > kb + 0.1, "observed texels kept: cut {kc}, band {kb}");
+    }
+
+    /// A square photo of a frontal plane, a diagonal ramp with noise, picked
+    /// whole: the texture square is the photo itself, so no surroundings
+    /// were seen along either axis and its opposite edges differ. The
+    /// texture is folded within the observed square (its side smaller by
+    /// the overlap, the texels per unit square following), every texel
+    /// observed, and it tiles; without the cut a band is inpainted instead,
+    /// keeping far fewer observed texels. A `--size` keeps its side (the
+    /// band then).
+    #[test]
+    fn a_crop_with_no_surroundings_is_folded_within_itself() {
+        let (h, w) = (72, 72);
+        let p = frontal_plane(w, h, &|i| {
+            let (x, y) = ((i % w) as f32, (i / w) as f32);
+            // A hash of the index (splitmix64's finaliser): no period.
+            let mut z = (i as u64).wrapping_add(0x9E37_79B9_7F4A_7C15);
+            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+            let n = ((z ^ (z >> 31)) >> 40) as f32 / (1u64 << 24) as f32;
+            0.2 + 0.4 * (x + y) / (w + h) as f32 + 0.15 * n
+        });
+        let pm = p.pick_mask([36, 36], &MaskOptions::default()).unwrap();
+        assert_eq!(pm.mask.count(), w * h);
+        let inpainter = picker_inpaint::PatchMatchInpainter::default();
+        let run = |cut_seams, size| {
+            let opts = Options {
+                max_size: 64,
+                size,
+                fov_deg: Some(60.0),
+                cut_seams,
+                ..test_options(&inpainter, UvChoice::Plane)
+            };
+            extract(&p, "ramp", Some([36, 36]), &pm, &opts).unwrap()
+        };
+        let (_, band_diag) = run(false, None);
+        let s = band_diag.texture_size.unwrap();
+        assert!(band_diag.seam_band.is_some());
+        let (cut, diag) = run(true, None);
+        let seam_cut = diag.seam_cut.expect("cut");
+        assert!(
+            seam_cut.columns.is_some() && seam_cut.rows.is_some(),
+            "{seam_cut:?}"
+        );
+        assert!(diag.seam_band.is_none());
+        let t = cut.texture.unwrap();
+        let side = t.texture.width;
+        let m = picker_inpaint::cut_margin(s);
+        assert_eq!(side, (s - m) / 4 * 4, "observed side {s}");
+        assert_eq!(diag.texture_size, Some(side));
+        assert_eq!(diag.texture_made_size, Some(side));
+        assert_eq!(t.observed_size, side);
+        assert_eq!((t.raw.width, t.coverage.width), (side, side));
+        let (kc, kb) = (
+            diag.observed_kept.unwrap(),
+            band_diag.observed_kept.unwrap(),
+        );
+        assert!(
+            kc > 0.95 && kb < 0.8,
+            "observed texels kept: cut {kc}, band {kb}"
+        );
+        // (A cut between unrelated texels of a noise is a little more visible
+        // than neighbouring texels, which share photo pixels.)
+        assert!(t.seam.ratio < 1.5, "{:?}", t.seam);
+        // A requested side is kept: no fold within, the band.
+        let (sized, sized_diag) = run(true, Some(s));
+        assert_eq!(sized.texture.unwrap().texture.width, s);
+        assert!(sized_diag.seam_band.is_some());
     }
 
     /// A mask of the whole `w × h` image whose surest part is `sure`.
@@ -3495,11 +3768,23 @@ mod tests {
         pick: [u32; 2],
         heal_seams: bool,
     ) -> (Material, Diagnostics) {
+        plane_crop_with(p, pm, pick, heal_seams, true)
+    }
+
+    /// [`plane_crop`], with or without the cut through the surroundings.
+    fn plane_crop_with(
+        p: &Prepared,
+        pm: &PickMask,
+        pick: [u32; 2],
+        heal_seams: bool,
+        cut_seams: bool,
+    ) -> (Material, Diagnostics) {
         let inpainter = picker_inpaint::PatchMatchInpainter::default();
         let opts = Options {
             max_size: 64,
             fov_deg: Some(60.0),
             heal_seams,
+            cut_seams,
             ..test_options(&inpainter, UvChoice::Plane)
         };
         extract(p, "crop", Some(pick), pm, &opts).unwrap()
@@ -3891,10 +4176,15 @@ mod tests {
         let (kept, kept_diag) = run(false);
         let (healed, diag) = run(true);
         assert!(kept_diag.seam_band.is_none());
+        // Neither axis could be cut (a strip: no surroundings on either).
+        let seam_cut = diag.seam_cut.expect("looked for");
+        assert!(seam_cut.columns.is_none() && seam_cut.rows.is_none());
         let first = diag.seam_band.expect("a second look");
         let (a, b) = (healed.texture.unwrap().seam, kept.texture.unwrap().seam);
+        // The kept texture's (its square reprojected alone, not within its
+        // surroundings: the texels at its edges differ slightly).
         assert!(
-            (first - b.ratio).abs() < 1e-9,
+            (first - b.ratio).abs() < 0.01 * b.ratio,
             "the first look is the kept texture: {first} {b:?}"
         );
         assert!(b.ratio > 5.0 && a.ratio < 2.0, "{b:?} -> {a:?}");

@@ -302,6 +302,9 @@ pub struct Square {
     /// units of the plane's distance from the camera).
     #[serde(skip)]
     pub side: f32,
+    /// Its corner `(s, t)` in plane units (the texture's axes).
+    #[serde(skip)]
+    pub origin: [f32; 2],
     /// Its side as a share of the geometric mean of the sides of the picked
     /// pixels' 2–98% box (1, or `2^(−k/2)` for a smaller square the pixels
     /// cover better: [`Framing::Covered`]).
@@ -351,32 +354,23 @@ pub fn plane_coords_with(
     plane_coords_with_side(w, h, mask, extra, n, focal, along, Framing::Covered).0
 }
 
-/// [`plane_coords_with`] with the square placed as `framing` says, and the
-/// square ([`Square`]: its side in plane units, and how it was framed);
-/// `None` when no picked pixel sees the plane's front (every coordinate is
-/// then NaN).
-///
-/// # Panics
-/// If `mask` or `extra` does not hold `w·h` values.
-#[allow(clippy::too_many_arguments)]
-pub fn plane_coords_with_side(
+/// The plane coordinates `(s, t)` (plane units, the texture's axes
+/// [`plane_basis`]) of the `wanted` pixels of a `w×h` photo (focal `focal`
+/// in photo pixels); `NaN` elsewhere and where a pixel's ray misses the
+/// plane's front. Rows in parallel; every pixel is computed alone (the same
+/// bits for any thread count).
+fn rectified(
     w: usize,
     h: usize,
-    mask: &[bool],
-    extra: Option<&[bool]>,
+    wanted: impl Fn(usize) -> bool + Sync,
     n: Vec3,
     focal: f32,
     along: Option<Vec3>,
-    framing: Framing,
-) -> (Coords, Option<Square>) {
-    assert_eq!(mask.len(), w * h, "mask size");
-    assert!(extra.is_none_or(|e| e.len() == w * h), "extra size");
-    let wanted = |i: usize| mask[i] || extra.is_some_and(|e| e[i]);
+) -> (Vec<f32>, Vec<f32>) {
     let (e1, e2) = plane_basis(n, along);
     let (cx, cy) = (w as f32 / 2.0, h as f32 / 2.0);
     let mut s = vec![f32::NAN; w * h];
     let mut t = vec![f32::NAN; w * h];
-    // Rows in parallel: every pixel is computed alone (same bits for any thread count).
     let step = w.max(1);
     s.par_chunks_mut(step)
         .zip(t.par_chunks_mut(step))
@@ -398,6 +392,97 @@ pub fn plane_coords_with_side(
                 rt[col] = -p.dot(e2);
             }
         });
+    (s, t)
+}
+
+/// The coordinates of the picked pixels of a `w×h` photo in the square of
+/// side `side` (plane units) whose corner is `origin` (`(s, t)`, plane
+/// units) on the plane `n` (focal `focal`, axes following `along`, as
+/// [`plane_coords_with_side`]): `u, v ∈ [0, 1)` inside it, `NaN` elsewhere.
+/// With a [`Square`]'s own `origin` and `side` they are
+/// [`plane_coords_with_side`]'s, bit for bit; the pipeline passes a larger
+/// square around it, whose texels past the square's sides let its wrap
+/// edges be cut where its two sides look alike
+/// ([`picker_inpaint::wrap_cut`]).
+///
+/// # Panics
+/// If `mask` does not hold `w·h` values.
+#[allow(clippy::too_many_arguments)]
+pub fn plane_coords_in(
+    w: usize,
+    h: usize,
+    mask: &[bool],
+    n: Vec3,
+    focal: f32,
+    along: Option<Vec3>,
+    origin: [f32; 2],
+    side: f32,
+) -> Coords {
+    assert_eq!(mask.len(), w * h, "mask size");
+    let (mut s, mut t) = rectified(w, h, |i| mask[i], n, focal, along);
+    into_square(&mut s, &mut t, w, origin, side);
+    Coords {
+        width: w,
+        height: h,
+        u: s,
+        v: t,
+        wrap: false,
+    }
+}
+
+/// Plane coordinates `(s, t)` (rows of `w`, in parallel) replaced in place
+/// by their coordinates in the square of side `side` at corner `origin`:
+/// `NaN` for both where either falls outside it.
+fn into_square(s: &mut [f32], t: &mut [f32], w: usize, origin: [f32; 2], side: f32) {
+    let [sc, tc] = origin;
+    s.par_chunks_mut(w.max(1))
+        .zip(t.par_chunks_mut(w.max(1)))
+        .for_each(|(rs, rt)| {
+            for (ps, pt) in rs.iter_mut().zip(rt.iter_mut()) {
+                let (u, v) = (square_coord(*ps, sc, side), square_coord(*pt, tc, side));
+                (*ps, *pt) = if u.is_finite() && v.is_finite() {
+                    (u, v)
+                } else {
+                    (f32::NAN, f32::NAN)
+                };
+            }
+        });
+}
+
+/// A plane coordinate `p` in the square starting at `corner` with side
+/// `side`: `(p − corner) / side` when in `[0, 1)`, else `NaN`.
+fn square_coord(p: f32, corner: f32, side: f32) -> f32 {
+    let u = (p - corner) / side;
+    if p.is_finite() && (0.0..1.0).contains(&u) {
+        u
+    } else {
+        f32::NAN
+    }
+}
+
+/// [`plane_coords_with`] with the square placed as `framing` says, and the
+/// square ([`Square`]: its side in plane units, and how it was framed);
+/// `None` when no picked pixel sees the plane's front (every coordinate is
+/// then NaN).
+///
+/// # Panics
+/// If `mask` or `extra` does not hold `w·h` values.
+#[allow(clippy::too_many_arguments)]
+pub fn plane_coords_with_side(
+    w: usize,
+    h: usize,
+    mask: &[bool],
+    extra: Option<&[bool]>,
+    n: Vec3,
+    focal: f32,
+    along: Option<Vec3>,
+    framing: Framing,
+) -> (Coords, Option<Square>) {
+    assert_eq!(mask.len(), w * h, "mask size");
+    assert!(extra.is_none_or(|e| e.len() == w * h), "extra size");
+    let wanted = |i: usize| mask[i] || extra.is_some_and(|e| e[i]);
+    let (mut s, mut t) = rectified(w, h, wanted, n, focal, along);
+    let step = w.max(1);
     // Both percentiles of the finite values, found in parallel without
     // collecting them (`select::kth_smallest`: the values a selection over
     // the collected finite values gives), both coordinates side by side.
@@ -460,20 +545,7 @@ pub fn plane_coords_with_side(
         };
     // The plane coordinates become the texture coordinates in place (NaN
     // where a pixel has none or falls outside the square).
-    s.par_chunks_mut(step)
-        .zip(t.par_chunks_mut(step))
-        .for_each(|(rs, rt)| {
-            for (ps, pt) in rs.iter_mut().zip(rt.iter_mut()) {
-                let (mut u, mut v) = (f32::NAN, f32::NAN);
-                if ps.is_finite() {
-                    let (uu, vv) = ((*ps - sc) / side, (*pt - tc) / side);
-                    if (0.0..1.0).contains(&uu) && (0.0..1.0).contains(&vv) {
-                        (u, v) = (uu, vv);
-                    }
-                }
-                (*ps, *pt) = (u, v);
-            }
-        });
+    into_square(&mut s, &mut t, step, [sc, tc], side);
 
     let coords = Coords {
         width: w,
@@ -484,6 +556,7 @@ pub fn plane_coords_with_side(
     };
     let square = Square {
         side,
+        origin: [sc, tc],
         side_share: side / side0,
         cells_observed: cells,
     };
@@ -1181,6 +1254,49 @@ mod tests {
     /// `mask`ed pixels' coordinates fall into.
     fn square_cover(c: &Coords, mask: &[bool], g: usize) -> f64 {
         c.footprint(mask, g).unwrap()
+    }
+
+    /// The coordinates in a given square: the framed square's own origin
+    /// and side give the framed coordinates bit for bit; a square grown by
+    /// a margin on every side keeps them (rescaled) and adds the pixels
+    /// around it.
+    #[test]
+    fn coordinates_in_a_square_around_the_framed_one() {
+        let (w, h) = (160, 120);
+        let mask: Vec<bool> = (0..w * h).map(|i| i / w >= 40).collect();
+        let n = Vec3::new(0.0, 1.0, 0.3).normalize();
+        let focal = 150.0;
+        for framing in [Framing::Covered, Framing::Whole] {
+            let (c, sq) = plane_coords_with_side(w, h, &mask, None, n, focal, None, framing);
+            let sq = sq.unwrap();
+            let same = plane_coords_in(w, h, &mask, n, focal, None, sq.origin, sq.side);
+            let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&same.u), bits(&c.u), "{framing:?}");
+            assert_eq!(bits(&same.v), bits(&c.v), "{framing:?}");
+            let g = 0.25 * sq.side;
+            let big = plane_coords_in(
+                w,
+                h,
+                &mask,
+                n,
+                focal,
+                None,
+                [sq.origin[0] - g, sq.origin[1] - g],
+                1.5 * sq.side,
+            );
+            let (mut inside, mut around) = (0, 0);
+            for (i, &picked) in mask.iter().enumerate() {
+                if c.u[i].is_finite() {
+                    inside += 1;
+                    let (u, v) = ((big.u[i] * 1.5 - 0.25), (big.v[i] * 1.5 - 0.25));
+                    assert!((u - c.u[i]).abs() < 1e-4 && (v - c.v[i]).abs() < 1e-4);
+                } else if big.u[i].is_finite() {
+                    around += 1;
+                    assert!(picked);
+                }
+            }
+            assert!(inside > 0 && around > 0, "{framing:?}: {inside} {around}");
+        }
     }
 
     #[test]

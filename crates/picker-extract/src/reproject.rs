@@ -226,6 +226,39 @@ impl Reprojected {
     pub fn known_fraction(&self) -> f64 {
         self.known.iter().filter(|&&b| b).count() as f64 / self.known.len().max(1) as f64
     }
+
+    /// The `side × side` texels from column `x0`, row `y0` on.
+    ///
+    /// # Panics
+    /// When they reach past the square.
+    pub fn crop(&self, x0: usize, y0: usize, side: usize) -> Reprojected {
+        let n = self.texture.width;
+        assert!(
+            x0 + side <= n && y0 + side <= n,
+            "Reprojected::crop: {side}² at ({x0}, {y0}) outside {n}²"
+        );
+        let cut = |img: &Image| {
+            let mut out = Image::zeros(img.channels, side, side);
+            for c in 0..img.channels {
+                let src = img.plane(c);
+                for y in 0..side {
+                    let from = (y0 + y) * n + x0;
+                    let to = c * side * side + y * side;
+                    out.data[to..to + side].copy_from_slice(&src[from..from + side]);
+                }
+            }
+            out
+        };
+        let known = (0..side * side)
+            .map(|i| self.known[(y0 + i / side) * n + x0 + i % side])
+            .collect();
+        Reprojected {
+            texture: cut(&self.texture),
+            weight: cut(&self.weight),
+            coverage: cut(&self.coverage),
+            known,
+        }
+    }
 }
 
 /// One picked pixel to splat.

@@ -43,6 +43,7 @@ pub mod error;
 pub mod learned;
 pub mod metrics;
 pub mod patchmatch;
+pub mod quilt;
 pub mod seam;
 
 pub use diffusion::DiffusionInpainter;
@@ -51,9 +52,13 @@ pub use learned::LearnedInpainter;
 pub use metrics::{colour_stats_distance, psnr};
 pub use patchmatch::PatchMatchInpainter;
 pub use picker_render::io::Image;
+pub use quilt::{
+    cut_margin, wrap_cut, AxisCut, WrapCut, CUT_MARGIN, CUT_MIN_BOTH_KNOWN, LOSE_COST,
+};
 pub use seam::{
-    clear_seam_band, known_seam_ratio, make_seamless, periodic_component, seam_band, seam_score,
-    SeamScore, SEAMLESS_MIN_RATIO, SEAM_BAND_FRACTION, SEAM_BAND_MIN_RATIO,
+    clear_seam_band, clear_seam_band_axes, known_seam_ratio, known_seam_ratio_axes, make_seamless,
+    periodic_component, seam_band, seam_score, SeamScore, SEAMLESS_MIN_RATIO, SEAM_BAND_FRACTION,
+    SEAM_BAND_MIN_RATIO,
 };
 
 /// Options common to every [`Inpainter`].

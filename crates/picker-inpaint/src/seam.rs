@@ -180,6 +180,17 @@ pub fn make_seamless(img: Image) -> (Image, bool) {
 /// # Panics
 /// If `known` does not hold one flag per texel.
 pub fn known_seam_ratio(img: &Image, known: &[bool]) -> Option<f64> {
+    known_seam_ratio_axes(img, known, [true, true])
+}
+
+/// [`known_seam_ratio`] over the wrap edges of the chosen axes only:
+/// `axes[0]` the columns' (last column against the first), `axes[1]` the
+/// rows'; the inside differences are all of them either way. `None` also
+/// when no axis is chosen.
+///
+/// # Panics
+/// If `known` does not hold one flag per texel.
+pub fn known_seam_ratio_axes(img: &Image, known: &[bool], axes: [bool; 2]) -> Option<f64> {
     let (h, w) = (img.height, img.width);
     assert_eq!(known.len(), h * w, "known_seam_ratio: one flag per texel");
     let (mut wrap, mut nw) = (0.0f64, 0usize);
@@ -209,11 +220,11 @@ pub fn known_seam_ratio(img: &Image, known: &[bool]) -> Option<f64> {
                 pair(i, i + w, false);
             }
         }
-        if w > 1 {
+        if w > 1 && axes[0] {
             pair(y * w + w - 1, y * w, true);
         }
     }
-    if h > 1 {
+    if h > 1 && axes[1] {
         for x in 0..w {
             pair((h - 1) * w + x, x, true);
         }
@@ -267,14 +278,28 @@ pub fn seam_band(img: &Image, known: &[bool]) -> Option<(Vec<bool>, f64)> {
 /// # Panics
 /// If `known` does not hold `w·h` flags.
 pub fn clear_seam_band(known: &[bool], w: usize, h: usize) -> Option<Vec<bool>> {
+    clear_seam_band_axes(known, w, h, [true, true])
+}
+
+/// [`clear_seam_band`] across the wrap edges of the chosen axes only
+/// (`axes[0]`: the columns' edge, a band of columns; `axes[1]`: the rows').
+///
+/// # Panics
+/// If `known` does not hold `w·h` flags.
+pub fn clear_seam_band_axes(
+    known: &[bool],
+    w: usize,
+    h: usize,
+    axes: [bool; 2],
+) -> Option<Vec<bool>> {
     assert_eq!(known.len(), w * h, "clear_seam_band: one flag per texel");
     let bx = ((w as f64 * SEAM_BAND_FRACTION).round() as usize).max(1);
     let by = ((h as f64 * SEAM_BAND_FRACTION).round() as usize).max(1);
     let mut k = known.to_vec();
     for y in 0..h {
         for x in 0..w {
-            let near_x = w > 1 && (x < bx || x + bx >= w);
-            let near_y = h > 1 && (y < by || y + by >= h);
+            let near_x = axes[0] && w > 1 && (x < bx || x + bx >= w);
+            let near_y = axes[1] && h > 1 && (y < by || y + by >= h);
             if near_x || near_y {
                 k[y * w + x] = false;
             }
