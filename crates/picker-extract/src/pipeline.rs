@@ -2257,28 +2257,34 @@ fn extract_as(
         };
         let (raw, known, coverage, band_axes, known_fraction) = match made {
             Some(r) => {
+                // The axes whose square's observed edges do not join (as the
+                // seam band decides: ratio above the bound, or nothing to
+                // measure) are cut through the square's surroundings; the
+                // others are left as they are.
+                let need = |axes| {
+                    picker_inpaint::known_seam_ratio_axes(&raw, &known, axes)
+                        .is_none_or(|r| r > picker_inpaint::SEAM_BAND_MIN_RATIO)
+                };
+                let need = [need([true, false]), need([false, true])];
                 let m = picker_inpaint::cut_margin(size);
-                let cut = |side| {
-                    picker_inpaint::wrap_cut(&r.texture, &r.known, &r.coverage, side, side, m)
+                let cut = |side, axes| {
+                    picker_inpaint::wrap_cut(&r.texture, &r.known, &r.coverage, side, side, m, axes)
                 };
                 let n_cut = |c: &picker_inpaint::WrapCut| {
                     usize::from(c.columns.is_some()) + usize::from(c.rows.is_some())
                 };
-                let mut c = cut(size);
-                // An axis whose surroundings were not seen: a tile folded
-                // within the observed square instead (smaller by the overlap,
-                // rounded down to a multiple of 4), when it cuts more axes
-                // and the side is the automatic one. The texels per unit of
-                // the (smaller) texture square follow.
-                // (Only where the square's own edges do not join: they would
-                // get no band.)
+                let mut c = cut(size, need);
+                // An axis that needs it and whose surroundings were not seen:
+                // a tile folded within the observed square instead (smaller
+                // by the overlap, rounded down to a multiple of 4; both axes
+                // cut, the smaller square's edges being new), when that cuts
+                // both and the side is the automatic one. The texels per unit
+                // of the (smaller) texture square follow.
                 let inner = size.saturating_sub(m) / 4 * 4;
-                let uncut = [c.columns.is_none(), c.rows.is_none()];
-                let joins = picker_inpaint::known_seam_ratio_axes(&c.texture, &c.known, uncut)
-                    .is_some_and(|r| r <= picker_inpaint::SEAM_BAND_MIN_RATIO);
-                if n_cut(&c) < 2 && !joins && opts.size.is_none() && inner >= 16 {
-                    let within = cut(inner);
-                    if n_cut(&within) > n_cut(&c) {
+                let missed = (need[0] && c.columns.is_none()) || (need[1] && c.rows.is_none());
+                if missed && opts.size.is_none() && inner >= 16 {
+                    let within = cut(inner, [true, true]);
+                    if n_cut(&within) == 2 {
                         c = within;
                     }
                 }
@@ -2292,7 +2298,9 @@ fn extract_as(
                     diag.texture_made_size = Some(side);
                 }
                 diag.seam_cut = Some(SeamCut::from_cut(&c));
-                let axes = [c.columns.is_none(), c.rows.is_none()];
+                // The band: across the edges that needed healing and were
+                // not cut.
+                let axes = [need[0] && c.columns.is_none(), need[1] && c.rows.is_none()];
                 let fraction =
                     c.known.iter().filter(|&&k| k).count() as f64 / c.known.len().max(1) as f64;
                 (c.texture, c.known, c.coverage, axes, fraction)
@@ -3807,11 +3815,15 @@ mod tests {
         let pick = [30, 20];
         let pm = p.pick_mask(pick, &MaskOptions::default()).unwrap();
         let inpainter = picker_inpaint::PatchMatchInpainter::default();
+        // (Without the cut through the surroundings: with no `--size` it may
+        // fold a smaller tile within the square, which a given size never
+        // does, so the two would not be the same texture.)
         let run = |size| {
             let opts = Options {
                 size,
                 max_size: 64,
                 fov_deg: Some(60.0),
+                cut_seams: false,
                 ..test_options(&inpainter, UvChoice::Plane)
             };
             extract(&p, "m", Some(pick), &pm, &opts).unwrap()

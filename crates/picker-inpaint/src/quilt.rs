@@ -100,7 +100,9 @@ pub struct WrapCut {
 /// over the observed pairs), and the jump this leaves across the wrap edge
 /// is spread linearly over the row (a linear change of brightness across
 /// the crop is removed). Texels whose chosen side was not observed stay
-/// unknown (0) for an inpainter. An axis with an overlap under
+/// unknown (0) for an inpainter. Only the `axes` asked for are cut
+/// (`[columns, rows]`); the others are cropped at the centre, as is an axis
+/// with an overlap under
 /// [`CUT_MIN_OVERLAP`] or over the texture's side, or under
 /// [`CUT_MIN_BOTH_KNOWN`] of it observed on both sides, is cropped at the
 /// centre instead (its field `None`). Colours are kept non-negative.
@@ -116,6 +118,7 @@ pub fn wrap_cut(
     width: usize,
     height: usize,
     overlap: usize,
+    axes: [bool; 2],
 ) -> WrapCut {
     let (w, h) = (content.width, content.height);
     assert!(
@@ -127,13 +130,16 @@ pub fn wrap_cut(
         coverage.channels == 1 && coverage.width == w && coverage.height == h,
         "wrap_cut: one coverage plane of the content's size"
     );
-    let (img, kn, cov, columns) = fold_columns(content, known, coverage, width, overlap);
+    // An axis not to cut: an overlap of 0, which crops.
+    let overlap_of = |cut: bool| if cut { overlap } else { 0 };
+    let (img, kn, cov, columns) =
+        fold_columns(content, known, coverage, width, overlap_of(axes[0]));
     let (img, kn, cov) = (
         transpose(&img),
         transpose_flags(&kn, width, h),
         transpose(&cov),
     );
-    let (img, kn, cov, rows) = fold_columns(&img, &kn, &cov, height, overlap);
+    let (img, kn, cov, rows) = fold_columns(&img, &kn, &cov, height, overlap_of(axes[1]));
     WrapCut {
         texture: transpose(&img),
         known: transpose_flags(&kn, height, width),
@@ -626,7 +632,7 @@ mod tests {
             let content = image(channels, n, n, tile);
             let known = vec![true; n * n];
             let cov = image(1, n, n, |_, _, _| 1.0);
-            let cut = wrap_cut(&content, &known, &cov, side, side, m);
+            let cut = wrap_cut(&content, &known, &cov, side, side, m, [true, true]);
             let (cx, cy) = (cut.columns.unwrap(), cut.rows.unwrap());
             assert_eq!(cx.both_known, 1.0);
             assert_eq!(cx.ratio, Some(0.0));
@@ -661,7 +667,7 @@ mod tests {
         let content = image(1, n, n, f);
         let known = vec![true; n * n];
         let cov = image(1, n, n, |_, _, _| 1.0);
-        let cut = wrap_cut(&content, &known, &cov, side, side, m);
+        let cut = wrap_cut(&content, &known, &cov, side, side, m, [true, true]);
         let plain = image(1, side, side, |c, y, x| f(c, y + m, x + m));
         let s_cut = crate::seam_score(&cut.texture).ratio;
         let s_plain = crate::seam_score(&plain).ratio;
@@ -672,6 +678,21 @@ mod tests {
         );
         assert!(cut.known.iter().all(|&k| k));
         assert!(cut.texture.data.iter().all(|v| v.is_finite() && *v >= 0.0));
+        // Only the rows asked for: the columns are the centre crop's.
+        let rows_only = wrap_cut(&content, &known, &cov, side, side, m, [false, true]);
+        assert!(rows_only.columns.is_none() && rows_only.rows.is_some());
+        let (off, b) = (
+            rows_only.rows.unwrap().offset,
+            rows_only.rows.unwrap().overlap,
+        );
+        for y in (b..side).step_by(7) {
+            let x = side - 1;
+            let want = f(0, y + off, x + m);
+            let got = rows_only.texture.data[y * side + x];
+            // (Past the rows' overlap: the content itself, but for the rows'
+            // spread jump, small next to the noise.)
+            assert!((got - want).abs() < 0.1, "({x},{y}) {got} vs {want}");
+        }
     }
 
     /// Unobserved surroundings: the axis is cropped at the centre, the
@@ -687,7 +708,7 @@ mod tests {
             .map(|i| (m..m + side).contains(&(i % n)))
             .collect();
         let cov = image(1, n, n, |_, _, _| 0.5);
-        let cut = wrap_cut(&content, &known, &cov, side, side, m);
+        let cut = wrap_cut(&content, &known, &cov, side, side, m, [true, true]);
         assert!(cut.columns.is_none());
         let rows = cut.rows.expect("the rows' margins were observed");
         assert_eq!(rows.both_known, 1.0);
@@ -703,7 +724,7 @@ mod tests {
         let exact = image(3, side, side, |c, y, x| noise((c * 100 + y) * 100 + x));
         let kn = vec![true; side * side];
         let cv = image(1, side, side, |_, _, _| 1.0);
-        let same = wrap_cut(&exact, &kn, &cv, side, side, cut_margin(side));
+        let same = wrap_cut(&exact, &kn, &cv, side, side, cut_margin(side), [true, true]);
         assert!(same.columns.is_none() && same.rows.is_none());
         assert_eq!(same.texture, exact);
     }
@@ -724,7 +745,7 @@ mod tests {
             }
         }
         let cov = image(1, n, n, |_, _, _| 1.0);
-        let cut = wrap_cut(&content, &known, &cov, side, side, m);
+        let cut = wrap_cut(&content, &known, &cov, side, side, m, [true, true]);
         assert!(cut.columns.is_some());
         let lost = cut.known.iter().filter(|&&k| !k).count();
         // The near side was seen there: nothing need be lost.
@@ -747,10 +768,10 @@ mod tests {
             |i: usize| (m..m + side).contains(&(i % n)) && (m..m + side).contains(&(i / n));
         let known: Vec<bool> = (0..n * n).map(inside).collect();
         let cov = image(1, n, n, |_, _, _| 1.0);
-        let full = wrap_cut(&content, &known, &cov, side, side, m);
+        let full = wrap_cut(&content, &known, &cov, side, side, m, [true, true]);
         assert!(full.columns.is_none() && full.rows.is_none());
         let t = side - m;
-        let cut = wrap_cut(&content, &known, &cov, t, t, m);
+        let cut = wrap_cut(&content, &known, &cov, t, t, m, [true, true]);
         let (cx, cy) = (cut.columns.unwrap(), cut.rows.unwrap());
         // (The columns' pass sees the margin rows, unobserved, too.)
         assert_eq!(
