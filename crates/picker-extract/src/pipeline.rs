@@ -2270,6 +2270,20 @@ fn extract_as(
                 let cut = |side, axes| {
                     picker_inpaint::wrap_cut(&r.texture, &r.known, &r.coverage, side, side, m, axes)
                 };
+                // An axis is cut only where its sides look alike along the
+                // cut (`CUT_MAX_RATIO`); a cut that would show is taken back.
+                let good = |a: Option<picker_inpaint::AxisCut>| {
+                    a.is_some_and(|a| a.ratio.is_none_or(|r| r <= picker_inpaint::CUT_MAX_RATIO))
+                };
+                let cut = |side, axes: [bool; 2]| {
+                    let c = cut(side, axes);
+                    let keep = [good(c.columns), good(c.rows)];
+                    if keep == [c.columns.is_some(), c.rows.is_some()] {
+                        c
+                    } else {
+                        cut(side, [axes[0] && keep[0], axes[1] && keep[1]])
+                    }
+                };
                 let n_cut = |c: &picker_inpaint::WrapCut| {
                     usize::from(c.columns.is_some()) + usize::from(c.rows.is_some())
                 };

@@ -53,7 +53,8 @@ pub use metrics::{colour_stats_distance, psnr};
 pub use patchmatch::PatchMatchInpainter;
 pub use picker_render::io::Image;
 pub use quilt::{
-    cut_margin, wrap_cut, AxisCut, WrapCut, CUT_MARGIN, CUT_MIN_BOTH_KNOWN, LOSE_COST,
+    cut_margin, wrap_cut, AxisCut, WrapCut, CUT_MARGIN, CUT_MAX_RATIO, CUT_MIN_BOTH_KNOWN,
+    LOSE_COST,
 };
 pub use seam::{
     clear_seam_band, clear_seam_band_axes, known_seam_ratio, known_seam_ratio_axes, make_seamless,

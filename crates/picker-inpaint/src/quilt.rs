@@ -22,6 +22,12 @@ use picker_render::io::Image;
 /// to the caller ([`WrapCut::columns`] / [`WrapCut::rows`] `None`).
 pub const CUT_MIN_BOTH_KNOWN: f64 = 0.5;
 
+/// The largest [`AxisCut::ratio`] at which a cut is as good as invisible:
+/// where the two sides differ more than that along the best cut, the cut
+/// shows (a grout line broken off, a pattern that does not continue), and
+/// the pipeline inpaints a band across that edge instead.
+pub const CUT_MAX_RATIO: f64 = 1.3;
+
 /// The overlap band of [`wrap_cut`] as a share of the texture's side: the
 /// content reprojected for the cut reaches this far past each side of the
 /// square (at least [`CUT_MIN_OVERLAP`] texels), and the overlap is that wide.
@@ -239,10 +245,12 @@ fn fold_columns(
         return crop(centre);
     }
     let plane = |ch: usize| &img.data[ch * h * w..(ch + 1) * h * w];
-    // Squared difference of the two sides at band column x ∈ −1..=b (index
-    // x + 1); NaN where either side is unobserved or outside the content.
     let near = |x: isize| off as isize + x;
     let far = |x: isize| (off + side) as isize + x;
+    let jump = side_jump(img, known, h, w, b, off, side);
+    // Squared difference of the two sides at band column x ∈ −1..=b (index
+    // x + 1), the far side brought to the near side's low frequencies; NaN
+    // where either side is unobserved or outside the content.
     let mut e = vec![f64::NAN; h * (b + 2)];
     for y in 0..h {
         for xi in 0..b + 2 {
@@ -255,7 +263,7 @@ fn fold_columns(
             if known[a] && known[f] {
                 e[y * (b + 2) + xi] = (0..c)
                     .map(|ch| {
-                        let d = plane(ch)[a] as f64 - plane(ch)[f] as f64;
+                        let d = plane(ch)[a] as f64 - plane(ch)[f] as f64 + jump[ch][y] as f64;
                         d * d
                     })
                     .sum();
@@ -314,54 +322,6 @@ fn fold_columns(
         p
     };
     let cuts = min_cut_path(&node, h, b + 1, jog);
-    // The low frequencies of the two sides' difference over the band: a
-    // normalised box filter (three passes) of the pairs observed on both.
-    let radius = (b / 4).max(1);
-    let pair = |y: usize, x: usize| {
-        let (a, f) = (
-            y * w + near(x as isize) as usize,
-            y * w + far(x as isize) as usize,
-        );
-        (a, f, known[a] && known[f])
-    };
-    let weight: Vec<f32> = (0..h * b)
-        .map(|i| pair(i / b, i % b).2 as u8 as f32)
-        .collect();
-    let wlow = box3(&weight, b, h, radius);
-    let dlow: Vec<Vec<f32>> = (0..c)
-        .map(|ch| {
-            let p = plane(ch);
-            let d: Vec<f32> = (0..h * b)
-                .map(|i| match pair(i / b, i % b) {
-                    (a, f, true) => p[f] - p[a],
-                    _ => 0.0,
-                })
-                .collect();
-            box3(&d, b, h, radius)
-        })
-        .collect();
-    // Per row, the two sides' low-frequency difference at the band's first
-    // column (where the tile's column 0 meets the far side), or over the
-    // band when that column saw too little: the jump the tile's low
-    // frequencies make across its wrap edge.
-    let jump: Vec<Vec<f32>> = (0..c)
-        .map(|ch| {
-            (0..h)
-                .map(|y| {
-                    if wlow[y * b] > 1e-3 {
-                        return dlow[ch][y * b] / wlow[y * b];
-                    }
-                    let r = y * b..(y + 1) * b;
-                    let wsum: f32 = wlow[r.clone()].iter().sum();
-                    if wsum > 1e-3 {
-                        dlow[ch][r].iter().sum::<f32>() / wsum
-                    } else {
-                        0.0
-                    }
-                })
-                .collect()
-        })
-        .collect();
     let mut t = Image::zeros(c, h, side);
     let mut k = vec![false; h * side];
     let mut cv = Image::zeros(1, h, side);
@@ -385,14 +345,10 @@ fn fold_columns(
             // jump is spread linearly over the whole row: at column 0 the
             // row meets the far side, at its end the near one. A linear
             // change of brightness across the crop is removed.
-            let wl = if far_side { wlow[y * b + x] } else { 0.0 };
             let ramp = 1.0 - (x as f32 + 0.5) / side as f32;
+            let shift = if far_side { ramp - 1.0 } else { ramp };
             for ch in 0..c {
-                let mut v = plane(ch)[src];
-                if wl > 1e-3 {
-                    v -= dlow[ch][y * b + x] / wl;
-                }
-                v += ramp * jump[ch][y];
+                let v = plane(ch)[src] + shift * jump[ch][y];
                 t.data[ch * h * side + o] = v.max(0.0);
             }
         }
@@ -401,6 +357,11 @@ fn fold_columns(
     let l1 = |a: usize, f: usize| -> f64 {
         (0..c)
             .map(|ch| (plane(ch)[a] as f64 - plane(ch)[f] as f64).abs())
+            .sum()
+    };
+    let l1_sides = |y: usize, a: usize, f: usize| -> f64 {
+        (0..c)
+            .map(|ch| (plane(ch)[a] as f64 - plane(ch)[f] as f64 + jump[ch][y] as f64).abs())
             .sum()
     };
     let (mut at_cut, mut n_cut) = (0.0f64, 0usize);
@@ -412,7 +373,7 @@ fn fold_columns(
             }
             let (a, f) = (y * w + a as usize, y * w + f as usize);
             if known[a] && known[f] {
-                at_cut += l1(a, f);
+                at_cut += l1_sides(y, a, f);
                 n_cut += 1;
             }
         }
@@ -493,44 +454,78 @@ fn min_cut_path(
     path
 }
 
-/// Three passes of a `(2r + 1)²` box filter over a `w × h` plane (edges:
-/// the window clipped to the plane, sums not normalised), an approximate
-/// Gaussian of σ ≈ r.
-fn box3(v: &[f32], w: usize, h: usize, r: usize) -> Vec<f32> {
-    let mut a: Vec<f64> = v.iter().map(|&x| x as f64).collect();
-    let mut tmp = vec![0.0f64; a.len()];
-    for _ in 0..3 {
-        // Rows.
-        for y in 0..h {
-            box_line(&a[y * w..(y + 1) * w], &mut tmp[y * w..(y + 1) * w], r);
-        }
-        // Columns.
-        let mut col = vec![0.0f64; h];
-        let mut out = vec![0.0f64; h];
-        for x in 0..w {
-            for y in 0..h {
-                col[y] = tmp[y * w + x];
-            }
-            box_line(&col, &mut out, r);
-            for y in 0..h {
-                a[y * w + x] = out[y];
-            }
-        }
-    }
-    a.into_iter().map(|x| x as f32).collect()
+/// Rows between which [`side_jump`] measures (a quarter of the overlap).
+fn jump_step(b: usize) -> usize {
+    (b / 4).max(1)
 }
 
-/// `out[i] = Σ src[i − r ..= i + r]` (clipped to the line).
-fn box_line(src: &[f64], out: &mut [f64], r: usize) {
-    let n = src.len();
-    let mut prefix = vec![0.0f64; n + 1];
-    for i in 0..n {
-        prefix[i + 1] = prefix[i] + src[i];
+/// Per channel and row, the two sides' low-frequency difference (far minus
+/// near) over the overlap of `b` columns at `off` (the far side `side`
+/// further): the median of the differences of the pairs observed on both
+/// sides in the rows within `b / 2` of the row (a median, so that a
+/// pattern's edge passing one side only — a grout line — is not taken for a
+/// change of light), measured every [`jump_step`] rows and interpolated
+/// linearly between; 0 where no pair was observed.
+fn side_jump(
+    img: &Image,
+    known: &[bool],
+    h: usize,
+    w: usize,
+    b: usize,
+    off: usize,
+    side: usize,
+) -> Vec<Vec<f32>> {
+    let c = img.channels;
+    let (reach, step) = ((b / 2).max(1), jump_step(b));
+    let mut centres: Vec<usize> = (0..h).step_by(step).collect();
+    if centres.last() != Some(&(h - 1)) {
+        centres.push(h - 1);
     }
-    for (i, o) in out.iter_mut().enumerate().take(n) {
-        let (lo, hi) = (i.saturating_sub(r), (i + r + 1).min(n));
-        *o = prefix[hi] - prefix[lo];
-    }
+    let mut diffs = Vec::new();
+    let at: Vec<Vec<Option<f32>>> = (0..c)
+        .map(|ch| {
+            let p = &img.data[ch * h * w..(ch + 1) * h * w];
+            centres
+                .iter()
+                .map(|&y| {
+                    diffs.clear();
+                    for r in y.saturating_sub(reach)..(y + reach + 1).min(h) {
+                        for x in 0..b {
+                            let (a, f) = (r * w + off + x, r * w + off + side + x);
+                            if known[a] && known[f] {
+                                diffs.push(p[f] - p[a]);
+                            }
+                        }
+                    }
+                    if diffs.is_empty() {
+                        return None;
+                    }
+                    let mid = diffs.len() / 2;
+                    Some(*diffs.select_nth_unstable_by(mid, f32::total_cmp).1)
+                })
+                .collect()
+        })
+        .collect();
+    at.iter()
+        .map(|vals| {
+            (0..h)
+                .map(|y| {
+                    // The measured centres either side of y.
+                    let k = centres.partition_point(|&cy| cy <= y);
+                    let below = (0..k).rev().find_map(|i| vals[i].map(|v| (centres[i], v)));
+                    let above = (k..centres.len()).find_map(|i| vals[i].map(|v| (centres[i], v)));
+                    match (below, above) {
+                        (Some((y0, v0)), Some((y1, v1))) if y1 > y0 => {
+                            let t = (y - y0) as f32 / (y1 - y0) as f32;
+                            v0 + t * (v1 - v0)
+                        }
+                        (Some((_, v)), _) | (None, Some((_, v))) => v,
+                        (None, None) => 0.0,
+                    }
+                })
+                .collect()
+        })
+        .collect()
 }
 
 #[cfg(test)]
@@ -785,21 +780,36 @@ mod tests {
         assert!(s_crop > 1.5 && s_cut < 1.1, "crop {s_crop}, cut {s_cut}");
     }
 
-    /// The box filter against a direct sum.
+    /// The sides' jump is the light's, not a pattern's: a constant offset
+    /// between the sides is measured exactly though a bright line runs
+    /// along one side only, and it follows a change along the edge.
     #[test]
-    fn box_line_matches_direct_sum() {
-        for n in [1usize, 2, 5, 17] {
-            for r in [1usize, 2, 7] {
-                let src: Vec<f64> = (0..n).map(|i| noise(n * 31 + i) as f64).collect();
-                let mut out = vec![0.0; n];
-                box_line(&src, &mut out, r);
-                for (i, got) in out.iter().enumerate() {
-                    let lo = i.saturating_sub(r);
-                    let hi = (i + r).min(n - 1);
-                    let want: f64 = src[lo..=hi].iter().sum();
-                    assert!((got - want).abs() < 1e-12);
-                }
-            }
+    fn a_line_on_one_side_is_not_taken_for_light() {
+        let (side, b) = (40usize, 6usize);
+        let (h, w) = (50usize, side + 2 * b);
+        let off = 3;
+        let content = image(1, h, w, |_, y, x| {
+            let far = x >= off + side;
+            let base = 0.3 + 0.2 * noise(y * 1000 + x % side);
+            let light = if far { 0.1 + 0.002 * y as f32 } else { 0.0 };
+            // A bright line two texels wide in the far side's overlap only.
+            let line = if far && (x - off - side) / 2 == 1 {
+                0.6
+            } else {
+                0.0
+            };
+            base + light + line
+        });
+        let known = vec![true; h * w];
+        let jump = side_jump(&content, &known, h, w, b, off, side);
+        for (y, &j) in jump[0].iter().enumerate() {
+            let want = 0.1 + 0.002 * y as f32;
+            assert!((j - want).abs() < 0.01, "row {y}: {j} vs {want}");
         }
+        // Nothing observed on one side: no jump.
+        let none: Vec<bool> = (0..h * w).map(|i| i % w < off + side).collect();
+        assert!(side_jump(&content, &none, h, w, b, off, side)[0]
+            .iter()
+            .all(|&j| j == 0.0));
     }
 }
