@@ -347,8 +347,8 @@ fn fold_columns(
             // change of brightness across the crop is removed.
             let ramp = 1.0 - (x as f32 + 0.5) / side as f32;
             let shift = if far_side { ramp - 1.0 } else { ramp };
-            for ch in 0..c {
-                let v = plane(ch)[src] + shift * jump[ch][y];
+            for (ch, j) in jump.iter().enumerate() {
+                let v = plane(ch)[src] + shift * j[y];
                 t.data[ch * h * side + o] = v.max(0.0);
             }
         }
