@@ -4,11 +4,11 @@
 //! two sides look most alike (image quilting, Efros & Freeman 2001, "Image
 //! quilting for texture synthesis and transfer", §2.1, with the cut cost of
 //! Kwatra et al. 2003, "Graphcut textures", §3: a cut between two neighbours
-//! costs the two sides' difference at both). Only the detail is cut: the
-//! band's low frequencies are cross-faded from one side to the other across
-//! the band (two-band blending, after Burt & Adelson 1983, "A multiresolution
-//! spline"), so a slow change of brightness across the crop (imperfect
-//! de-lighting) does not leave a step at the cut.
+//! costs the two sides' difference at both). Only the detail is cut: the two
+//! sides' difference in brightness (a robust median along the edge) is taken
+//! out before comparing them and spread linearly over the tile instead, so a
+//! slow change of light across the crop (imperfect de-lighting) leaves no
+//! step at the cut or the wrap edge.
 //!
 //! The alternative ([`crate::seam_band`]) inpaints a band across each wrap
 //! edge, inventing a quarter of the square's texels; the cut keeps the
@@ -102,10 +102,10 @@ pub struct WrapCut {
 /// unobserved pair costs the median difference, an observed texel given up
 /// for an unobserved one [`LOSE_COST`] times it), found exactly by dynamic
 /// programming. Only the detail is cut: the far side's texels are brought to
-/// the near side's low frequencies (the two sides' difference, box-filtered
-/// over the observed pairs), and the jump this leaves across the wrap edge
-/// is spread linearly over the row (a linear change of brightness across
-/// the crop is removed). Texels whose chosen side was not observed stay
+/// the near side's brightness (the median of the two sides' differences
+/// over the rows within half the overlap), and the jump this leaves across the wrap edge
+/// is spread linearly over the row, the row's mean kept (a linear change of
+/// brightness across the crop is removed). Texels whose chosen side was not observed stay
 /// unknown (0) for an inpainter. Only the `axes` asked for are cut
 /// (`[columns, rows]`); the others are cropped at the centre, as is an axis
 /// with an overlap under
@@ -342,10 +342,12 @@ fn fold_columns(
             // The far side's texels are brought to the near side's low
             // frequencies (so the tile's low frequencies are the content's
             // from `off` on, continuous but for the wrap edge), and that
-            // jump is spread linearly over the whole row: at column 0 the
-            // row meets the far side, at its end the near one. A linear
-            // change of brightness across the crop is removed.
-            let ramp = 1.0 - (x as f32 + 0.5) / side as f32;
+            // jump is spread linearly over the whole row, centred so that
+            // the row's mean is kept: column 0 is raised by half the jump,
+            // the last column lowered by half, and the two meet across the
+            // wrap edge. A linear change of brightness across the crop is
+            // removed.
+            let ramp = 0.5 - (x as f32 + 0.5) / side as f32;
             let shift = if far_side { ramp - 1.0 } else { ramp };
             for (ch, j) in jump.iter().enumerate() {
                 let v = plane(ch)[src] + shift * j[y];
