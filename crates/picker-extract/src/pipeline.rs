@@ -1051,6 +1051,10 @@ pub struct SeamCut {
     pub columns: Option<SeamCutAxis>,
     /// The rows' wrap edge (top against bottom).
     pub rows: Option<SeamCutAxis>,
+    /// When no surroundings were seen, the side (texels) of the observed
+    /// square the smaller tile was folded within; absent otherwise.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub within: Option<usize>,
 }
 
 impl SeamCut {
@@ -1065,6 +1069,7 @@ impl SeamCut {
         Self {
             columns: axis(c.columns),
             rows: axis(c.rows),
+            within: None,
         }
     }
 }
@@ -2327,6 +2332,7 @@ fn extract_as(
                     }
                 }
                 let side = c.texture.width;
+                let within = (side != size).then_some(size);
                 if side != size {
                     let k = side as f64 / size as f64;
                     size_m = size_m.map(|[a, b]| [a * k, b * k]);
@@ -2335,7 +2341,10 @@ fn extract_as(
                     diag.texture_observed_size = Some(side);
                     diag.texture_made_size = Some(side);
                 }
-                diag.seam_cut = Some(SeamCut::from_cut(&c));
+                diag.seam_cut = Some(SeamCut {
+                    within,
+                    ..SeamCut::from_cut(&c)
+                });
                 // The band: across the edges that needed healing and were
                 // not cut.
                 let axes = [need[0] && c.columns.is_none(), need[1] && c.rows.is_none()];
@@ -3693,6 +3702,7 @@ mod tests {
             "{seam_cut:?}"
         );
         assert!(diag.seam_band.is_none());
+        assert_eq!(seam_cut.within, Some(s));
         let t = cut.texture.unwrap();
         let side = t.texture.width;
         let m = picker_inpaint::cut_margin(s);
