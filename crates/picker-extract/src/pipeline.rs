@@ -1091,7 +1091,8 @@ pub struct Diagnostics {
     pub texture_size: Option<usize>,
     /// Texels per unit of texture square at the median observed density
     /// (capped by `--max-size`): the side the texture is made at without a
-    /// `--size`.
+    /// `--size`. When a smaller tile was folded within the observed square
+    /// ([`SeamCut::within`]), the tile is the unit square: its side.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub texture_observed_size: Option<usize>,
     /// The side the texture was reprojected and inpainted at: the
