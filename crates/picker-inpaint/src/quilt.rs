@@ -16,8 +16,8 @@
 
 use picker_render::io::Image;
 
-/// Share of the overlap band's texel pairs that must be observed on both
-/// sides for [`wrap_cut`] to cut along an axis; below it (the crop's
+/// Share of the overlap band's texel pairs with either side observed that
+/// must have both observed for [`wrap_cut`] to cut along an axis; below it (the crop's
 /// surroundings were not seen) that axis is cropped at the centre and left
 /// to the caller ([`WrapCut::columns`] / [`WrapCut::rows`] `None`).
 pub const CUT_MIN_BOTH_KNOWN: f64 = 0.5;
@@ -56,7 +56,8 @@ pub struct AxisCut {
     pub offset: usize,
     /// Width of the overlap band, in texels.
     pub overlap: usize,
-    /// Share of the overlap's texel pairs observed on both sides.
+    /// Share of the overlap's texel pairs with either side observed that
+    /// have both observed.
     pub both_known: f64,
     /// Mean difference of the two sides where the cut passes (mean absolute,
     /// summed over channels, at the two texels either side of the cut, pairs
@@ -110,7 +111,7 @@ pub struct WrapCut {
 /// (`[columns, rows]`); the others are cropped at the centre, as is an axis
 /// with an overlap under
 /// [`CUT_MIN_OVERLAP`] or over the texture's side, or under
-/// [`CUT_MIN_BOTH_KNOWN`] of it observed on both sides, is cropped at the
+/// [`CUT_MIN_BOTH_KNOWN`] of its pairs seen on either side seen on both, is cropped at the
 /// centre instead (its field `None`). Colours are kept non-negative.
 /// Deterministic.
 ///
@@ -243,7 +244,20 @@ fn fold_columns(
             (off, best) = (o, n);
         }
     }
-    let both_known = best as f64 / (b * h) as f64;
+    // Of the overlap's pairs with either side observed (rows neither side
+    // saw, a margin past the photo's region or a hole, do not count).
+    let either: usize = (0..h)
+        .map(|y| {
+            (off..off + b)
+                .filter(|&x| known[y * w + x] || known[y * w + x + side])
+                .count()
+        })
+        .sum();
+    let both_known = if either == 0 {
+        0.0
+    } else {
+        best as f64 / either as f64
+    };
     if both_known < CUT_MIN_BOTH_KNOWN {
         return crop(centre);
     }
@@ -773,11 +787,8 @@ mod tests {
         let t = side - m;
         let cut = wrap_cut(&content, &known, &cov, t, t, m, [true, true]);
         let (cx, cy) = (cut.columns.unwrap(), cut.rows.unwrap());
-        // (The columns' pass sees the margin rows, unobserved, too.)
-        assert_eq!(
-            (cx.both_known, cy.both_known),
-            (side as f64 / n as f64, 1.0)
-        );
+        // (The margin rows, seen by neither side, do not count.)
+        assert_eq!((cx.both_known, cy.both_known), (1.0, 1.0));
         assert_eq!((cx.offset, cy.offset), (m, m));
         assert!(cut.known.iter().all(|&k| k));
         let s_cut = crate::seam_score(&cut.texture).ratio;
