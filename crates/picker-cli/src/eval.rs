@@ -212,6 +212,12 @@ pub struct Row {
     /// The observed seam ratio when a band across the wrap edges was
     /// inpainted (`diagnostics.seam_band`).
     seam_band: Option<f64>,
+    /// The wrap edges cut through the square's surroundings (0, 1 or 2;
+    /// `diagnostics.seam_cut`), when the cut was looked for.
+    seam_cut: Option<u8>,
+    /// Share of the texture's texels holding observed colours
+    /// (`diagnostics.observed_kept`).
+    observed_kept: Option<f64>,
 }
 
 fn scene_dirs(dir: &Path) -> Result<Vec<PathBuf>> {
@@ -577,6 +583,8 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
             repeat_filled: None,
             mask_filled: None,
             seam_band: None,
+            seam_cut: None,
+            observed_kept: None,
         };
         let Some((mat, diag)) = extracted else {
             rows.push(row);
@@ -602,6 +610,10 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
         row.repeat_filled = diag.uv.as_ref().and_then(|u| u.repeats).map(|r| r.filled);
         row.mask_filled = diag.filled_from_mask;
         row.seam_band = diag.seam_band;
+        row.seam_cut = diag
+            .seam_cut
+            .map(|c| u8::from(c.columns.is_some()) + u8::from(c.rows.is_some()));
+        row.observed_kept = diag.observed_kept;
         if let Some(uv) = diag.uv.as_ref().filter(|u| u.mode == UvMode::Plane) {
             // The true plane at the pick (the same rule as the extraction's:
             // a material of several planes is rectified from the one picked),
@@ -815,6 +827,8 @@ pub fn run(a: Args) -> Result<()> {
         "uv_repeat_rows": rows.iter().filter(|r| r.uv_repeats.is_some()).count(),
         "mask_filled_rows": rows.iter().filter(|r| r.mask_filled.is_some()).count(),
         "seam_band_rows": rows.iter().filter(|r| r.seam_band.is_some()).count(),
+        "seam_cut_rows": rows.iter().filter(|r| r.seam_cut.is_some_and(|n| n > 0)).count(),
+        "mean_observed_kept": mean(tex.iter().filter_map(|r| r.observed_kept)),
         "mean_plane_predicted_error_deg": mean(rows.iter().filter_map(|r| r.plane_predicted_error_deg)),
         "mean_plane_error_deg": mean(rows.iter().filter_map(|r| r.plane_error_deg)),
         "median_plane_error_deg": median(rows.iter().filter_map(|r| r.plane_error_deg).collect()),

@@ -370,6 +370,19 @@ fn eval_truth_parts_replace_the_networks_estimate() {
             .count();
         assert_eq!(nets["aggregate"][format!("{key}_rows")], n, "{key}");
     }
+    let cut = nets["rows"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|r| r["seam_cut"].as_u64().is_some_and(|n| n > 0))
+        .count();
+    assert_eq!(nets["aggregate"]["seam_cut_rows"], cut);
+    // Every textured extraction says how much of its texture was observed.
+    for r in nets["rows"].as_array().unwrap() {
+        if let Some(k) = r["observed_kept"].as_f64() {
+            assert!((0.0..=1.0).contains(&k), "{r}");
+        }
+    }
     let rows = |v: &Value| v["rows"].as_array().unwrap().clone();
     let (t, a, s, n) = (rows(&truth), rows(&swapped), rows(&seg), rows(&nets));
     assert!(!t.is_empty() && t.len() == a.len() && t.len() == s.len());
