@@ -2180,7 +2180,7 @@ fn extract_as(
                     );
                     let len = c.known.len().max(1) as f64;
                     Observed {
-                        fraction: c.known.iter().filter(|&&k| k).count() as f64 / len,
+                        fraction: reproject::known_share(&c.known),
                         texture: c.texture,
                         known: c.known,
                         coverage: c.coverage,
@@ -2349,8 +2349,7 @@ fn extract_as(
                 // The band: across the edges that needed healing and were
                 // not cut.
                 let axes = [need[0] && c.columns.is_none(), need[1] && c.rows.is_none()];
-                let fraction =
-                    c.known.iter().filter(|&&k| k).count() as f64 / c.known.len().max(1) as f64;
+                let fraction = reproject::known_share(&c.known);
                 (c.texture, c.known, c.coverage, axes, fraction)
             }
             None => (raw, known, coverage, [true, true], known_fraction),
@@ -2359,8 +2358,7 @@ fn extract_as(
                        known: &[bool],
                        band: &mut Option<f64>|
          -> picker_inpaint::Result<(Image, f64)> {
-            let share =
-                |k: &[bool]| k.iter().filter(|&&b| b).count() as f64 / k.len().max(1) as f64;
+            let share = reproject::known_share;
             // A band across the wrap edges where the observed sides differ:
             // only for a rectified plane, whose square is a crop of the
             // photo's region (folded, its tile's sides meet only as well as
@@ -2374,19 +2372,12 @@ fn extract_as(
                 && mode == UvMode::Plane
                 && band_axes.iter().any(|&a| a);
             let healed = heal
-                .then(|| {
-                    let r = match decided {
-                        Some(r) => r,
-                        None => {
-                            let r = picker_inpaint::known_seam_ratio_axes(t, known, band_axes)?;
-                            if r <= picker_inpaint::SEAM_BAND_MIN_RATIO {
-                                return None;
-                            }
-                            r
-                        }
-                    };
-                    picker_inpaint::clear_seam_band_axes(known, t.width, t.height, band_axes)
-                        .map(|k| (k, r))
+                .then(|| match decided {
+                    Some(r) => {
+                        picker_inpaint::clear_seam_band_axes(known, t.width, t.height, band_axes)
+                            .map(|k| (k, r))
+                    }
+                    None => picker_inpaint::seam_band_axes(t, known, band_axes),
                 })
                 .flatten();
             let healed = healed.map(|(k, ratio)| {

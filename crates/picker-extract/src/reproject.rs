@@ -221,10 +221,15 @@ pub struct Reprojected {
     pub known: Vec<bool>,
 }
 
+/// The share of `known`'s flags that are set (0 for none).
+pub fn known_share(known: &[bool]) -> f64 {
+    known.iter().filter(|&&b| b).count() as f64 / known.len().max(1) as f64
+}
+
 impl Reprojected {
     /// Fraction of texels observed.
     pub fn known_fraction(&self) -> f64 {
-        self.known.iter().filter(|&&b| b).count() as f64 / self.known.len().max(1) as f64
+        known_share(&self.known)
     }
 
     /// The `side × side` texels from column `x0`, row `y0` on.

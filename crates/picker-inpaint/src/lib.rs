@@ -58,8 +58,8 @@ pub use quilt::{
 };
 pub use seam::{
     clear_seam_band, clear_seam_band_axes, known_seam_ratio, known_seam_ratio_axes, make_seamless,
-    periodic_component, seam_band, seam_score, SeamScore, SEAMLESS_MIN_RATIO, SEAM_BAND_FRACTION,
-    SEAM_BAND_MIN_RATIO,
+    periodic_component, seam_band, seam_band_axes, seam_score, SeamScore, SEAMLESS_MIN_RATIO,
+    SEAM_BAND_FRACTION, SEAM_BAND_MIN_RATIO,
 };
 
 /// Options common to every [`Inpainter`].

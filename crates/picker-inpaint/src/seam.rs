@@ -263,11 +263,21 @@ pub const SEAM_BAND_FRACTION: f64 = 1.0 / 8.0;
 /// # Panics
 /// If `known` does not hold one flag per texel.
 pub fn seam_band(img: &Image, known: &[bool]) -> Option<(Vec<bool>, f64)> {
-    let r = known_seam_ratio(img, known)?;
+    seam_band_axes(img, known, [true, true])
+}
+
+/// [`seam_band`] over the wrap edges of the chosen axes only (`axes[0]`:
+/// the columns' edge, `axes[1]`: the rows'), measured by
+/// [`known_seam_ratio_axes`] and cleared by [`clear_seam_band_axes`].
+///
+/// # Panics
+/// If `known` does not hold one flag per texel.
+pub fn seam_band_axes(img: &Image, known: &[bool], axes: [bool; 2]) -> Option<(Vec<bool>, f64)> {
+    let r = known_seam_ratio_axes(img, known, axes)?;
     if r <= SEAM_BAND_MIN_RATIO {
         return None;
     }
-    clear_seam_band(known, img.width, img.height).map(|k| (k, r))
+    clear_seam_band_axes(known, img.width, img.height, axes).map(|k| (k, r))
 }
 
 /// `known` (a `w × h` square) with the texels within [`SEAM_BAND_FRACTION`]
