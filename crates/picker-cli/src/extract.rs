@@ -123,8 +123,8 @@ pub struct Flags {
     /// Inpaint a band across a rectified crop's wrap edges where its sides differ instead of
     /// first cutting each edge through the crop's observed surroundings where the two sides look
     /// alike (the cut keeps the observed texels; with no surroundings seen and no --size, a tile
-    /// 7/8 of the side is folded within the observed square; an edge whose cut would show gets
-    /// the band either way).
+    /// 7/8 of the side, or smaller down to half, is folded within the observed square; an edge
+    /// whose cut would show gets the band either way).
     #[arg(long)]
     pub no_seam_cut: bool,
     /// Texture side in texels (default: the observed texel density, capped by --max-size). A side

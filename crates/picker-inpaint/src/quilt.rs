@@ -743,6 +743,41 @@ mod tests {
         assert_eq!(same.texture, exact);
     }
 
+    /// The share of the overlap's pairs seen on both sides decides: with the
+    /// columns' margins seen in every `k`-th row only (the near side in all),
+    /// the axis is cut from a share of [`CUT_MIN_BOTH_KNOWN`] on, cropped
+    /// below it; the texels the cut takes from unseen rows stay unknown.
+    #[test]
+    fn the_columns_are_cut_from_the_least_share_of_pairs_seen_on() {
+        let side = 32;
+        let m = cut_margin(side);
+        let n = side + 2 * m;
+        let content = image(1, n, n, |_, y, x| noise(y * 1000 + x));
+        let cov = image(1, n, n, |_, _, _| 1.0);
+        let mut seen = Vec::new();
+        for k in 1..=8usize {
+            let known: Vec<bool> = (0..n * n)
+                .map(|i| (m..m + side).contains(&(i % n)) || (i / n).is_multiple_of(k))
+                .collect();
+            let cut = wrap_cut(&content, &known, &cov, side, side, m, [true, false]);
+            let share = (0..n).filter(|y| y.is_multiple_of(k)).count() as f64 / n as f64;
+            // The best offset's overlap holds at least the margin's rows' share.
+            assert_eq!(
+                cut.columns.is_some(),
+                cut.columns.map_or(share, |c| c.both_known) >= CUT_MIN_BOTH_KNOWN,
+                "k {k}: {:?}",
+                cut.columns
+            );
+            if let Some(c) = cut.columns {
+                assert!(c.both_known >= share - 1e-9, "k {k}: {c:?}, share {share}");
+            }
+            seen.push(cut.columns.is_some());
+        }
+        // Every row seen, and half: cut; an eighth: cropped.
+        assert_eq!(&seen[..2], &[true, true]);
+        assert!(!seen[7]);
+    }
+
     /// Unobserved texels on the chosen side stay unknown, and the cut keeps
     /// observed texels where one side alone was seen.
     #[test]
