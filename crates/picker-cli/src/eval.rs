@@ -120,6 +120,12 @@ pub struct Args {
     /// whose cut would show gets the band either way).
     #[arg(long)]
     pub no_seam_cut: bool,
+    /// As `extract --shading-sigma`: the de-lighting's shading from the networks' albedo smoothed
+    /// over the material by a Gaussian of this many working pixels (ground-truth albedo is used as
+    /// it is).
+    #[arg(long, value_name = "PX", default_value_t = picker_extract::shading::SHADING_SIGMA,
+          value_parser = crate::extract::parse_sigma, allow_negative_numbers = true)]
+    pub shading_sigma: f32,
     /// Even out broad light and dark patches in each texture, as `extract --even-out [SCALE]`.
     #[arg(long, value_name = "SCALE", num_args = 0..=1, default_missing_value = "0.125")]
     pub even_out: Option<f64>,
@@ -396,7 +402,10 @@ fn with_truth(
     let el = &mut inputs.elements;
     for part in parts {
         match part {
-            TruthPart::Albedo => el.diffuse = truth.diffuse.clone(),
+            TruthPart::Albedo => {
+                el.diffuse = truth.diffuse.clone();
+                inputs.albedo_estimated = false;
+            }
             TruthPart::Specular => {
                 el.specular = truth.specular.clone();
                 el.glossiness = truth.glossiness.clone();
@@ -456,6 +465,7 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
             segmentation: rio::read_exr(&dir.join("segmentation.exr"))?,
             embedding: None,
             segmentation_estimated: false,
+            albedo_estimated: false,
             opaque: None,
             envmap: Some(
                 EnvMap::from_image(&rio::read_exr(&env_path)?)
@@ -490,6 +500,7 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
         fill_from_mask: !a.no_mask_fill,
         heal_seams: !a.keep_seams,
         cut_seams: !a.no_seam_cut,
+        shading_sigma: a.shading_sigma,
         wrap_placement: !a.no_wrap_placement,
         tileable: true,
         seamless: false,

@@ -127,6 +127,15 @@ pub struct Flags {
     /// whose cut would show gets the band either way).
     #[arg(long)]
     pub no_seam_cut: bool,
+    /// The de-lighting's shading where the networks estimated the albedo: the ratio of their
+    /// albedo to the photo is smoothed over the material's pixels by a Gaussian of this many
+    /// working pixels, so the texture's detail comes from the photo and its level and colour from
+    /// the network (0: the network's albedo as it is at the working resolution, which is the
+    /// texture itself for a photo no larger than it). Albedo given with --elements from a
+    /// renderer is exact and used as it is.
+    #[arg(long, value_name = "PX", default_value_t = picker_extract::shading::SHADING_SIGMA,
+          value_parser = parse_sigma, allow_negative_numbers = true)]
+    pub shading_sigma: f32,
     /// Texture side in texels (default: the observed texel density, capped by --max-size). A side
     /// above the observed density is made at that side where the photo's pixels cover it (many
     /// repeats, a near view), else at the observed side and enlarged (bicubic) at the end.
@@ -215,6 +224,7 @@ impl Flags {
             fill_from_mask: !self.no_mask_fill,
             heal_seams: !self.keep_seams,
             cut_seams: !self.no_seam_cut,
+            shading_sigma: self.shading_sigma,
             wrap_placement: true,
             tileable: !self.no_tile,
             seamless: self.seamless,
@@ -266,6 +276,7 @@ impl Flags {
             "mask_fill": !self.no_mask_fill,
             "heal_seams": !self.keep_seams,
             "seam_cut": !self.no_seam_cut,
+            "shading_sigma": self.shading_sigma,
             "size": self.size,
             "max_size": self.max_size,
             "tileable": !self.no_tile,
@@ -692,6 +703,7 @@ pub fn load_inputs_from(
                     segmentation: msn.segmentation,
                     embedding: msn.embedding,
                     segmentation_estimated: true,
+                    albedo_estimated: true,
                     envmap,
                     opaque,
                 },
@@ -774,7 +786,8 @@ fn read_elements(dir: &Path, photo: Image, opaque: Option<Mask>) -> Result<(Inpu
     } else {
         None
     };
-    let segmentation_estimated = segmentation_is_estimated(dir)?;
+    let segmentation_estimated = output_is_estimated(dir, conv::SEGMENTATION)?;
+    let albedo_estimated = output_is_estimated(dir, conv::DIFFUSE_ALBEDO)?;
     // A `picker infer` folder holds the network's map as predicted: its
     // wrap seam is closed as when the networks run here.
     let mut envmap = envmap;
@@ -789,6 +802,7 @@ fn read_elements(dir: &Path, photo: Image, opaque: Option<Mask>) -> Result<(Inpu
             segmentation,
             embedding,
             segmentation_estimated,
+            albedo_estimated,
             envmap,
             opaque,
         },
@@ -816,11 +830,11 @@ pub(crate) fn check_finite(path: &Path, img: &Image) -> Result<()> {
     Ok(())
 }
 
-/// Whether an elements folder's segmentation is a network's estimate: the
-/// folder is `picker infer` output (its `manifest.json` names a network for
-/// the segmentation). A folder without a manifest (`picker synth` ground
-/// truth) holds an exact segmentation.
-fn segmentation_is_estimated(dir: &Path) -> Result<bool> {
+/// Whether an elements folder's `output` (the segmentation, the albedo) is
+/// a network's estimate: the folder is `picker infer` output (its
+/// `manifest.json` names a network for it). A folder without a manifest
+/// (`picker synth` ground truth, a renderer's passes) holds exact ones.
+fn output_is_estimated(dir: &Path, output: &str) -> Result<bool> {
     let path = dir.join("manifest.json");
     if !path.exists() {
         return Ok(false);
@@ -832,7 +846,7 @@ fn segmentation_is_estimated(dir: &Path) -> Result<bool> {
     Ok(v["files"].as_array().is_some_and(|files| {
         files
             .iter()
-            .any(|f| f["output"] == conv::SEGMENTATION && !f["net"].is_null())
+            .any(|f| f["output"] == output && !f["net"].is_null())
     }))
 }
 
@@ -1568,9 +1582,22 @@ pub fn infer_inputs(models: &Models, photo_path: &Path, work_size: u32) -> Resul
         segmentation: msn.segmentation,
         embedding: msn.embedding,
         segmentation_estimated: true,
+        albedo_estimated: true,
         envmap,
         opaque: opaque_mask(&p),
     })
+}
+
+/// A `--shading-sigma`: a finite number of working pixels, at least 0.
+pub fn parse_sigma(s: &str) -> std::result::Result<f32, String> {
+    let v: f32 = s.parse().map_err(|e| format!("{s:?}: {e}"))?;
+    if (0.0..=1000.0).contains(&v) {
+        Ok(v)
+    } else {
+        Err(format!(
+            "{s:?}: give a number of working pixels from 0 to 1000"
+        ))
+    }
 }
 
 #[cfg(test)]

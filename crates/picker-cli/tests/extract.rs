@@ -1722,3 +1722,54 @@ fn the_estimated_envmaps_wrap_seam_is_closed() {
     ]);
     assert_eq!(read(&from_infer.join("envmap.exr")), got);
 }
+
+/// `--shading-sigma`: with the networks' albedo the texture changes with it
+/// (0 takes the network's albedo as it is), and it is recorded; ground-truth
+/// albedo read with `--elements` is used as it is whatever the value; a
+/// negative or non-numeric value is refused.
+#[test]
+fn shading_sigma_smooths_only_an_estimated_albedo() {
+    let tmp = tempfile::tempdir().unwrap();
+    let photo = repo().join("fixtures/examples/room.png");
+    let texture = |args: &[&str], name: &str| {
+        let out = tmp.path().join(name);
+        let mut all = args.to_vec();
+        all.extend(["--max-size", "64", "--out", out.to_str().unwrap()]);
+        ok(&all);
+        let m = json_file(&out.join("summary.json"));
+        (std::fs::read(out.join("texture.png")).unwrap(), m)
+    };
+    let nets = ["extract", photo.to_str().unwrap(), "--pick", "200,150"];
+    let (smoothed, m) = texture(&nets, "nets-default");
+    let (raw, m0) = texture(&[&nets[..], &["--shading-sigma", "0"]].concat(), "nets-0");
+    assert_ne!(smoothed, raw, "the flag reaches the de-lighting");
+    let sigma = |m: &serde_json::Value| m["settings"]["shading_sigma"].as_f64();
+    assert_eq!(sigma(&m), Some(4.0), "{}", m["settings"]);
+    assert_eq!(sigma(&m0), Some(0.0));
+    let scene = repo().join("fixtures/blender/scene_000002");
+    let truth = [
+        "extract",
+        "--elements",
+        scene.to_str().unwrap(),
+        "--pick",
+        "80,100",
+    ];
+    let (a, _) = texture(&truth, "truth-default");
+    let (b, _) = texture(&[&truth[..], &["--shading-sigma", "0"]].concat(), "truth-0");
+    assert_eq!(a, b, "ground-truth albedo is exact");
+    for bad in ["-1", "nan", "x"] {
+        let e = run(&[
+            "extract",
+            photo.to_str().unwrap(),
+            "--pick",
+            "200,150",
+            "--shading-sigma",
+            bad,
+        ]);
+        assert_eq!(e.status.code(), Some(2), "{bad}");
+        assert!(
+            String::from_utf8_lossy(&e.stderr).contains("shading-sigma"),
+            "{bad}"
+        );
+    }
+}

@@ -40,6 +40,7 @@ pub mod report;
 pub mod reproject;
 pub mod resample;
 pub mod select;
+pub mod shading;
 pub mod smooth;
 
 pub use error::{Error, Result};

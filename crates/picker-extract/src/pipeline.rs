@@ -139,6 +139,11 @@ pub struct Inputs {
     /// masks then read it smoothed along the photo
     /// ([`crate::smooth::smooth_segmentation`]); ground truth is taken as exact.
     pub segmentation_estimated: bool,
+    /// The diffuse albedo is a network's estimate (`true`), not ground
+    /// truth: the de-lighting then takes only its low frequencies, the
+    /// detail coming from the photo ([`crate::shading`],
+    /// [`Options::shading_sigma`]); ground truth is taken as exact.
+    pub albedo_estimated: bool,
     /// The estimated environment map (camera space), if any.
     pub envmap: Option<EnvMap>,
     /// The photo's opaque pixels at full resolution, when some are
@@ -225,6 +230,12 @@ pub struct Options<'a> {
     /// look alike ([`picker_inpaint::wrap_cut`]), keeping the observed
     /// texels; an axis whose surroundings were not observed gets the band.
     pub cut_seams: bool,
+    /// When the inputs' albedo was estimated ([`Inputs::albedo_estimated`]):
+    /// σ, in working pixels, of the Gaussian that smooths the de-lighting
+    /// ratio (albedo ÷ photo) over the material's pixels
+    /// ([`crate::shading::smooth_in_mask`]), so the texture's detail comes
+    /// from the photo; 0 takes the network's albedo as it is.
+    pub shading_sigma: f32,
     /// Put a folded tile's wrap edges where its observed texels change least
     /// (any cyclic shift of a repeating tile is the same texture), so that a
     /// pattern's edge is not taken for a seam ([`smoothest_wrap`]).
@@ -1565,6 +1576,11 @@ fn extract_as(
             rw[i] = 1.0;
         }
     }
+    // A network's albedo: its low frequencies only (the light), the detail
+    // the photo's.
+    if p.inputs.albedo_estimated && opts.shading_sigma > 0.0 {
+        ratio = crate::shading::smooth_in_mask(&ratio, &rw, opts.shading_sigma);
+    }
     // Only the masked pixels of the de-lit photo are ever read (reprojection,
     // consistency and medians all go through `full`): the others stay 0.
     let delit = if rw.iter().any(|&v| v > 0.0) {
@@ -2802,6 +2818,7 @@ mod tests {
             tileable: true,
             heal_seams: true,
             cut_seams: true,
+            shading_sigma: crate::shading::SHADING_SIGMA,
             wrap_placement: true,
             seamless: false,
             even_out: None,
@@ -3123,6 +3140,7 @@ mod tests {
             segmentation: flat(3, &[0.2, 0.5, 0.7]),
             embedding: None,
             segmentation_estimated: false,
+            albedo_estimated: false,
             envmap: None,
             opaque: None,
         })
@@ -3155,6 +3173,7 @@ mod tests {
             segmentation: flat(3, &[0.3, 0.3, 0.3]),
             embedding: embedded.then(|| Image::new(3, h, w, embedding).unwrap()),
             segmentation_estimated: estimated,
+            albedo_estimated: false,
             envmap: None,
             opaque: None,
         })
@@ -3192,6 +3211,7 @@ mod tests {
             segmentation: seg,
             embedding: None,
             segmentation_estimated: false,
+            albedo_estimated: false,
             envmap: None,
             opaque: None,
         })
@@ -3269,6 +3289,7 @@ mod tests {
             segmentation: flat(3, &[0.2, 0.5, 0.7]),
             embedding: None,
             segmentation_estimated: false,
+            albedo_estimated: false,
             envmap: None,
             opaque: Some(Mask {
                 width: fw,
@@ -3412,10 +3433,105 @@ mod tests {
             segmentation: plane(3, &|_| 0.5),
             embedding: None,
             segmentation_estimated: false,
+            albedo_estimated: false,
             envmap: None,
             opaque: None,
         })
         .unwrap()
+    }
+
+    /// A frontal plane whose photo is an albedo of fine stripes (period 4
+    /// pixels) under light that rises from left to right, and whose
+    /// "network" albedo is flat at the stripes' mean (the detail lost, the
+    /// level right). With the albedo estimated, the de-lighting takes its
+    /// shading smoothed ([`crate::shading`]): the texture shows the photo's
+    /// stripes at the network's level, without the light's ramp. With σ 0,
+    /// or with the albedo taken as ground truth, the texture is the flat
+    /// albedo.
+    #[test]
+    fn an_estimated_albedo_gives_the_light_and_the_photo_the_detail() {
+        let (h, w) = (64, 96);
+        let albedo = |i: usize| if (i % w) % 4 < 2 { 0.2 } else { 0.4 };
+        let light = |i: usize| 0.5 + 0.5 * (i % w) as f32 / w as f32;
+        let plane = |c: usize, f: &dyn Fn(usize) -> f32| {
+            Image::new(c, h, w, (0..c * h * w).map(|k| f(k % (h * w))).collect()).unwrap()
+        };
+        let z = || {
+            let data = [0.0, 0.0, 1.0]
+                .iter()
+                .flat_map(|&v| vec![v; h * w])
+                .collect();
+            Image::new(3, h, w, data).unwrap()
+        };
+        let prepared = |estimated| {
+            let elements = ElementImages::new(
+                plane(3, &|_| 0.3),
+                plane(3, &|_| 0.04),
+                plane(1, &|_| 0.5),
+                z(),
+                z(),
+                Some(plane(3, &|_| 1.0)),
+            )
+            .unwrap();
+            Prepared::new(Inputs {
+                photo: plane(3, &|i| crate::photo::srgb_encode(albedo(i) * light(i))),
+                elements,
+                segmentation: plane(3, &|_| 0.5),
+                embedding: None,
+                segmentation_estimated: false,
+                albedo_estimated: estimated,
+                envmap: None,
+                opaque: None,
+            })
+            .unwrap()
+        };
+        let inpainter = picker_inpaint::DiffusionInpainter::default();
+        let run = |estimated, shading_sigma| {
+            let p = prepared(estimated);
+            let pm = p.pick_mask([48, 32], &MaskOptions::default()).unwrap();
+            let opts = Options {
+                size: Some(48),
+                fov_deg: Some(60.0),
+                fold_period: false,
+                line_refine: false,
+                tileable: false,
+                heal_seams: false,
+                shading_sigma,
+                ..test_options(&inpainter, UvChoice::Plane)
+            };
+            let t = extract(&p, "stripes", Some([48, 32]), &pm, &opts)
+                .unwrap()
+                .0
+                .texture
+                .unwrap()
+                .texture;
+            // Mean, contrast (std over mean) and the right half's mean over
+            // the left's, of the first channel.
+            let v = &t.data[..t.width * t.height];
+            let n = v.len() as f32;
+            let mean = v.iter().sum::<f32>() / n;
+            let sd = (v.iter().map(|x| (x - mean).powi(2)).sum::<f32>() / n).sqrt();
+            let half = |right: bool| {
+                let s: Vec<f32> = v
+                    .iter()
+                    .enumerate()
+                    .filter(|(i, _)| (i % t.width >= t.width / 2) == right)
+                    .map(|(_, &x)| x)
+                    .collect();
+                s.iter().sum::<f32>() / s.len() as f32
+            };
+            (mean, sd / mean, half(true) / half(false))
+        };
+        let (mean, contrast, ramp) = run(true, crate::shading::SHADING_SIGMA);
+        assert!((mean - 0.3).abs() < 0.05, "level {mean}");
+        // The stripes' own contrast is 1/3.
+        assert!(contrast > 0.2, "contrast {contrast}");
+        assert!((ramp - 1.0).abs() < 0.1, "light left in: {ramp}");
+        for (estimated, sigma) in [(true, 0.0), (false, crate::shading::SHADING_SIGMA)] {
+            let (mean, contrast, _) = run(estimated, sigma);
+            assert!((mean - 0.3).abs() < 0.01, "level {mean}");
+            assert!(contrast < 0.02, "{estimated} {sigma}: contrast {contrast}");
+        }
     }
 
     /// A 160×96 scene: a chessboard of 8-pixel squares (80×48, from (40,
@@ -4561,6 +4677,7 @@ mod tests {
             segmentation: plane(3, 0.5),
             embedding: None,
             segmentation_estimated: false,
+            albedo_estimated: false,
             envmap: None,
             opaque: None,
         })
@@ -4652,6 +4769,7 @@ mod tests {
             segmentation: flat(3, &[0.2, 0.5, 0.7]),
             embedding: None,
             segmentation_estimated: false,
+            albedo_estimated: false,
             envmap: Some(env),
             opaque: None,
         };
