@@ -3408,6 +3408,24 @@ mod tests {
     /// grey sRGB value `shown(i)`; the albedo is that value decoded, so the
     /// de-lit colours are the albedo.
     fn frontal_plane(w: usize, h: usize, shown: &dyn Fn(usize) -> f32) -> Prepared {
+        frontal_plane_with(
+            w,
+            h,
+            shown,
+            &|i| picker_render::io::srgb_decode(shown(i)),
+            false,
+        )
+    }
+
+    /// [`frontal_plane`] with the albedo given (`albedo(i)`, linear) and
+    /// taken as the networks' estimate or as ground truth.
+    fn frontal_plane_with(
+        w: usize,
+        h: usize,
+        shown: &dyn Fn(usize) -> f32,
+        albedo: &dyn Fn(usize) -> f32,
+        albedo_estimated: bool,
+    ) -> Prepared {
         let plane = |c: usize, f: &dyn Fn(usize) -> f32| {
             Image::new(c, h, w, (0..c * h * w).map(|k| f(k % (h * w))).collect()).unwrap()
         };
@@ -3419,7 +3437,7 @@ mod tests {
             Image::new(3, h, w, data).unwrap()
         };
         let elements = ElementImages::new(
-            plane(3, &|i| picker_render::io::srgb_decode(shown(i))),
+            plane(3, albedo),
             plane(3, &|_| 0.04),
             plane(1, &|_| 0.5),
             z(),
@@ -3433,7 +3451,7 @@ mod tests {
             segmentation: plane(3, &|_| 0.5),
             embedding: None,
             segmentation_estimated: false,
-            albedo_estimated: false,
+            albedo_estimated,
             envmap: None,
             opaque: None,
         })
@@ -3453,38 +3471,8 @@ mod tests {
         let (h, w) = (64, 96);
         let albedo = |i: usize| if (i % w) % 4 < 2 { 0.2 } else { 0.4 };
         let light = |i: usize| 0.5 + 0.5 * (i % w) as f32 / w as f32;
-        let plane = |c: usize, f: &dyn Fn(usize) -> f32| {
-            Image::new(c, h, w, (0..c * h * w).map(|k| f(k % (h * w))).collect()).unwrap()
-        };
-        let z = || {
-            let data = [0.0, 0.0, 1.0]
-                .iter()
-                .flat_map(|&v| vec![v; h * w])
-                .collect();
-            Image::new(3, h, w, data).unwrap()
-        };
-        let prepared = |estimated| {
-            let elements = ElementImages::new(
-                plane(3, &|_| 0.3),
-                plane(3, &|_| 0.04),
-                plane(1, &|_| 0.5),
-                z(),
-                z(),
-                Some(plane(3, &|_| 1.0)),
-            )
-            .unwrap();
-            Prepared::new(Inputs {
-                photo: plane(3, &|i| crate::photo::srgb_encode(albedo(i) * light(i))),
-                elements,
-                segmentation: plane(3, &|_| 0.5),
-                embedding: None,
-                segmentation_estimated: false,
-                albedo_estimated: estimated,
-                envmap: None,
-                opaque: None,
-            })
-            .unwrap()
-        };
+        let shown = |i: usize| crate::photo::srgb_encode(albedo(i) * light(i));
+        let prepared = |estimated| frontal_plane_with(w, h, &shown, &|_| 0.3, estimated);
         let inpainter = picker_inpaint::DiffusionInpainter::default();
         let run = |estimated, shading_sigma| {
             let p = prepared(estimated);
