@@ -11,8 +11,10 @@
 //! from the whole scene, but the light does not change from pixel to pixel
 //! on one surface: so the ratio (one over the shading) is smoothed over the
 //! material's own pixels ([`smooth_in_mask`], [`SHADING_SIGMA`]) and the
-//! detail comes from the photo. Ground-truth albedo is exact and is used as
-//! it is ([`crate::Inputs::albedo_estimated`]).
+//! detail comes from the photo. Where the photo is clipped
+//! ([`crate::pipeline::CLIPPED_SRGB`]) its detail is not the material's and
+//! the network's albedo stands in. Ground-truth albedo is exact and is used
+//! as it is ([`crate::Inputs::albedo_estimated`]).
 
 use picker_render::Image;
 use rayon::prelude::*;
