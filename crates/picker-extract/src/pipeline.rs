@@ -3477,65 +3477,82 @@ mod tests {
         .unwrap()
     }
 
-    /// A frontal plane whose photo is an albedo of fine stripes (period 4
-    /// pixels) under light that rises from left to right, and whose
-    /// "network" albedo is flat at the stripes' mean (the detail lost, the
-    /// level right). With the albedo estimated, the de-lighting takes its
-    /// shading smoothed ([`crate::shading`]): the texture shows the photo's
-    /// stripes at the network's level, without the light's ramp. With σ 0,
-    /// or with the albedo taken as ground truth, the texture is the flat
-    /// albedo.
+    /// The first channel of the texture picked at (20, 50) on a 96×64
+    /// frontal plane showing `shown` (display values), whose albedo is a
+    /// flat 0.3, taken as the networks' estimate or as ground truth, with
+    /// the de-lighting's `shading_sigma`; the plane's raw crop (no fold, no
+    /// tiling) at 48 texels.
+    fn flat_albedo_texture(
+        shown: &dyn Fn(usize) -> f32,
+        estimated: bool,
+        shading_sigma: f32,
+    ) -> (Vec<f32>, usize) {
+        let p = frontal_plane_with(96, 64, shown, &|_| 0.3, estimated);
+        let pick = [20, 50];
+        let pm = p.pick_mask(pick, &MaskOptions::default()).unwrap();
+        let inpainter = picker_inpaint::DiffusionInpainter::default();
+        let opts = Options {
+            size: Some(48),
+            fov_deg: Some(60.0),
+            fold_period: false,
+            line_refine: false,
+            tileable: false,
+            heal_seams: false,
+            shading_sigma,
+            ..test_options(&inpainter, UvChoice::Plane)
+        };
+        let t = extract(&p, "stripes", Some(pick), &pm, &opts)
+            .unwrap()
+            .0
+            .texture
+            .unwrap()
+            .texture;
+        (t.data[..t.width * t.height].to_vec(), t.width)
+    }
+
+    /// Mean and contrast (standard deviation over mean) of `v`.
+    fn mean_contrast(v: &[f32]) -> (f32, f32) {
+        let n = v.len() as f32;
+        let mean = v.iter().sum::<f32>() / n;
+        let sd = (v.iter().map(|x| (x - mean).powi(2)).sum::<f32>() / n).sqrt();
+        (mean, sd / mean)
+    }
+
+    /// Fine stripes of albedo (period 4 pixels) under light that rises from
+    /// left to right, the photo of [`flat_albedo_texture`]'s plane.
+    fn striped(i: usize) -> f32 {
+        let albedo = if (i % 96) % 4 < 2 { 0.2 } else { 0.4 };
+        let light = 0.5 + 0.5 * (i % 96) as f32 / 96.0;
+        crate::photo::srgb_encode(albedo * light)
+    }
+
+    /// A frontal plane whose photo is an albedo of fine stripes under light
+    /// that rises from left to right, and whose "network" albedo is flat at
+    /// the stripes' mean (the detail lost, the level right). With the albedo
+    /// estimated, the de-lighting takes its shading smoothed
+    /// ([`crate::shading`]): the texture shows the photo's stripes at the
+    /// network's level, without the light's ramp. With σ 0, or with the
+    /// albedo taken as ground truth, the texture is the flat albedo.
     #[test]
     fn an_estimated_albedo_gives_the_light_and_the_photo_the_detail() {
-        let (h, w) = (64, 96);
-        let albedo = |i: usize| if (i % w) % 4 < 2 { 0.2 } else { 0.4 };
-        let light = |i: usize| 0.5 + 0.5 * (i % w) as f32 / w as f32;
-        let shown = |i: usize| crate::photo::srgb_encode(albedo(i) * light(i));
-        let prepared = |estimated| frontal_plane_with(w, h, &shown, &|_| 0.3, estimated);
-        let inpainter = picker_inpaint::DiffusionInpainter::default();
-        let run = |estimated, shading_sigma| {
-            let p = prepared(estimated);
-            let pm = p.pick_mask([48, 32], &MaskOptions::default()).unwrap();
-            let opts = Options {
-                size: Some(48),
-                fov_deg: Some(60.0),
-                fold_period: false,
-                line_refine: false,
-                tileable: false,
-                heal_seams: false,
-                shading_sigma,
-                ..test_options(&inpainter, UvChoice::Plane)
-            };
-            let t = extract(&p, "stripes", Some([48, 32]), &pm, &opts)
-                .unwrap()
-                .0
-                .texture
-                .unwrap()
-                .texture;
-            // Mean, contrast (std over mean) and the right half's mean over
-            // the left's, of the first channel.
-            let v = &t.data[..t.width * t.height];
-            let n = v.len() as f32;
-            let mean = v.iter().sum::<f32>() / n;
-            let sd = (v.iter().map(|x| (x - mean).powi(2)).sum::<f32>() / n).sqrt();
-            let half = |right: bool| {
-                let s: Vec<f32> = v
-                    .iter()
-                    .enumerate()
-                    .filter(|(i, _)| (i % t.width >= t.width / 2) == right)
-                    .map(|(_, &x)| x)
-                    .collect();
-                s.iter().sum::<f32>() / s.len() as f32
-            };
-            (mean, sd / mean, half(true) / half(false))
-        };
-        let (mean, contrast, ramp) = run(true, crate::shading::SHADING_SIGMA);
+        let (v, w) = flat_albedo_texture(&striped, true, crate::shading::SHADING_SIGMA);
+        let (mean, contrast) = mean_contrast(&v);
         assert!((mean - 0.3).abs() < 0.05, "level {mean}");
         // The stripes' own contrast is 1/3.
         assert!(contrast > 0.2, "contrast {contrast}");
+        // The right half's mean over the left's: the light's ramp is gone.
+        let half = |right: bool| {
+            let s: Vec<f32> = (0..v.len())
+                .filter(|i| (i % w >= w / 2) == right)
+                .map(|i| v[i])
+                .collect();
+            s.iter().sum::<f32>() / s.len() as f32
+        };
+        let ramp = half(true) / half(false);
         assert!((ramp - 1.0).abs() < 0.1, "light left in: {ramp}");
         for (estimated, sigma) in [(true, 0.0), (false, crate::shading::SHADING_SIGMA)] {
-            let (mean, contrast, _) = run(estimated, sigma);
+            let (mean, contrast) =
+                mean_contrast(&flat_albedo_texture(&striped, estimated, sigma).0);
             assert!((mean - 0.3).abs() < 0.01, "level {mean}");
             assert!(contrast < 0.02, "{estimated} {sigma}: contrast {contrast}");
         }
@@ -3547,43 +3564,15 @@ mod tests {
     /// rest keeps the photo's stripes.
     #[test]
     fn a_clipped_highlight_takes_the_networks_albedo() {
-        let (h, w) = (64, 96);
-        let albedo = |i: usize| if (i % w) % 4 < 2 { 0.2 } else { 0.4 };
-        let light = |i: usize| 0.5 + 0.5 * (i % w) as f32 / w as f32;
-        let blob = |i: usize| (40..50).contains(&(i % w)) && (20..30).contains(&(i / w));
-        let shown = |i: usize| {
-            if blob(i) {
-                1.0
-            } else {
-                crate::photo::srgb_encode(albedo(i) * light(i))
-            }
-        };
-        let p = frontal_plane_with(w, h, &shown, &|_| 0.3, true);
-        let pm = p.pick_mask([20, 50], &MaskOptions::default()).unwrap();
-        let inpainter = picker_inpaint::DiffusionInpainter::default();
-        let opts = Options {
-            size: Some(48),
-            fov_deg: Some(60.0),
-            fold_period: false,
-            line_refine: false,
-            tileable: false,
-            heal_seams: false,
-            ..test_options(&inpainter, UvChoice::Plane)
-        };
-        let t = extract(&p, "stripes", Some([20, 50]), &pm, &opts)
-            .unwrap()
-            .0
-            .texture
-            .unwrap()
-            .texture;
-        let v = &t.data[..t.width * t.height];
+        let blob = |i: usize| (40..50).contains(&(i % 96)) && (20..30).contains(&(i / 96));
+        let shown = |i: usize| if blob(i) { 1.0 } else { striped(i) };
+        let (v, _) = flat_albedo_texture(&shown, true, crate::shading::SHADING_SIGMA);
         let max = v.iter().fold(0.0f32, |a, &b| a.max(b));
         // The stripes reach 0.4 at the network's level (0.3 mean); the
         // clipped patch de-lit by the smoothed shading would be above 1.
         assert!(max < 0.6, "brightest texel {max}");
-        let mean = v.iter().sum::<f32>() / v.len() as f32;
-        let sd = (v.iter().map(|x| (x - mean).powi(2)).sum::<f32>() / v.len() as f32).sqrt();
-        assert!(sd / mean > 0.2, "stripes kept: {}", sd / mean);
+        let (_, contrast) = mean_contrast(&v);
+        assert!(contrast > 0.2, "stripes kept: {contrast}");
     }
 
     /// A 160×96 scene: a chessboard of 8-pixel squares (80×48, from (40,
