@@ -1123,6 +1123,18 @@ fn cut_crop(
     c
 }
 
+/// The de-lighting's use of an estimated albedo ([`Diagnostics::delight`]).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Delight {
+    /// σ, in working pixels, of the smoothing of the ratio albedo ÷ photo
+    /// ([`Options::shading_sigma`]).
+    pub shading_sigma: f32,
+    /// Share of the mask's photo pixels that were clipped
+    /// ([`CLIPPED_SRGB`]) and took the network's albedo instead of the
+    /// photo's detail.
+    pub clipped_share: f64,
+}
+
 /// How one axis's wrap edge was cut ([`picker_inpaint::AxisCut`]).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct SeamCutAxis {
@@ -1237,6 +1249,11 @@ pub struct Diagnostics {
     /// texture's texels; absent when it was off or had nothing to do.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub even_out_gain: Option<[f64; 2]>,
+    /// How the de-lighting read the networks' albedo ([`crate::shading`]);
+    /// absent when the albedo is ground truth or `shading_sigma` is 0 (the
+    /// albedo as it is).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub delight: Option<Delight>,
     /// The photo has no colour ([`Prepared::greyscale`]): the extracted
     /// colours are grey.
     pub greyscale_photo: bool,
@@ -1582,6 +1599,7 @@ fn extract_as(
     // highlight, a lamp's reflection): the network's albedo stands in there,
     // the ratio as it was.
     let mut unsmoothed = None;
+    let mut clipped_share = 0.0;
     if p.inputs.albedo_estimated && opts.shading_sigma > 0.0 {
         let smooth = crate::shading::smooth_in_mask(&ratio, &rw, opts.shading_sigma);
         unsmoothed = Some(std::mem::replace(&mut ratio, smooth));
@@ -1596,7 +1614,9 @@ fn extract_as(
                 .into_par_iter()
                 .map(|i| full.data[i] && (0..3).any(|k| p.inputs.photo.at(k, i) >= CLIPPED_SRGB))
                 .collect();
-            if clipped.contains(&true) {
+            let count = clipped.iter().filter(|&&c| c).count();
+            clipped_share = count as f64 / full.count().max(1) as f64;
+            if count > 0 {
                 let r = resample::masked_bilinear_where(raw, &rw, fw, fh, &clipped);
                 for (i, _) in clipped.iter().enumerate().filter(|(_, &c)| c) {
                     for c in 0..3 {
@@ -1669,6 +1689,10 @@ fn extract_as(
         seam_cut: None,
         observed_kept: None,
         even_out_gain: None,
+        delight: unsmoothed.as_ref().map(|_| Delight {
+            shading_sigma: opts.shading_sigma,
+            clipped_share,
+        }),
         timings_ms: Default::default(),
     };
     let mut texture = None;
@@ -3481,12 +3505,13 @@ mod tests {
     /// frontal plane showing `shown` (display values), whose albedo is a
     /// flat 0.3, taken as the networks' estimate or as ground truth, with
     /// the de-lighting's `shading_sigma`; the plane's raw crop (no fold, no
-    /// tiling) at 48 texels.
+    /// tiling) at 48 texels; and the share of clipped pixels the
+    /// de-lighting reported.
     fn flat_albedo_texture(
         shown: &dyn Fn(usize) -> f32,
         estimated: bool,
         shading_sigma: f32,
-    ) -> (Vec<f32>, usize) {
+    ) -> (Vec<f32>, usize, f64) {
         let p = frontal_plane_with(96, 64, shown, &|_| 0.3, estimated);
         let pick = [20, 50];
         let pm = p.pick_mask(pick, &MaskOptions::default()).unwrap();
@@ -3501,13 +3526,14 @@ mod tests {
             shading_sigma,
             ..test_options(&inpainter, UvChoice::Plane)
         };
-        let t = extract(&p, "stripes", Some(pick), &pm, &opts)
-            .unwrap()
-            .0
-            .texture
-            .unwrap()
-            .texture;
-        (t.data[..t.width * t.height].to_vec(), t.width)
+        let (m, diag) = extract(&p, "stripes", Some(pick), &pm, &opts).unwrap();
+        let t = m.texture.unwrap().texture;
+        // Recorded when the networks' albedo was smoothed, and only then.
+        let d = diag.delight;
+        assert_eq!(d.is_some(), estimated && shading_sigma > 0.0, "{d:?}");
+        assert!(d.is_none_or(|d| d.shading_sigma == shading_sigma));
+        let clipped = d.map_or(0.0, |d| d.clipped_share);
+        (t.data[..t.width * t.height].to_vec(), t.width, clipped)
     }
 
     /// Mean and contrast (standard deviation over mean) of `v`.
@@ -3535,7 +3561,8 @@ mod tests {
     /// albedo taken as ground truth, the texture is the flat albedo.
     #[test]
     fn an_estimated_albedo_gives_the_light_and_the_photo_the_detail() {
-        let (v, w) = flat_albedo_texture(&striped, true, crate::shading::SHADING_SIGMA);
+        let (v, w, clipped) = flat_albedo_texture(&striped, true, crate::shading::SHADING_SIGMA);
+        assert_eq!(clipped, 0.0);
         let (mean, contrast) = mean_contrast(&v);
         assert!((mean - 0.3).abs() < 0.05, "level {mean}");
         // The stripes' own contrast is 1/3.
@@ -3566,7 +3593,9 @@ mod tests {
     fn a_clipped_highlight_takes_the_networks_albedo() {
         let blob = |i: usize| (40..50).contains(&(i % 96)) && (20..30).contains(&(i / 96));
         let shown = |i: usize| if blob(i) { 1.0 } else { striped(i) };
-        let (v, _) = flat_albedo_texture(&shown, true, crate::shading::SHADING_SIGMA);
+        let (v, _, clipped) = flat_albedo_texture(&shown, true, crate::shading::SHADING_SIGMA);
+        // 100 of the plane's 96 × 64 pixels.
+        assert!((clipped - 100.0 / (96.0 * 64.0)).abs() < 1e-9, "{clipped}");
         let max = v.iter().fold(0.0f32, |a, &b| a.max(b));
         // The stripes reach 0.4 at the network's level (0.3 mean); the
         // clipped patch de-lit by the smoothed shading would be above 1.
