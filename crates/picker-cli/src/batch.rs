@@ -1013,7 +1013,7 @@ pub fn run(a: Args) -> Result<ExitCode> {
     let (jobs, per_job) = split_threads(total_threads, a.jobs.map(|j| j.min(max_jobs as u32)));
     let jobs = jobs.min(photos.len().max(1));
 
-    let models = Models::load(&a.flags.weights)?;
+    let models = Models::load(&a.flags.weights)?.with_mirror_pass(!a.flags.single_pass);
     let weights: Vec<(String, String)> = models
         .paths()
         .into_iter()

@@ -126,6 +126,9 @@ pub struct Args {
     #[arg(long, value_name = "PX", default_value_t = picker_extract::shading::SHADING_SIGMA,
           value_parser = crate::extract::parse_sigma, allow_negative_numbers = true)]
     pub shading_sigma: f32,
+    /// As `extract --single-pass`: run the networks once, not also on the mirrored photo.
+    #[arg(long)]
+    pub single_pass: bool,
     /// Even out broad light and dark patches in each texture, as `extract --even-out [SCALE]`.
     #[arg(long, value_name = "SCALE", num_args = 0..=1, default_missing_value = "0.125")]
     pub even_out: Option<f64>,
@@ -761,7 +764,7 @@ pub fn run(a: Args) -> Result<()> {
         None
     } else {
         // No --weights with --embedded: the embedded defaults.
-        Some(crate::extract::Models::load(&a.weights)?)
+        Some(crate::extract::Models::load(&a.weights)?.with_mirror_pass(!a.single_pass))
     };
     let mut rows = Vec::new();
     for d in &dirs {
@@ -854,6 +857,7 @@ pub fn run(a: Args) -> Result<()> {
             "dir": a.dir.display().to_string(),
             "elements": if models.is_none() { "ground truth" } else { "networks" },
             "work_size": models.as_ref().map(|_| a.work_size),
+            "mirror_pass": models.as_ref().map(|_| !a.single_pass),
             "truth": &a.truth,
             "weights": models.as_ref().map(|m| m.paths().iter().map(|p| p.display().to_string()).collect::<Vec<_>>()),
             "min_area": a.min_area, "aggregate": agg, "rows": rows,

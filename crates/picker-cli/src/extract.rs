@@ -65,6 +65,11 @@ pub struct Flags {
     /// Long side of the networks' working resolution.
     #[arg(long, default_value_t = 320, value_parser = clap::value_parser!(u32).range(8..=4096))]
     pub work_size: u32,
+    /// Run the networks once. By default they run twice, on the photo and on its mirror image,
+    /// and the outputs that mirror with the photo (albedos, glossiness, normals, view vectors,
+    /// segmentation, lighting) are averaged: better estimates for twice the networks' time.
+    #[arg(long)]
+    pub single_pass: bool,
     /// Keep only the connected region at the pick.
     #[arg(long)]
     pub connected: bool,
@@ -260,6 +265,7 @@ impl Flags {
         json!({
             "min_area": self.min_area,
             "work_size": self.work_size,
+            "mirror_pass": !self.single_pass,
             "connected": self.connected,
             "tolerance": self.tolerance,
             "pattern": !self.no_pattern,
@@ -484,6 +490,7 @@ struct LoadedNet {
 /// The networks of `--weights`, loaded once and shared by every photo.
 pub struct Models {
     nets: Vec<LoadedNet>,
+    mirror_pass: bool,
 }
 
 impl Models {
@@ -510,7 +517,18 @@ impl Models {
                 net,
             });
         }
-        Ok(Self { nets })
+        Ok(Self {
+            nets,
+            mirror_pass: true,
+        })
+    }
+
+    /// Whether each network also runs on the mirrored photo, the outputs that
+    /// mirror with it averaged ([`picker_nets::mirror`]; the default), or
+    /// runs once (`--single-pass`).
+    pub fn with_mirror_pass(mut self, on: bool) -> Self {
+        self.mirror_pass = on;
+        self
     }
 
     /// The weights files, in network order (`<embedded lite>/FILE` for the defaults).
@@ -546,6 +564,7 @@ impl Models {
         let mut x = Tensor::new([1, 3, wh as usize, ww as usize], photo::to_planar(work))
             .map_err(|e| anyhow!("making the input tensor: {e}"))?;
         conv::normalize_input(&mut x);
+        let xm = self.mirror_pass.then(|| x.mirror_w());
         let (mut elements, mut seg, mut env) = (None, None, None);
         let mut seam: Option<Value> = None;
         let mut described = Vec::new();
@@ -554,7 +573,12 @@ impl Models {
             let what = || format!("running the {} network ({})", n.kind, n.path.display());
             match &n.net {
                 Net::Irn(irn) => {
-                    let out = irn.forward(&x).with_context(what)?;
+                    let mut out = irn.forward(&x).with_context(what)?;
+                    if let Some(xm) = &xm {
+                        out = out
+                            .merge_mirrored(&irn.forward(xm).with_context(what)?)
+                            .with_context(what)?;
+                    }
                     let re = conv::RenderElements::from_irn(&out).with_context(|| {
                         format!("decoding the IRN outputs of {}", n.path.display())
                     })?;
@@ -571,7 +595,12 @@ impl Models {
                     );
                 }
                 Net::Msn(msn) => {
-                    let out = msn.forward(&x).with_context(what)?;
+                    let mut out = msn.forward(&x).with_context(what)?;
+                    if let Some(xm) = &xm {
+                        out = out
+                            .merge_mirrored(&msn.forward(xm).with_context(what)?)
+                            .with_context(what)?;
+                    }
                     seg = Some(MsnImages {
                         segmentation: tensor_image(&conv::decode_segmentation_tensor(
                             &out.segmentation,
@@ -580,7 +609,12 @@ impl Models {
                     });
                 }
                 Net::EnvMap(e) => {
-                    let out = e.forward(&x).with_context(what)?;
+                    let mut out = e.forward(&x).with_context(what)?;
+                    if let Some(xm) = &xm {
+                        out = out
+                            .merge_mirrored(&e.forward(xm).with_context(what)?)
+                            .with_context(what)?;
+                    }
                     let img = tensor_image(&conv::decode_envmap(&out.envmap));
                     let mut map =
                         EnvMap::from_image(&img).map_err(|e| anyhow!("environment map: {e}"))?;
@@ -607,6 +641,7 @@ impl Models {
                 "source": "networks",
                 "nets": described,
                 "working_size": {"width": ww, "height": wh},
+                "mirror_pass": self.mirror_pass,
                 "envmap_regularised": seam,
             }),
         ))
@@ -1486,7 +1521,7 @@ pub fn run(a: Args) -> Result<()> {
     let source = match &a.elements {
         Some(dir) => Source::Elements(dir),
         None => {
-            models = Models::load(&a.flags.weights)?;
+            models = Models::load(&a.flags.weights)?.with_mirror_pass(!a.flags.single_pass);
             Source::Nets(&models)
         }
     };

@@ -41,6 +41,11 @@ pub struct Args {
     /// Worker threads (default: one per logical core).
     #[arg(long)]
     pub threads: Option<usize>,
+    /// Run each network once. By default it also runs on the mirrored photo and the outputs that
+    /// mirror with it are averaged, as `picker extract` does (texture coordinates, the material
+    /// embedding and outputs of unknown meaning are the first pass's).
+    #[arg(long)]
+    pub single_pass: bool,
 }
 
 /// The file names looked for in a `--weights` directory.
@@ -305,13 +310,27 @@ fn decode_irn(out: IrnOutput) -> Result<Vec<Decoded>> {
     Ok(decoded)
 }
 
-/// Runs one network and decodes its outputs.
-fn run_net(net: &Net, x: &Tensor) -> Result<Vec<Decoded>> {
+/// Runs one network (and on `mirrored`, the input mirrored, when given:
+/// [`picker_nets::mirror`]) and decodes its outputs.
+fn run_net(net: &Net, x: &Tensor, mirrored: Option<&Tensor>) -> Result<Vec<Decoded>> {
     let what = || format!("running the {} network", net.kind());
     match net {
-        Net::Irn(irn) => decode_irn(irn.forward(x).with_context(what)?),
+        Net::Irn(irn) => {
+            let mut out = irn.forward(x).with_context(what)?;
+            if let Some(xm) = mirrored {
+                out = out
+                    .merge_mirrored(&irn.forward(xm).with_context(what)?)
+                    .with_context(what)?;
+            }
+            decode_irn(out)
+        }
         _ => {
-            let out = net.forward(x).with_context(what)?;
+            let mut out = net.forward(x).with_context(what)?;
+            if let Some(xm) = mirrored {
+                out = out
+                    .merge_mirrored(&net.forward(xm).with_context(what)?)
+                    .with_context(what)?;
+            }
             let mut decoded = Vec::new();
             for (name, raw) in &out.tensors {
                 let d = match name.as_str() {
@@ -379,6 +398,7 @@ pub fn run(a: Args) -> Result<()> {
     let mut x = Tensor::new([1, 3, h, w], photo::to_planar(&work))
         .map_err(|e| anyhow!("making the input tensor: {e}"))?;
     conv::normalize_input(&mut x);
+    let xm = (!a.single_pass).then(|| x.mirror_w());
     let resize_ms = ms(t);
 
     let mut files = Vec::new();
@@ -410,7 +430,7 @@ pub fn run(a: Args) -> Result<()> {
         );
         drop(c.weights);
         let t = Instant::now();
-        let decoded = run_net(&net, &x)?;
+        let decoded = run_net(&net, &x, xm.as_ref())?;
         let forward_ms = ms(t);
         let t = Instant::now();
         let mut outputs = Vec::new();
@@ -480,6 +500,7 @@ pub fn run(a: Args) -> Result<()> {
         "working_size": {"width": w, "height": h, "work_size": a.work_size,
                          "resize": "triangle (bilinear, antialiased) on sRGB values"},
         "nets": nets,
+        "mirror_pass": xm.is_some(),
         "files": files,
         "threads": threads,
         "isa": Isa::best().name(),

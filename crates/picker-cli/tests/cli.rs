@@ -1456,3 +1456,79 @@ fn failed_and_interrupted_extractions_leave_no_partial_result() {
         }
     }
 }
+
+/// With the mirror pass (the default), each network also runs on the
+/// mirrored photo and the outputs that mirror with it are averaged
+/// (`picker_nets::mirror`): so the outputs for the mirrored photo are the
+/// photo's outputs mirrored, bit for bit (the x component of the normals and
+/// view vectors negated; the environment map mirrored in longitude), which
+/// a network run once does not give. The texture coordinates and the material
+/// embedding, which have no mirror relation, are the first pass's: the same
+/// as with `--single-pass`. The manifest says which was run.
+#[test]
+fn the_mirror_pass_makes_the_outputs_mirror_with_the_photo() {
+    let dir = tempfile::tempdir().unwrap();
+    // 320×240, the working size: no resampling between the two photos.
+    let photo = root().join("fixtures/examples/room.png");
+    let mirrored = dir.path().join("mirrored.png");
+    image::imageops::flip_horizontal(&image::open(&photo).unwrap().to_rgb8())
+        .save(&mirrored)
+        .unwrap();
+    let run = |p: &Path, name: &str, extra: &[&str]| {
+        let out = dir.path().join(name);
+        let mut args: Vec<std::ffi::OsString> = vec![
+            "infer".into(),
+            p.into(),
+            "--out".into(),
+            out.as_os_str().into(),
+        ];
+        args.extend(extra.iter().map(Into::into));
+        assert_ok(&picker(args));
+        let m: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(out.join("manifest.json")).unwrap()).unwrap();
+        (out, m["mirror_pass"].as_bool())
+    };
+    let (a, ma) = run(&photo, "a", &[]);
+    let (b, mb) = run(&mirrored, "b", &[]);
+    let (s, ms) = run(&photo, "s", &["--single-pass"]);
+    let (t, _) = run(&mirrored, "t", &["--single-pass"]);
+    assert_eq!((ma, mb, ms), (Some(true), Some(true), Some(false)));
+    let exr = |dir: &Path, name: &str| {
+        picker_render::io::read_exr(&dir.join(format!("{name}.exr"))).unwrap()
+    };
+    // Whether `q` is `p` mirrored (channel 0 negated when `negate_x`).
+    let mirrors = |p: &picker_render::Image, q: &picker_render::Image, negate_x: bool| {
+        let (w, h) = (p.width, p.height);
+        (0..p.channels).all(|c| {
+            (0..h * w).all(|i| {
+                let (x, y) = (i % w, i / w);
+                let v = p.data[c * h * w + y * w + (w - 1 - x)];
+                let v = if negate_x && c == 0 { -v } else { v };
+                q.data[c * h * w + i].to_bits() == v.to_bits()
+            })
+        })
+    };
+    for (name, negate_x) in [
+        ("diffuse_albedo", false),
+        ("specular_albedo", false),
+        ("glossiness", false),
+        ("normals", true),
+        ("view_vector", true),
+        ("segmentation", false),
+        ("envmap", false),
+    ] {
+        assert!(mirrors(&exr(&a, name), &exr(&b, name), negate_x), "{name}");
+    }
+    assert!(
+        !mirrors(
+            &exr(&s, "diffuse_albedo"),
+            &exr(&t, "diffuse_albedo"),
+            false
+        ),
+        "one pass is not mirror-symmetric by itself"
+    );
+    for name in ["uv", "embedding"] {
+        assert_eq!(exr(&a, name), exr(&s, name), "{name}: the first pass's");
+    }
+    assert_ne!(exr(&a, "diffuse_albedo"), exr(&s, "diffuse_albedo"));
+}

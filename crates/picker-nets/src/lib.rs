@@ -67,6 +67,7 @@ mod display;
 mod error;
 pub mod keys;
 pub mod layers;
+pub mod mirror;
 pub mod nets;
 mod save;
 pub mod weights;

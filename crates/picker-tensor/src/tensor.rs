@@ -182,6 +182,21 @@ impl Tensor {
         &self.data()[n * chw..(n + 1) * chw]
     }
 
+    /// Every row mirrored left to right: element `(n, c, y, x)` of the result
+    /// is `(n, c, y, w − 1 − x)` of `self`.
+    pub fn mirror_w(&self) -> Tensor {
+        let w = self.shape[3];
+        let mut t = Self::for_overwrite(self.shape);
+        if w > 0 {
+            for (dst, src) in t.data_mut().chunks_mut(w).zip(self.data().chunks(w)) {
+                for (d, s) in dst.iter_mut().zip(src.iter().rev()) {
+                    *d = *s;
+                }
+            }
+        }
+        t
+    }
+
     /// The window `[y0, y0+h) × [x0, x0+w)` of every plane.
     pub fn crop(&self, y0: usize, x0: usize, h: usize, w: usize) -> Result<Tensor> {
         let [n, c, hh, ww] = self.shape;
@@ -270,6 +285,38 @@ mod tests {
 
     fn aligned(t: &Tensor) -> bool {
         (t.data().as_ptr() as usize).is_multiple_of(ALIGN)
+    }
+
+    /// `mirror_w` reverses every row and nothing else, at every shape
+    /// (one column, one row, empty); twice is the identity.
+    #[test]
+    fn mirror_w_reverses_the_rows() {
+        let mut rng = crate::Rng::new(9);
+        for &shape in &[
+            [1, 1, 1, 1],
+            [1, 3, 5, 7],
+            [2, 2, 1, 6],
+            [1, 4, 3, 1],
+            [1, 2, 0, 3],
+            [1, 2, 3, 0],
+        ] {
+            let len: usize = shape.iter().product();
+            let t = Tensor::new(shape, rng.normal_vec(len, 1.0)).unwrap();
+            let m = t.mirror_w();
+            assert_eq!(m.shape(), shape);
+            let [n, c, h, w] = shape;
+            for ni in 0..n {
+                for ci in 0..c {
+                    for y in 0..h {
+                        for x in 0..w {
+                            assert_eq!(m.at(ni, ci, y, x), t.at(ni, ci, y, w - 1 - x), "{shape:?}");
+                        }
+                    }
+                }
+            }
+            assert!(m.mirror_w() == t, "{shape:?}: twice");
+            assert!(len == 0 || aligned(&m), "{shape:?}");
+        }
     }
 
     /// Tensors the crate makes start on a cache line, at every size (small
