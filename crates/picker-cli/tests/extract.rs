@@ -1723,30 +1723,35 @@ fn the_estimated_envmaps_wrap_seam_is_closed() {
     assert_eq!(read(&from_infer.join("envmap.exr")), got);
 }
 
-/// `--shading-sigma`: with the networks' albedo the texture changes with it
-/// (0 takes the network's albedo as it is), and it is recorded; ground-truth
-/// albedo read with `--elements` is used as it is whatever the value; a
-/// negative or non-numeric value is refused.
+/// `picker extract ARGS --max-size 64 --out DIR/NAME`: the texture's bytes,
+/// `summary.json` and `material.json`.
+fn small_extract(
+    dir: &Path,
+    args: &[&str],
+    name: &str,
+) -> (Vec<u8>, serde_json::Value, serde_json::Value) {
+    let out = dir.join(name);
+    let mut all = args.to_vec();
+    all.extend(["--max-size", "64", "--out", out.to_str().unwrap()]);
+    ok(&all);
+    (
+        std::fs::read(out.join("texture.png")).unwrap(),
+        json_file(&out.join("summary.json")),
+        json_file(&out.join("material.json")),
+    )
+}
+
 /// `--single-pass` runs the networks once: the texture changes, and the
 /// summary's settings and the material's inputs say which was run (the
-/// mirror pass is the default). Ground-truth elements have no networks to run
-/// twice.
+/// mirror pass is the default).
 #[test]
 fn single_pass_runs_the_networks_once() {
     let tmp = tempfile::tempdir().unwrap();
     let photo = repo().join("fixtures/examples/room.png");
-    let run = |extra: &[&str], name: &str| {
-        let out = tmp.path().join(name);
-        let mut all = vec!["extract", photo.to_str().unwrap(), "--pick", "200,150"];
-        all.extend(extra);
-        all.extend(["--max-size", "64", "--out", out.to_str().unwrap()]);
-        ok(&all);
-        let m = json_file(&out.join("summary.json"));
-        let mat = json_file(&out.join("material.json"));
-        (std::fs::read(out.join("texture.png")).unwrap(), m, mat)
-    };
-    let (two, m2, mat2) = run(&[], "two");
-    let (one, m1, mat1) = run(&["--single-pass"], "one");
+    let nets = ["extract", photo.to_str().unwrap(), "--pick", "200,150"];
+    let (two, m2, mat2) = small_extract(tmp.path(), &nets, "two");
+    let (one, m1, mat1) =
+        small_extract(tmp.path(), &[&nets[..], &["--single-pass"]].concat(), "one");
     assert_ne!(two, one, "the flag reaches the networks");
     assert_eq!(m2["settings"]["mirror_pass"], true, "{}", m2["settings"]);
     assert_eq!(m1["settings"]["mirror_pass"], false);
@@ -1754,17 +1759,17 @@ fn single_pass_runs_the_networks_once() {
     assert_eq!(mat1["inputs"]["mirror_pass"], false);
 }
 
+/// `--shading-sigma`: with the networks' albedo the texture changes with it
+/// (0 takes the network's albedo as it is), and it is recorded; ground-truth
+/// albedo read with `--elements` is used as it is whatever the value; a
+/// negative or non-numeric value is refused.
 #[test]
 fn shading_sigma_smooths_only_an_estimated_albedo() {
     let tmp = tempfile::tempdir().unwrap();
     let photo = repo().join("fixtures/examples/room.png");
     let texture = |args: &[&str], name: &str| {
-        let out = tmp.path().join(name);
-        let mut all = args.to_vec();
-        all.extend(["--max-size", "64", "--out", out.to_str().unwrap()]);
-        ok(&all);
-        let m = json_file(&out.join("summary.json"));
-        (std::fs::read(out.join("texture.png")).unwrap(), m)
+        let (t, m, _) = small_extract(tmp.path(), args, name);
+        (t, m)
     };
     let nets = ["extract", photo.to_str().unwrap(), "--pick", "200,150"];
     let (smoothed, m) = texture(&nets, "nets-default");
