@@ -21,6 +21,7 @@ use picker_extract::report::{self, Tile};
 use picker_extract::{pipeline, Inputs, Material, Prepared, Quad, UserPlane, UvChoice};
 use picker_inpaint::{DiffusionInpainter, Inpainter, LearnedInpainter, PatchMatchInpainter};
 use picker_nets::conventions as conv;
+use picker_nets::mirror;
 use picker_nets::{Net, NetKind};
 use picker_render::io::{self as rio, Image};
 use picker_render::{ElementImages, EnvMap, Shader};
@@ -573,12 +574,8 @@ impl Models {
             let what = || format!("running the {} network ({})", n.kind, n.path.display());
             match &n.net {
                 Net::Irn(irn) => {
-                    let mut out = irn.forward(&x).with_context(what)?;
-                    if let Some(xm) = &xm {
-                        out = out
-                            .merge_mirrored(&irn.forward(xm).with_context(what)?)
-                            .with_context(what)?;
-                    }
+                    let out = mirror::forward_mirrored(&x, xm.as_ref(), |t| irn.forward(t))
+                        .with_context(what)?;
                     let re = conv::RenderElements::from_irn(&out).with_context(|| {
                         format!("decoding the IRN outputs of {}", n.path.display())
                     })?;
@@ -595,12 +592,8 @@ impl Models {
                     );
                 }
                 Net::Msn(msn) => {
-                    let mut out = msn.forward(&x).with_context(what)?;
-                    if let Some(xm) = &xm {
-                        out = out
-                            .merge_mirrored(&msn.forward(xm).with_context(what)?)
-                            .with_context(what)?;
-                    }
+                    let out = mirror::forward_mirrored(&x, xm.as_ref(), |t| msn.forward(t))
+                        .with_context(what)?;
                     seg = Some(MsnImages {
                         segmentation: tensor_image(&conv::decode_segmentation_tensor(
                             &out.segmentation,
@@ -609,12 +602,8 @@ impl Models {
                     });
                 }
                 Net::EnvMap(e) => {
-                    let mut out = e.forward(&x).with_context(what)?;
-                    if let Some(xm) = &xm {
-                        out = out
-                            .merge_mirrored(&e.forward(xm).with_context(what)?)
-                            .with_context(what)?;
-                    }
+                    let out = mirror::forward_mirrored(&x, xm.as_ref(), |t| e.forward(t))
+                        .with_context(what)?;
                     let img = tensor_image(&conv::decode_envmap(&out.envmap));
                     let mut map =
                         EnvMap::from_image(&img).map_err(|e| anyhow!("environment map: {e}"))?;

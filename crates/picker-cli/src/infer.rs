@@ -14,6 +14,7 @@ use std::time::Instant;
 
 use anyhow::{anyhow, bail, Context, Result};
 use picker_nets::conventions as conv;
+use picker_nets::mirror;
 use picker_nets::{IrnOutput, Net, NetKind, Weights};
 use picker_tensor::{Isa, Tensor};
 use serde_json::json;
@@ -315,22 +316,12 @@ fn decode_irn(out: IrnOutput) -> Result<Vec<Decoded>> {
 fn run_net(net: &Net, x: &Tensor, mirrored: Option<&Tensor>) -> Result<Vec<Decoded>> {
     let what = || format!("running the {} network", net.kind());
     match net {
-        Net::Irn(irn) => {
-            let mut out = irn.forward(x).with_context(what)?;
-            if let Some(xm) = mirrored {
-                out = out
-                    .merge_mirrored(&irn.forward(xm).with_context(what)?)
-                    .with_context(what)?;
-            }
-            decode_irn(out)
-        }
+        Net::Irn(irn) => decode_irn(
+            mirror::forward_mirrored(x, mirrored, |t| irn.forward(t)).with_context(what)?,
+        ),
         _ => {
-            let mut out = net.forward(x).with_context(what)?;
-            if let Some(xm) = mirrored {
-                out = out
-                    .merge_mirrored(&net.forward(xm).with_context(what)?)
-                    .with_context(what)?;
-            }
+            let out =
+                mirror::forward_mirrored(x, mirrored, |t| net.forward(t)).with_context(what)?;
             let mut decoded = Vec::new();
             for (name, raw) in &out.tensors {
                 let d = match name.as_str() {

@@ -138,28 +138,50 @@ fn merge_all(
         .collect()
 }
 
-impl IrnOutput {
-    /// These outputs merged with `mirrored`, the IRN's outputs for the input
-    /// mirrored left to right, head by head ([`rule`]; the texture
-    /// coordinates and unknown heads are kept).
+/// A network's outputs that can take in those of a second pass on the input
+/// mirrored left to right.
+pub trait MergeMirrored: Sized {
+    /// These outputs merged with `mirrored`, the same network's outputs for
+    /// the input mirrored left to right ([`Tensor::mirror_w`]), each output by
+    /// its [`rule`].
     ///
     /// # Errors
-    /// As [`merge`], or when `mirrored` lacks a head that is merged.
-    pub fn merge_mirrored(self, mirrored: &IrnOutput) -> Result<IrnOutput> {
+    /// As [`merge`]; or when `mirrored` lacks an output that is merged, or
+    /// comes from another network.
+    fn merge_mirrored(self, mirrored: &Self) -> Result<Self>;
+}
+
+/// `forward(x)`, and, when `mirrored` (the input mirrored left to right) is
+/// given, `forward(mirrored)` merged into it ([`MergeMirrored`]).
+///
+/// # Errors
+/// Those of `forward` and of the merge.
+pub fn forward_mirrored<T: MergeMirrored>(
+    x: &Tensor,
+    mirrored: Option<&Tensor>,
+    forward: impl Fn(&Tensor) -> Result<T>,
+) -> Result<T> {
+    let out = forward(x)?;
+    match mirrored {
+        Some(xm) => out.merge_mirrored(&forward(xm)?),
+        None => Ok(out),
+    }
+}
+
+/// The IRN: head by head ([`rule`]; the texture coordinates and unknown
+/// heads are kept).
+impl MergeMirrored for IrnOutput {
+    fn merge_mirrored(self, mirrored: &IrnOutput) -> Result<IrnOutput> {
         Ok(IrnOutput {
             heads: merge_all(NetKind::Irn, self.heads, &mirrored.heads)?,
         })
     }
 }
 
-impl MsnOutput {
-    /// These outputs merged with `mirrored` (the MSN's outputs for the input
-    /// mirrored left to right): the segmentation averaged, the material
-    /// embedding kept ([`rule`]).
-    ///
-    /// # Errors
-    /// As [`merge`].
-    pub fn merge_mirrored(self, mirrored: &MsnOutput) -> Result<MsnOutput> {
+/// The MSN: the segmentation averaged, the material embedding kept
+/// ([`rule`]).
+impl MergeMirrored for MsnOutput {
+    fn merge_mirrored(self, mirrored: &MsnOutput) -> Result<MsnOutput> {
         Ok(MsnOutput {
             segmentation: merge(
                 conv::SEGMENTATION,
@@ -172,14 +194,10 @@ impl MsnOutput {
     }
 }
 
-impl EnvMapOutput {
-    /// This environment map merged with `mirrored` (the EnvMap's output for
-    /// the input mirrored left to right): the mean radiance, the second
-    /// mirrored back in longitude ([`MirrorRule::MeanRadiance`]).
-    ///
-    /// # Errors
-    /// As [`merge`].
-    pub fn merge_mirrored(self, mirrored: &EnvMapOutput) -> Result<EnvMapOutput> {
+/// The EnvMap: the mean radiance, the second pass mirrored back in
+/// longitude ([`MirrorRule::MeanRadiance`]).
+impl MergeMirrored for EnvMapOutput {
+    fn merge_mirrored(self, mirrored: &EnvMapOutput) -> Result<EnvMapOutput> {
         Ok(EnvMapOutput {
             envmap: merge(
                 conv::ENVMAP,
@@ -191,14 +209,9 @@ impl EnvMapOutput {
     }
 }
 
-impl NetOutput {
-    /// These outputs merged with `mirrored` (the same network's outputs for
-    /// the input mirrored left to right), each by its [`rule`].
-    ///
-    /// # Errors
-    /// As [`merge`]; or when the two come from different networks, or
-    /// `mirrored` lacks an output that is merged.
-    pub fn merge_mirrored(self, mirrored: &NetOutput) -> Result<NetOutput> {
+/// Any network's outputs, each by its [`rule`] for the network.
+impl MergeMirrored for NetOutput {
+    fn merge_mirrored(self, mirrored: &NetOutput) -> Result<NetOutput> {
         if self.kind != mirrored.kind {
             return Err(Error::Output {
                 name: format!("{}", self.kind),
@@ -367,6 +380,60 @@ mod tests {
         let out = msn.merge_mirrored(&other).unwrap();
         assert!(out.embedding.unwrap() == emb);
         assert!(out.segmentation == merge("s", Mean, seg, &other.segmentation).unwrap());
+    }
+
+    /// `forward_mirrored` runs once without a mirrored input, and merges the
+    /// second pass by the rules with one: an identity "network" (an MSN whose
+    /// segmentation is its input) is mirror-equivariant and gives its input
+    /// back; one that weights each column by its index is not, and gives the
+    /// mean of the two passes.
+    #[test]
+    fn forward_mirrored_runs_and_merges_the_two_passes() {
+        let mut rng = Rng::new(6);
+        let x = random(&mut rng, [1, 3, 4, 5]);
+        let calls = std::cell::Cell::new(0);
+        let identity = |t: &Tensor| {
+            calls.set(calls.get() + 1);
+            Ok(NetOutput {
+                kind: NetKind::Msn,
+                tensors: vec![(conv::SEGMENTATION.to_string(), t.clone())],
+            })
+        };
+        let once = forward_mirrored(&x, None, identity).unwrap();
+        assert_eq!(calls.get(), 1);
+        assert!(once.get(conv::SEGMENTATION).unwrap() == &x);
+        let xm = x.mirror_w();
+        let twice = forward_mirrored(&x, Some(&xm), identity).unwrap();
+        assert_eq!(calls.get(), 3);
+        assert!(
+            twice
+                .get(conv::SEGMENTATION)
+                .unwrap()
+                .max_abs_diff(&x)
+                .unwrap()
+                == 0.0
+        );
+        let ramp = |t: &Tensor| {
+            let mut o = t.clone();
+            let w = o.w();
+            for (i, v) in o.data_mut().iter_mut().enumerate() {
+                *v *= (i % w) as f32;
+            }
+            Ok(NetOutput {
+                kind: NetKind::Msn,
+                tensors: vec![(conv::SEGMENTATION.to_string(), o)],
+            })
+        };
+        let merged = forward_mirrored(&x, Some(&xm), ramp).unwrap();
+        let (a, b) = (ramp(&x).unwrap(), ramp(&xm).unwrap());
+        let want = merge(
+            "s",
+            MirrorRule::Mean,
+            a.tensors[0].1.clone(),
+            &b.tensors[0].1,
+        )
+        .unwrap();
+        assert!(merged.get(conv::SEGMENTATION).unwrap() == &want);
     }
 
     /// Mismatched passes are refused with the output's name.
