@@ -23,7 +23,7 @@ use rayon::prelude::*;
 /// to the de-lighting ratio of a network's albedo.
 ///
 /// Measured (stop 51) with the embedded networks, `picker eval --embedded
-/// --shading-sigma S` on proc-4242 / proc-9191 / assets-5151 (40 scenes
+/// --shading-sigma S` on proc-4242 / proc-9191 / proc-5151 (40 scenes
 /// each), mean aligned texture PSNR and colour-statistics distance:
 ///
 /// | σ | PSNR (dB) | colour distance |
