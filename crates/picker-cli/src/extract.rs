@@ -574,7 +574,7 @@ impl Models {
             let what = || format!("running the {} network ({})", n.kind, n.path.display());
             match &n.net {
                 Net::Irn(irn) => {
-                    let out = mirror::forward_mirrored(&x, xm.as_ref(), |t| irn.forward(t))
+                    let out = irn.forward_mirrored(&x, xm.as_ref())
                         .with_context(what)?;
                     let re = conv::RenderElements::from_irn(&out).with_context(|| {
                         format!("decoding the IRN outputs of {}", n.path.display())

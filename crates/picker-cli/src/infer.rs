@@ -316,9 +316,7 @@ fn decode_irn(out: IrnOutput) -> Result<Vec<Decoded>> {
 fn run_net(net: &Net, x: &Tensor, mirrored: Option<&Tensor>) -> Result<Vec<Decoded>> {
     let what = || format!("running the {} network", net.kind());
     match net {
-        Net::Irn(irn) => decode_irn(
-            mirror::forward_mirrored(x, mirrored, |t| irn.forward(t)).with_context(what)?,
-        ),
+        Net::Irn(irn) => decode_irn(irn.forward_mirrored(x, mirrored).with_context(what)?),
         _ => {
             let out =
                 mirror::forward_mirrored(x, mirrored, |t| net.forward(t)).with_context(what)?;

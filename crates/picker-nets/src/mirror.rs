@@ -168,6 +168,26 @@ pub fn forward_mirrored<T: MergeMirrored>(
     }
 }
 
+impl crate::nets::Irn {
+    /// [`forward_mirrored`] for the IRN, whose mirrored pass runs only the
+    /// heads that are merged ([`Irn::forward_heads`](crate::nets::Irn::forward_heads):
+    /// the texture coordinates' tower, whose second output would be thrown
+    /// away, is not run).
+    ///
+    /// # Errors
+    /// Those of the passes and of the merge.
+    pub fn forward_mirrored(&self, x: &Tensor, mirrored: Option<&Tensor>) -> Result<IrnOutput> {
+        let out = self.forward(x)?;
+        match mirrored {
+            Some(xm) => {
+                let merged = |n: &str| rule(NetKind::Irn, n) != MirrorRule::Keep;
+                out.merge_mirrored(&self.forward_heads(xm, merged)?)
+            }
+            None => Ok(out),
+        }
+    }
+}
+
 /// The IRN: head by head ([`rule`]; the texture coordinates and unknown
 /// heads are kept).
 impl MergeMirrored for IrnOutput {

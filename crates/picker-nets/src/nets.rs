@@ -176,12 +176,28 @@ impl Irn {
         self.run(x, &mut Tracer::timing(timings))
     }
 
+    /// As [`Irn::forward`], running only the heads whose name `keep` accepts
+    /// (the encoder always; the outputs in configuration order).
+    pub fn forward_heads(&self, x: &Tensor, keep: impl Fn(&str) -> bool) -> Result<IrnOutput> {
+        self.run_heads(x, &mut Tracer::new(None), &keep)
+    }
+
     fn run(&self, x: &Tensor, tr: &mut Tracer<'_>) -> Result<IrnOutput> {
+        self.run_heads(x, tr, &|_| true)
+    }
+
+    fn run_heads(
+        &self,
+        x: &Tensor,
+        tr: &mut Tracer<'_>,
+        keep: &dyn Fn(&str) -> bool,
+    ) -> Result<IrnOutput> {
         let (xp, pads) = pad_input(NetKind::Irn, x, 3)?;
         let e = self.enc.forward_traced(&xp, tr, "enc")?;
-        let mut heads = Vec::with_capacity(self.heads.len());
+        let towers: Vec<&(String, Tower)> = self.heads.iter().filter(|(n, _)| keep(n)).collect();
+        let mut heads = Vec::with_capacity(towers.len());
         if tr.is_recording() || picker_tensor::low_memory() {
-            for (name, tower) in &self.heads {
+            for (name, tower) in towers.iter().map(|h| (&h.0, &h.1)) {
                 let y = tower.forward_traced(&e, tr, &format!("heads.{name}"))?;
                 heads.push((name.clone(), crop_back(y, pads, x.h(), x.w())?));
             }
@@ -196,11 +212,11 @@ impl Irn {
             // not depend on the schedule: every kernel's arithmetic is fixed
             // per element.
             use rayon::prelude::*;
-            let groups = rayon::current_num_threads().clamp(1, self.heads.len().max(1));
+            let groups = rayon::current_num_threads().clamp(1, towers.len().max(1));
             let ys: Vec<Vec<Result<Tensor>>> = (0..groups)
                 .into_par_iter()
                 .map(|g| {
-                    self.heads
+                    towers
                         .iter()
                         .skip(g)
                         .step_by(groups)
@@ -209,7 +225,7 @@ impl Irn {
                 })
                 .collect();
             let mut ys: Vec<_> = ys.into_iter().map(Vec::into_iter).collect();
-            for (i, (name, _)) in self.heads.iter().enumerate() {
+            for (i, (name, _)) in towers.iter().map(|h| (&h.0, &h.1)).enumerate() {
                 let y = ys[i % groups].next().expect("one output per head");
                 heads.push((name.clone(), crop_back(y?, pads, x.h(), x.w())?));
             }
