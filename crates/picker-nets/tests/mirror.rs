@@ -8,8 +8,7 @@ mod common;
 use common::TempFile;
 use picker_nets::mirror::MergeMirrored;
 use picker_nets::{
-    metadata_for, random_weights, save_safetensors, Irn, NetConfig, NetKind, StorageDtype,
-    Weights,
+    metadata_for, random_weights, save_safetensors, Irn, NetConfig, NetKind, StorageDtype, Weights,
 };
 use picker_tensor::Rng;
 
@@ -43,7 +42,10 @@ fn forward_heads_and_the_mirror_pass_match_full_passes() {
         assert_eq!(irn.forward_heads(&x, |_| false).unwrap().heads.len(), 0);
 
         let xm = x.mirror_w();
-        let merged = full.clone().merge_mirrored(&irn.forward(&xm).unwrap()).unwrap();
+        let merged = full
+            .clone()
+            .merge_mirrored(&irn.forward(&xm).unwrap())
+            .unwrap();
         let pass = irn.forward_mirrored(&x, Some(&xm)).unwrap();
         assert_eq!(pass.heads.len(), merged.heads.len());
         for ((a, s), (b, t)) in pass.heads.iter().zip(&merged.heads) {
