@@ -227,6 +227,9 @@ pub struct Row {
     /// Share of the texture's texels holding observed colours
     /// (`diagnostics.observed_kept`).
     observed_kept: Option<f64>,
+    /// How far the networks' two passes disagreed over the mask
+    /// (`diagnostics.mirror_disagreement`), when they ran twice.
+    mirror_disagreement: Option<picker_extract::pipeline::DisagreementStats>,
 }
 
 fn scene_dirs(dir: &Path) -> Result<Vec<PathBuf>> {
@@ -474,6 +477,7 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
                 EnvMap::from_image(&rio::read_exr(&env_path)?)
                     .map_err(|e| anyhow!("{}: {e}", env_path.display()))?,
             ),
+            disagreement: None,
         }
     };
     let photo = rio::read_png(&photo_path)?;
@@ -599,6 +603,7 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
             seam_band: None,
             seam_cut: None,
             observed_kept: None,
+            mirror_disagreement: None,
         };
         let Some((mat, diag)) = extracted else {
             rows.push(row);
@@ -628,6 +633,7 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
             .seam_cut
             .map(|c| u8::from(c.columns.is_some()) + u8::from(c.rows.is_some()));
         row.observed_kept = diag.observed_kept;
+        row.mirror_disagreement = diag.mirror_disagreement;
         if let Some(uv) = diag.uv.as_ref().filter(|u| u.mode == UvMode::Plane) {
             // The true plane at the pick (the same rule as the extraction's:
             // a material of several planes is rectified from the one picked),

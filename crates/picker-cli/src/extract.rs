@@ -18,7 +18,9 @@ use anyhow::{anyhow, bail, Context, Result};
 use picker_extract::export::{self, ExportOptions};
 use picker_extract::mask::{Mask, MaskOptions};
 use picker_extract::report::{self, Tile};
-use picker_extract::{pipeline, Inputs, Material, Prepared, Quad, UserPlane, UvChoice};
+use picker_extract::{
+    pipeline, Inputs, Material, PassDisagreement, Prepared, Quad, UserPlane, UvChoice,
+};
 use picker_inpaint::{DiffusionInpainter, Inpainter, LearnedInpainter, PatchMatchInpainter};
 use picker_nets::conventions as conv;
 use picker_nets::mirror;
@@ -549,7 +551,7 @@ impl Models {
         photo_rgb: &image::Rgb32FImage,
         work_size: u32,
         timings: &mut serde_json::Map<String, Value>,
-    ) -> Result<(ElementImages, MsnImages, Option<EnvMap>, Value)> {
+    ) -> Result<Inferred> {
         let (pw, ph) = photo_rgb.dimensions();
         let (ww, wh) = photo::working_size(pw, ph, work_size);
         self.infer_work(&photo::resize(photo_rgb, ww, wh), timings)
@@ -560,13 +562,13 @@ impl Models {
         &self,
         work: &image::Rgb32FImage,
         timings: &mut serde_json::Map<String, Value>,
-    ) -> Result<(ElementImages, MsnImages, Option<EnvMap>, Value)> {
+    ) -> Result<Inferred> {
         let (ww, wh) = work.dimensions();
         let mut x = Tensor::new([1, 3, wh as usize, ww as usize], photo::to_planar(work))
             .map_err(|e| anyhow!("making the input tensor: {e}"))?;
         conv::normalize_input(&mut x);
         let xm = self.mirror_pass.then(|| x.mirror_w());
-        let (mut elements, mut seg, mut env) = (None, None, None);
+        let (mut elements, mut seg, mut env, mut disagreement) = (None, None, None, None);
         let mut seam: Option<Value> = None;
         let mut described = Vec::new();
         for n in &self.nets {
@@ -574,8 +576,13 @@ impl Models {
             let what = || format!("running the {} network ({})", n.kind, n.path.display());
             match &n.net {
                 Net::Irn(irn) => {
-                    let out = irn.forward_mirrored(&x, xm.as_ref())
+                    let (out, dis) = irn
+                        .forward_mirrored_measured(&x, xm.as_ref())
                         .with_context(what)?;
+                    disagreement = dis.map(|d| PassDisagreement {
+                        albedo: tensor_image(&d.albedo),
+                        normals_deg: tensor_image(&d.normals_deg),
+                    });
                     let re = conv::RenderElements::from_irn(&out).with_context(|| {
                         format!("decoding the IRN outputs of {}", n.path.display())
                     })?;
@@ -622,19 +629,31 @@ impl Models {
         }
         let elements = elements.ok_or_else(|| anyhow!("the IRN network gave no outputs"))?;
         let seg = seg.ok_or_else(|| anyhow!("the MSN network gave no outputs"))?;
-        Ok((
+        Ok(Inferred {
             elements,
-            seg,
-            env,
-            json!({
+            msn: seg,
+            envmap: env,
+            disagreement,
+            source: json!({
                 "source": "networks",
                 "nets": described,
                 "working_size": {"width": ww, "height": wh},
                 "mirror_pass": self.mirror_pass,
                 "envmap_regularised": seam,
             }),
-        ))
+        })
     }
+}
+
+/// The networks' outputs for one photo ([`Models::infer`]).
+struct Inferred {
+    elements: ElementImages,
+    msn: MsnImages,
+    envmap: Option<EnvMap>,
+    /// How far the mirror pass's two passes disagreed (IRN), when it ran.
+    disagreement: Option<PassDisagreement>,
+    /// What ran, for `material.json`'s inputs.
+    source: Value,
 }
 
 /// Where the render elements come from.
@@ -719,19 +738,20 @@ pub fn load_inputs_from(
         Source::Nets(models) => {
             drop(p);
             let work = work.expect("resized for the networks");
-            let (elements, msn, envmap, source) = models.infer_work(&work, &mut timings)?;
+            let r = models.infer_work(&work, &mut timings)?;
             (
                 Inputs {
                     photo: photo_img,
-                    elements,
-                    segmentation: msn.segmentation,
-                    embedding: msn.embedding,
+                    elements: r.elements,
+                    segmentation: r.msn.segmentation,
+                    embedding: r.msn.embedding,
                     segmentation_estimated: true,
                     albedo_estimated: true,
-                    envmap,
+                    envmap: r.envmap,
                     opaque,
+                    disagreement: r.disagreement,
                 },
-                source,
+                r.source,
             )
         }
         Source::Elements(dir) => {
@@ -829,6 +849,7 @@ fn read_elements(dir: &Path, photo: Image, opaque: Option<Mask>) -> Result<(Inpu
             albedo_estimated,
             envmap,
             opaque,
+            disagreement: None,
         },
         json!({
             "source": "elements",
@@ -1598,17 +1619,17 @@ pub fn infer_inputs(models: &Models, photo_path: &Path, work_size: u32) -> Resul
     let (w, h) = p.rgb.dimensions();
     let photo_img = Image::new(3, h as usize, w as usize, photo::to_planar(&p.rgb))
         .map_err(|e| anyhow!("{}: {e}", photo_path.display()))?;
-    let (elements, msn, envmap, _) =
-        models.infer(&p.rgb, work_size, &mut serde_json::Map::new())?;
+    let r = models.infer(&p.rgb, work_size, &mut serde_json::Map::new())?;
     Ok(Inputs {
         photo: photo_img,
-        elements,
-        segmentation: msn.segmentation,
-        embedding: msn.embedding,
+        elements: r.elements,
+        segmentation: r.msn.segmentation,
+        embedding: r.msn.embedding,
         segmentation_estimated: true,
         albedo_estimated: true,
-        envmap,
+        envmap: r.envmap,
         opaque: opaque_mask(&p),
+        disagreement: r.disagreement,
     })
 }
 

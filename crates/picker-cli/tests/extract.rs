@@ -1743,7 +1743,8 @@ fn small_extract(
 
 /// `--single-pass` runs the networks once: the texture changes, and the
 /// summary's settings and the material's inputs say which was run (the
-/// mirror pass is the default).
+/// mirror pass is the default); the diagnostics give the two passes'
+/// disagreement only when there were two.
 #[test]
 fn single_pass_runs_the_networks_once() {
     let tmp = tempfile::tempdir().unwrap();
@@ -1757,6 +1758,13 @@ fn single_pass_runs_the_networks_once() {
     assert_eq!(m1["settings"]["mirror_pass"], false);
     assert_eq!(mat2["inputs"]["mirror_pass"], true, "{}", mat2["inputs"]);
     assert_eq!(mat1["inputs"]["mirror_pass"], false);
+    // The two passes' disagreement over the mask, only when they ran.
+    let d = &mat2["diagnostics"]["mirror_disagreement"];
+    let albedo = d["albedo"].as_f64().unwrap();
+    let normals = d["normals_deg"].as_f64().unwrap();
+    assert!(albedo > 0.0 && albedo < 1.0, "{d}");
+    assert!(normals > 0.0 && normals <= 180.0, "{d}");
+    assert!(mat1["diagnostics"].get("mirror_disagreement").is_none());
 }
 
 /// `--shading-sigma`: with the networks' albedo the texture changes with it

@@ -45,5 +45,5 @@ pub mod smooth;
 
 pub use error::{Error, Result};
 pub use material::{Material, MaterialParams, TextureResult, UvMode};
-pub use pipeline::{extract, Inputs, Options, Prepared, UvChoice};
+pub use pipeline::{extract, Inputs, Options, PassDisagreement, Prepared, UvChoice};
 pub use quad::{Quad, UserPlane};

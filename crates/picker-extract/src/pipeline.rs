@@ -153,6 +153,32 @@ pub struct Inputs {
     /// working pixel less than half opaque has no surface
     /// ([`Prepared::valid`]).
     pub opaque: Option<Mask>,
+    /// How far the networks' two passes disagreed at each working pixel, when
+    /// they ran twice ([`PassDisagreement`]); summed up per material in
+    /// [`Diagnostics::mirror_disagreement`].
+    pub disagreement: Option<PassDisagreement>,
+}
+
+/// How far the networks' pass on the photo and their pass on its mirror
+/// image disagree at each working pixel
+/// (`picker_nets::mirror::IrnDisagreement`): where the two estimates differ
+/// the network is unsure, and the material's error tends to be larger.
+#[derive(Clone, Debug)]
+pub struct PassDisagreement {
+    /// Mean over the channels of the two diffuse albedos' absolute
+    /// difference (linear), 1 channel at the working resolution.
+    pub albedo: Image,
+    /// Angle in degrees between the two passes' normals, 1 channel.
+    pub normals_deg: Image,
+}
+
+/// [`PassDisagreement`] averaged over a material's working-resolution mask.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct DisagreementStats {
+    /// Mean absolute difference of the two passes' diffuse albedo (linear).
+    pub albedo: f64,
+    /// Mean angle between the two passes' normals, degrees.
+    pub normals_deg: f64,
 }
 
 /// Options of one extraction.
@@ -1249,6 +1275,11 @@ pub struct Diagnostics {
     /// texture's texels; absent when it was off or had nothing to do.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub even_out_gain: Option<[f64; 2]>,
+    /// How far the networks' two passes (the mirror pass) disagreed over
+    /// the material's mask ([`PassDisagreement`]): a measure of how sure they
+    /// were. Absent when they ran once or the elements are given.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mirror_disagreement: Option<DisagreementStats>,
     /// How the de-lighting read the networks' albedo ([`crate::shading`]);
     /// absent when the albedo is ground truth or `shading_sigma` is 0 (the
     /// albedo as it is).
@@ -1689,6 +1720,25 @@ fn extract_as(
         seam_cut: None,
         observed_kept: None,
         even_out_gain: None,
+        mirror_disagreement: p
+            .inputs
+            .disagreement
+            .as_ref()
+            .filter(|d| {
+                [&d.albedo, &d.normals_deg]
+                    .iter()
+                    .all(|i| (i.width, i.height, i.channels) == (w, h, 1))
+            })
+            .map(|d| {
+                let mean = |img: &Image| {
+                    idx.iter().map(|&i| f64::from(img.data[i])).sum::<f64>()
+                        / idx.len().max(1) as f64
+                };
+                DisagreementStats {
+                    albedo: mean(&d.albedo),
+                    normals_deg: mean(&d.normals_deg),
+                }
+            }),
         delight: unsmoothed.as_ref().map(|_| Delight {
             shading_sigma: opts.shading_sigma,
             clipped_share,
@@ -3186,6 +3236,7 @@ mod tests {
             albedo_estimated: false,
             envmap: None,
             opaque: None,
+            disagreement: None,
         })
         .unwrap()
     }
@@ -3219,6 +3270,7 @@ mod tests {
             albedo_estimated: false,
             envmap: None,
             opaque: None,
+            disagreement: None,
         })
         .unwrap()
     }
@@ -3257,6 +3309,7 @@ mod tests {
             albedo_estimated: false,
             envmap: None,
             opaque: None,
+            disagreement: None,
         })
         .unwrap();
         // Bins 8 and 9 of channel 0 hold 4 and 6 columns: 12.5 % and 19 %.
@@ -3339,6 +3392,7 @@ mod tests {
                 height: fh,
                 data: (0..fw * fh).map(|i| i % fw >= edge).collect(),
             }),
+            disagreement: None,
         })
         .unwrap()
     }
@@ -3497,6 +3551,7 @@ mod tests {
             albedo_estimated,
             envmap: None,
             opaque: None,
+            disagreement: None,
         })
         .unwrap()
     }
@@ -3583,6 +3638,53 @@ mod tests {
             assert!((mean - 0.3).abs() < 0.01, "level {mean}");
             assert!(contrast < 0.02, "{estimated} {sigma}: contrast {contrast}");
         }
+    }
+
+    /// The networks' two passes' disagreement, when given, is averaged over
+    /// the material's working mask into `diagnostics.mirror_disagreement`
+    /// (the plane's whole 96×64 frame here: the mean of two ramps); without
+    /// it, or with maps of another size, the diagnostic is absent.
+    #[test]
+    fn the_passes_disagreement_is_averaged_over_the_mask() {
+        let (w, h) = (96, 64);
+        let mut p = frontal_plane_with(w, h, &striped, &|_| 0.3, true);
+        let ramp = |scale: f32| {
+            Image::new(
+                1,
+                h,
+                w,
+                (0..w * h).map(|i| scale * (i % w) as f32).collect(),
+            )
+            .unwrap()
+        };
+        let run = |p: &Prepared| {
+            let pick = [20, 50];
+            let pm = p.pick_mask(pick, &MaskOptions::default()).unwrap();
+            let inpainter = picker_inpaint::DiffusionInpainter::default();
+            let opts = Options {
+                size: Some(16),
+                fov_deg: Some(60.0),
+                ..test_options(&inpainter, UvChoice::Plane)
+            };
+            let (_, diag) = extract(p, "m", Some(pick), &pm, &opts).unwrap();
+            (diag.mirror_disagreement, pm.mask.count())
+        };
+        assert_eq!(run(&p).0, None);
+        p.inputs.disagreement = Some(PassDisagreement {
+            albedo: ramp(0.001),
+            normals_deg: ramp(0.5),
+        });
+        let (d, count) = run(&p);
+        assert_eq!(count, w * h, "the whole plane is the material");
+        let d = d.unwrap();
+        // Mean column index 47.5.
+        assert!((d.albedo - 0.0475).abs() < 1e-6, "{d:?}");
+        assert!((d.normals_deg - 23.75).abs() < 1e-4, "{d:?}");
+        p.inputs.disagreement = Some(PassDisagreement {
+            albedo: Image::new(1, 2, 2, vec![0.0; 4]).unwrap(),
+            normals_deg: Image::new(1, 2, 2, vec![0.0; 4]).unwrap(),
+        });
+        assert_eq!(run(&p).0, None, "maps of another size are not read");
     }
 
     /// As above with a clipped highlight (a 10×10 patch of the photo at
@@ -4750,6 +4852,7 @@ mod tests {
             albedo_estimated: false,
             envmap: None,
             opaque: None,
+            disagreement: None,
         })
         .unwrap();
         let disc = Mask {
@@ -4842,6 +4945,7 @@ mod tests {
             albedo_estimated: false,
             envmap: Some(env),
             opaque: None,
+            disagreement: None,
         };
         let inpainter = picker_inpaint::DiffusionInpainter::default();
         let opts = Options {

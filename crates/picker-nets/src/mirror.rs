@@ -178,13 +178,117 @@ impl crate::nets::Irn {
     /// # Errors
     /// Those of the passes and of the merge.
     pub fn forward_mirrored(&self, x: &Tensor, mirrored: Option<&Tensor>) -> Result<IrnOutput> {
+        Ok(self.forward_mirrored_measured(x, mirrored)?.0)
+    }
+}
+
+/// How far the IRN's two passes disagree at each pixel: a measure of how
+/// sure the network is, which the mean of the passes does not show.
+#[derive(Clone, Debug)]
+pub struct IrnDisagreement {
+    /// `[N, 1, H, W]`: the mean over the channels of `|ρd₁ − ρd₂|`, the
+    /// decoded diffuse albedos (linear) of the first pass and of the second
+    /// mirrored back.
+    pub albedo: Tensor,
+    /// `[N, 1, H, W]`: the angle in degrees between the decoded normals of
+    /// the first pass and of the second mirrored back (its x negated); 0
+    /// where either is zero.
+    pub normals_deg: Tensor,
+}
+
+/// The disagreement of the IRN's first pass `first` and its pass on the
+/// mirrored input `mirrored` ([`IrnDisagreement`]); `None` when either lacks
+/// the diffuse albedo or the normals.
+///
+/// # Errors
+/// [`Error::Output`] when the two passes' heads differ in shape, or a head
+/// has other than 3 channels.
+pub fn irn_disagreement(
+    first: &IrnOutput,
+    mirrored: &IrnOutput,
+) -> Result<Option<IrnDisagreement>> {
+    fn heads(o: &IrnOutput) -> Option<(&Tensor, &Tensor)> {
+        o.get(conv::DIFFUSE_ALBEDO).zip(o.get(conv::NORMALS))
+    }
+    let (Some((a1, n1)), Some((a2, n2))) = (heads(first), heads(mirrored)) else {
+        return Ok(None);
+    };
+    for (name, p, q) in [(conv::DIFFUSE_ALBEDO, a1, a2), (conv::NORMALS, n1, n2)] {
+        if p.shape() != q.shape() || p.c() != 3 {
+            return Err(Error::Output {
+                name: name.to_string(),
+                reason: format!(
+                    "the passes' shapes {:?} and {:?} (3 channels needed)",
+                    p.shape(),
+                    q.shape()
+                ),
+            });
+        }
+    }
+    if a1.shape() != n1.shape() {
+        return Err(Error::Output {
+            name: conv::NORMALS.to_string(),
+            reason: format!("shape {:?}, the albedo's {:?}", n1.shape(), a1.shape()),
+        });
+    }
+    let (a2, n2) = (a2.mirror_w(), n2.mirror_w());
+    let [n, _, h, w] = a1.shape();
+    let hw = h * w;
+    let mut albedo = Tensor::zeros([n, 1, h, w]);
+    let mut normals_deg = Tensor::zeros([n, 1, h, w]);
+    for ni in 0..n {
+        let o = ni * 3 * hw;
+        let (p, q) = (&a1.data()[o..o + 3 * hw], &a2.data()[o..o + 3 * hw]);
+        let (u, v) = (&n1.data()[o..o + 3 * hw], &n2.data()[o..o + 3 * hw]);
+        for i in 0..hw {
+            let d: f32 = (0..3)
+                .map(|c| {
+                    (conv::unit_from_tanh(p[c * hw + i]) - conv::unit_from_tanh(q[c * hw + i]))
+                        .abs()
+                })
+                .sum();
+            albedo.data_mut()[ni * hw + i] = d / 3.0;
+            let a = [u[i], u[hw + i], u[2 * hw + i]];
+            let b = [-v[i], v[hw + i], v[2 * hw + i]];
+            let (la, lb) = (
+                a.iter().map(|x| x * x).sum::<f32>().sqrt(),
+                b.iter().map(|x| x * x).sum::<f32>().sqrt(),
+            );
+            normals_deg.data_mut()[ni * hw + i] = if la > 0.0 && lb > 0.0 {
+                let dot: f32 = a.iter().zip(&b).map(|(x, y)| x * y).sum();
+                (dot / (la * lb)).clamp(-1.0, 1.0).acos().to_degrees()
+            } else {
+                0.0
+            };
+        }
+    }
+    Ok(Some(IrnDisagreement {
+        albedo,
+        normals_deg,
+    }))
+}
+
+impl crate::nets::Irn {
+    /// As [`Irn::forward_mirrored`](crate::nets::Irn::forward_mirrored),
+    /// also giving the two passes' disagreement ([`irn_disagreement`];
+    /// `None` without a mirrored input, or without the heads it reads).
+    ///
+    /// # Errors
+    /// Those of the passes, of the merge and of [`irn_disagreement`].
+    pub fn forward_mirrored_measured(
+        &self,
+        x: &Tensor,
+        mirrored: Option<&Tensor>,
+    ) -> Result<(IrnOutput, Option<IrnDisagreement>)> {
         let out = self.forward(x)?;
         match mirrored {
             Some(xm) => {
                 let merged = |n: &str| rule(NetKind::Irn, n) != MirrorRule::Keep;
-                out.merge_mirrored(&self.forward_heads(xm, merged)?)
+                let second = self.forward_heads(xm, merged)?;
+                let dis = irn_disagreement(&out, &second)?;
+                Ok((out.merge_mirrored(&second)?, dis))
             }
-            None => Ok(out),
+            None => Ok((out, None)),
         }
     }
 }
@@ -455,6 +559,65 @@ mod tests {
         )
         .unwrap();
         assert!(merged.get(conv::SEGMENTATION).unwrap() == &want);
+    }
+
+    /// The disagreement against its formulas: 0 for an exactly mirrored
+    /// pass; the mean absolute difference of the decoded albedos and the
+    /// angle between the normals otherwise; `None` without the heads.
+    #[test]
+    fn the_disagreement_follows_its_formulas() {
+        let mut rng = Rng::new(12);
+        let s = [1, 3, 3, 4];
+        let heads = |a: Tensor, n: Tensor| IrnOutput {
+            heads: vec![
+                (conv::DIFFUSE_ALBEDO.to_string(), a),
+                (conv::NORMALS.to_string(), n),
+            ],
+        };
+        let (a, n) = (random(&mut rng, s), random(&mut rng, s));
+        let first = heads(a.clone(), n.clone());
+        let exact = heads(exact_mirror(&a, false), exact_mirror(&n, true));
+        let d = irn_disagreement(&first, &exact).unwrap().unwrap();
+        assert!(d.albedo.data().iter().all(|&v| v == 0.0));
+        assert!(
+            d.normals_deg.data().iter().all(|&v| v < 0.05),
+            "{:?}",
+            d.normals_deg.data()
+        );
+        let (b, m) = (random(&mut rng, s), random(&mut rng, s));
+        let d = irn_disagreement(&first, &heads(b.clone(), m.clone()))
+            .unwrap()
+            .unwrap();
+        let (bm, mm) = (b.mirror_w(), m.mirror_w());
+        for y in 0..3 {
+            for x in 0..4 {
+                let want: f32 = (0..3)
+                    .map(|c| ((a.at(0, c, y, x) - bm.at(0, c, y, x)) / 2.0).abs())
+                    .sum::<f32>()
+                    / 3.0;
+                assert!((d.albedo.at(0, 0, y, x) - want).abs() < 1e-6);
+                let u = [n.at(0, 0, y, x), n.at(0, 1, y, x), n.at(0, 2, y, x)];
+                let v = [-mm.at(0, 0, y, x), mm.at(0, 1, y, x), mm.at(0, 2, y, x)];
+                let dot = u.iter().zip(&v).map(|(p, q)| f64::from(p * q)).sum::<f64>();
+                let l = |w: &[f32; 3]| w.iter().map(|p| f64::from(p * p)).sum::<f64>().sqrt();
+                let deg = (dot / (l(&u) * l(&v))).clamp(-1.0, 1.0).acos().to_degrees();
+                assert!(
+                    (f64::from(d.normals_deg.at(0, 0, y, x)) - deg).abs() < 0.05,
+                    "{deg}"
+                );
+            }
+        }
+        let no_normals = IrnOutput {
+            heads: vec![(conv::DIFFUSE_ALBEDO.to_string(), a.clone())],
+        };
+        assert!(irn_disagreement(&no_normals, &no_normals)
+            .unwrap()
+            .is_none());
+        let other = heads(
+            random(&mut rng, [1, 3, 3, 5]),
+            random(&mut rng, [1, 3, 3, 5]),
+        );
+        assert!(irn_disagreement(&first, &other).is_err());
     }
 
     /// Mismatched passes are refused with the output's name.
