@@ -408,15 +408,21 @@ fn with_truth(
     let el = &mut inputs.elements;
     for part in parts {
         match part {
+            // The passes' disagreement describes the networks' albedo and
+            // normals: it goes with either.
             TruthPart::Albedo => {
                 el.diffuse = truth.diffuse.clone();
                 inputs.albedo_estimated = false;
+                inputs.disagreement = None;
             }
             TruthPart::Specular => {
                 el.specular = truth.specular.clone();
                 el.glossiness = truth.glossiness.clone();
             }
-            TruthPart::Normals => el.normals = truth.normals.clone(),
+            TruthPart::Normals => {
+                el.normals = truth.normals.clone();
+                inputs.disagreement = None;
+            }
             TruthPart::View => el.view = truth.view.clone(),
             TruthPart::Uv => el.uv = truth.uv.clone(),
             TruthPart::Segmentation => {
