@@ -57,7 +57,7 @@ pub const WEIGHTS_FILES: [(NetKind, &str); 3] = [
 ];
 
 /// How each output is stored: `(output name, EXR contents, PNG contents)`.
-pub const ENCODINGS: [(&str, &str, &str); 10] = [
+pub const ENCODINGS: [(&str, &str, &str); 12] = [
     (
         conv::DIFFUSE_ALBEDO,
         "diffuse albedo, linear RGB in [0,1]: (y+1)/2",
@@ -106,11 +106,29 @@ pub const ENCODINGS: [(&str, &str, &str); 10] = [
         "Reinhard global tone map (auto exposure, key 0.18), sRGB-encoded",
     ),
     (
+        DISAGREEMENT_ALBEDO,
+        "how far the IRN's two passes (the photo and its mirror image) disagree: the mean over R, G, B \
+         of |albedo1 - albedo2| (linear, channel Y); only with the mirror pass",
+        "4 x the value, clamped to [0,1], grey",
+    ),
+    (
+        DISAGREEMENT_NORMALS,
+        "the angle in degrees between the IRN's two passes' normals (channel Y); only with the mirror \
+         pass",
+        "degrees / 90, clamped to [0,1], grey",
+    ),
+    (
         "*",
         "unknown output, (y+1)/2",
         "(y+1)/2 clamped to [0,1]",
     ),
 ];
+
+/// The output name of the IRN passes' albedo disagreement
+/// ([`picker_nets::mirror::IrnDisagreement::albedo`]).
+pub const DISAGREEMENT_ALBEDO: &str = "disagreement_albedo";
+/// The output name of the IRN passes' normals disagreement, degrees.
+pub const DISAGREEMENT_NORMALS: &str = "disagreement_normals";
 
 fn encoding(name: &str) -> (&'static str, &'static str) {
     let e = ENCODINGS
@@ -316,7 +334,24 @@ fn decode_irn(out: IrnOutput) -> Result<Vec<Decoded>> {
 fn run_net(net: &Net, x: &Tensor, mirrored: Option<&Tensor>) -> Result<Vec<Decoded>> {
     let what = || format!("running the {} network", net.kind());
     match net {
-        Net::Irn(irn) => decode_irn(irn.forward_mirrored(x, mirrored).with_context(what)?),
+        Net::Irn(irn) => {
+            let (out, dis) = irn
+                .forward_mirrored_measured(x, mirrored)
+                .with_context(what)?;
+            let mut decoded = decode_irn(out)?;
+            if let Some(d) = dis {
+                let k = NetKind::Irn;
+                decoded.push(
+                    Decoded::new(DISAGREEMENT_ALBEDO, k, &d.albedo)
+                        .png_map(|v| (4.0 * v).clamp(0.0, 1.0)),
+                );
+                decoded.push(
+                    Decoded::new(DISAGREEMENT_NORMALS, k, &d.normals_deg)
+                        .png_map(|v| (v / 90.0).clamp(0.0, 1.0)),
+                );
+            }
+            Ok(decoded)
+        }
         _ => {
             let out =
                 mirror::forward_mirrored(x, mirrored, |t| net.forward(t)).with_context(what)?;

@@ -127,6 +127,9 @@ fn check_full_outputs(out: &Path, w: usize, h: usize) {
         .collect();
     expected.push(("segmentation".into(), 3, w, h));
     expected.push(("envmap".into(), 3, ew, eh));
+    // The mirror pass (the default): how far the IRN's two passes disagree.
+    expected.push(("disagreement_albedo".into(), 1, w, h));
+    expected.push(("disagreement_normals".into(), 1, w, h));
     for (name, c, ow, oh) in &expected {
         let exr = out.join(format!("{name}.exr"));
         let ((xw, xh), chans) = read_exr(&exr);
@@ -144,7 +147,12 @@ fn check_full_outputs(out: &Path, w: usize, h: usize) {
                 values.iter().all(|v| v.is_finite()),
                 "{name}.{ch} not finite"
             );
-            if name != "envmap" && name != "normals" && name != "view_vector" {
+            if name == "disagreement_normals" {
+                assert!(
+                    values.iter().all(|v| (0.0..=180.0).contains(v)),
+                    "{name}.{ch} not an angle in degrees"
+                );
+            } else if name != "envmap" && name != "normals" && name != "view_vector" {
                 assert!(
                     values.iter().all(|v| (0.0..=1.0).contains(v)),
                     "{name}.{ch} outside [0, 1]"
@@ -205,7 +213,7 @@ fn infer_example_photo_writes_every_output() {
     let out = dir.path().join("nested/out");
     let o = infer(&example_photo(), &out, &[]);
     assert_ok(&o);
-    assert!(stdout(&o).contains("wrote 17 files"), "{}", stdout(&o));
+    assert!(stdout(&o).contains("wrote 21 files"), "{}", stdout(&o));
     // coffee.jpg is 320×213; the default work size 320 keeps it.
     check_full_outputs(&out, 320, 213);
 }
@@ -1529,6 +1537,12 @@ fn the_mirror_pass_makes_the_outputs_mirror_with_the_photo() {
     );
     for name in ["uv", "embedding"] {
         assert_eq!(exr(&a, name), exr(&s, name), "{name}: the first pass's");
+    }
+    // The passes' disagreement: written only with two passes, and the same
+    // for the photo and its mirror image (mirrored).
+    for name in ["disagreement_albedo", "disagreement_normals"] {
+        assert!(!s.join(format!("{name}.exr")).exists(), "{name}");
+        assert!(mirrors(&exr(&a, name), &exr(&b, name), false), "{name}");
     }
     assert_ne!(exr(&a, "diffuse_albedo"), exr(&s, "diffuse_albedo"));
 }
