@@ -3556,6 +3556,25 @@ mod tests {
         .unwrap()
     }
 
+    /// The material picked at (20, 50) of a frontal plane, extracted in the
+    /// plane mode with a 60° field of view and the options `tweak` makes of
+    /// [`test_options`]'s (diffusion inpainting): the material, its
+    /// diagnostics and the mask's pixel count.
+    fn pick_plane(
+        p: &Prepared,
+        tweak: impl for<'a> FnOnce(Options<'a>) -> Options<'a>,
+    ) -> (Material, Diagnostics, usize) {
+        let pick = [20, 50];
+        let pm = p.pick_mask(pick, &MaskOptions::default()).unwrap();
+        let inpainter = picker_inpaint::DiffusionInpainter::default();
+        let opts = tweak(Options {
+            fov_deg: Some(60.0),
+            ..test_options(&inpainter, UvChoice::Plane)
+        });
+        let (m, diag) = extract(p, "m", Some(pick), &pm, &opts).unwrap();
+        (m, diag, pm.mask.count())
+    }
+
     /// The first channel of the texture picked at (20, 50) on a 96×64
     /// frontal plane showing `shown` (display values), whose albedo is a
     /// flat 0.3, taken as the networks' estimate or as ground truth, with
@@ -3568,20 +3587,15 @@ mod tests {
         shading_sigma: f32,
     ) -> (Vec<f32>, usize, f64) {
         let p = frontal_plane_with(96, 64, shown, &|_| 0.3, estimated);
-        let pick = [20, 50];
-        let pm = p.pick_mask(pick, &MaskOptions::default()).unwrap();
-        let inpainter = picker_inpaint::DiffusionInpainter::default();
-        let opts = Options {
+        let (m, diag, _) = pick_plane(&p, |o| Options {
             size: Some(48),
-            fov_deg: Some(60.0),
             fold_period: false,
             line_refine: false,
             tileable: false,
             heal_seams: false,
             shading_sigma,
-            ..test_options(&inpainter, UvChoice::Plane)
-        };
-        let (m, diag) = extract(&p, "stripes", Some(pick), &pm, &opts).unwrap();
+            ..o
+        });
         let t = m.texture.unwrap().texture;
         // Recorded when the networks' albedo was smoothed, and only then.
         let d = diag.delight;
@@ -3640,6 +3654,25 @@ mod tests {
         }
     }
 
+    /// As above with a clipped highlight (a 10×10 patch of the photo at
+    /// full white): there the photo's detail is not the material's and the
+    /// network's albedo stands in, so the texture has no bright patch; the
+    /// rest keeps the photo's stripes.
+    #[test]
+    fn a_clipped_highlight_takes_the_networks_albedo() {
+        let blob = |i: usize| (40..50).contains(&(i % 96)) && (20..30).contains(&(i / 96));
+        let shown = |i: usize| if blob(i) { 1.0 } else { striped(i) };
+        let (v, _, clipped) = flat_albedo_texture(&shown, true, crate::shading::SHADING_SIGMA);
+        // 100 of the plane's 96 × 64 pixels.
+        assert!((clipped - 100.0 / (96.0 * 64.0)).abs() < 1e-9, "{clipped}");
+        let max = v.iter().fold(0.0f32, |a, &b| a.max(b));
+        // The stripes reach 0.4 at the network's level (0.3 mean); the
+        // clipped patch de-lit by the smoothed shading would be above 1.
+        assert!(max < 0.6, "brightest texel {max}");
+        let (_, contrast) = mean_contrast(&v);
+        assert!(contrast > 0.2, "stripes kept: {contrast}");
+    }
+
     /// The networks' two passes' disagreement, when given, is averaged over
     /// the material's working mask into `diagnostics.mirror_disagreement`
     /// (the plane's whole 96×64 frame here: the mean of two ramps); without
@@ -3658,16 +3691,11 @@ mod tests {
             .unwrap()
         };
         let run = |p: &Prepared| {
-            let pick = [20, 50];
-            let pm = p.pick_mask(pick, &MaskOptions::default()).unwrap();
-            let inpainter = picker_inpaint::DiffusionInpainter::default();
-            let opts = Options {
+            let (_, diag, count) = pick_plane(p, |o| Options {
                 size: Some(16),
-                fov_deg: Some(60.0),
-                ..test_options(&inpainter, UvChoice::Plane)
-            };
-            let (_, diag) = extract(p, "m", Some(pick), &pm, &opts).unwrap();
-            (diag.mirror_disagreement, pm.mask.count())
+                ..o
+            });
+            (diag.mirror_disagreement, count)
         };
         assert_eq!(run(&p).0, None);
         p.inputs.disagreement = Some(PassDisagreement {
@@ -3685,25 +3713,6 @@ mod tests {
             normals_deg: Image::new(1, 2, 2, vec![0.0; 4]).unwrap(),
         });
         assert_eq!(run(&p).0, None, "maps of another size are not read");
-    }
-
-    /// As above with a clipped highlight (a 10×10 patch of the photo at
-    /// full white): there the photo's detail is not the material's and the
-    /// network's albedo stands in, so the texture has no bright patch; the
-    /// rest keeps the photo's stripes.
-    #[test]
-    fn a_clipped_highlight_takes_the_networks_albedo() {
-        let blob = |i: usize| (40..50).contains(&(i % 96)) && (20..30).contains(&(i / 96));
-        let shown = |i: usize| if blob(i) { 1.0 } else { striped(i) };
-        let (v, _, clipped) = flat_albedo_texture(&shown, true, crate::shading::SHADING_SIGMA);
-        // 100 of the plane's 96 × 64 pixels.
-        assert!((clipped - 100.0 / (96.0 * 64.0)).abs() < 1e-9, "{clipped}");
-        let max = v.iter().fold(0.0f32, |a, &b| a.max(b));
-        // The stripes reach 0.4 at the network's level (0.3 mean); the
-        // clipped patch de-lit by the smoothed shading would be above 1.
-        assert!(max < 0.6, "brightest texel {max}");
-        let (_, contrast) = mean_contrast(&v);
-        assert!(contrast > 0.2, "stripes kept: {contrast}");
     }
 
     /// A 160×96 scene: a chessboard of 8-pixel squares (80×48, from (40,
