@@ -105,6 +105,10 @@ pub struct Args {
     /// least (for measuring what the placement does).
     #[arg(long)]
     pub no_wrap_placement: bool,
+    /// Keep each texture's level as the part of the material it came from shows it
+    /// (`extract --keep-level`).
+    #[arg(long)]
+    pub keep_level: bool,
     /// Inpaint every texel the mask's surest part did not show, instead of first filling them
     /// from the rest of the mask (its less sure pixels) where it showed them.
     #[arg(long)]
@@ -518,6 +522,7 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
         tileable: true,
         seamless: false,
         even_out: a.even_out,
+        level: !a.keep_level,
         seed: 0,
         inpainter: &inpainter,
     };

@@ -135,6 +135,13 @@ pub struct Flags {
     /// whose cut would show gets the band either way).
     #[arg(long)]
     pub no_seam_cut: bool,
+    /// Keep the texture's level as the part of the material it came from shows it. By default a
+    /// texture whose mean colour lies outside the quartiles of the material's local mean colours
+    /// (its de-lit colours averaged over about a quarter of the texture's square) is scaled to
+    /// the nearer quartile per channel, by at most 8x: a texture taken from a vignetted corner or
+    /// a shadow gets the material's level (material.json diagnostics.level).
+    #[arg(long)]
+    pub keep_level: bool,
     /// The de-lighting's shading where the networks estimated the albedo: the ratio of their
     /// albedo to the photo is smoothed over the material's pixels by a Gaussian of this many
     /// working pixels, so the texture's detail comes from the photo and its level and colour from
@@ -237,6 +244,7 @@ impl Flags {
             tileable: !self.no_tile,
             seamless: self.seamless,
             even_out: self.even_out,
+            level: !self.keep_level,
             seed: self.seed,
             inpainter,
         }
@@ -285,6 +293,7 @@ impl Flags {
             "mask_fill": !self.no_mask_fill,
             "heal_seams": !self.keep_seams,
             "seam_cut": !self.no_seam_cut,
+            "level": !self.keep_level,
             "shading_sigma": self.shading_sigma,
             "size": self.size,
             "max_size": self.max_size,

@@ -1741,6 +1741,48 @@ fn small_extract(
     )
 }
 
+/// The texture's level against the material's (`picker_extract::level`):
+/// on the coffee photo's saucer, picked beside the cup's handle, where the
+/// texture comes out much darker than most of the saucer (gain 3.4 when
+/// this test was written), the check is recorded (`diagnostics.level`) and the texture
+/// (EXR, linear) is `--keep-level`'s times the recorded gain, brought to
+/// the nearer quartile of the material's local mean luminances;
+/// `--keep-level` records nothing and the summary's settings say which ran.
+#[test]
+fn a_darker_texture_gets_the_materials_level() {
+    let tmp = tempfile::tempdir().unwrap();
+    let photo = repo().join("fixtures/examples/coffee.jpg");
+    let args = ["extract", photo.to_str().unwrap(), "--pick", "160,127"];
+    let (_, levelled_sum, levelled) = small_extract(tmp.path(), &args, "levelled");
+    let mut kept_args = args.to_vec();
+    kept_args.push("--keep-level");
+    let (_, kept_sum, kept) = small_extract(tmp.path(), &kept_args, "kept");
+    assert_eq!(levelled_sum["settings"]["level"], Value::Bool(true));
+    assert_eq!(kept_sum["settings"]["level"], Value::Bool(false));
+    assert!(kept["diagnostics"].get("level").is_none());
+    let l = &levelled["diagnostics"]["level"];
+    let f = |k: &str| l[k].as_f64().unwrap();
+    let gain = f("gain");
+    assert!(gain > 1.5, "the dark texture is brought up: {l}");
+    let lum = f("texture_luminance") * gain;
+    assert!(
+        (lum - f("q1")).abs() < 1e-4 * f("q1"),
+        "to the first quartile: {l}"
+    );
+    assert!(f("q1") <= f("median") && f("median") <= f("q3"), "{l}");
+    let read =
+        |d: &str| picker_render::io::read_exr(&tmp.path().join(d).join("texture.exr")).unwrap();
+    let (a, b) = (read("kept"), read("levelled"));
+    assert_eq!((a.width, a.height), (b.width, b.height));
+    for (k, (x, y)) in a.data.iter().zip(&b.data).enumerate() {
+        let want = f64::from(*x) * gain;
+        assert!(
+            (want - f64::from(*y)).abs() <= 1e-5 * (1.0 + want.abs()),
+            "texel value {k}: {x} × {gain} vs {y}"
+        );
+    }
+}
+
 /// `--single-pass` runs the networks once: the texture changes, and the
 /// summary's settings and the material's inputs say which was run (the
 /// mirror pass is the default); the diagnostics give the two passes'

@@ -12,7 +12,9 @@
 //!   rectified plane) and the scatter into the texture square with coverage;
 //!   [`quad`]: a plane the user gives (a normal, a rectangle's corners).
 //! - inpainting ([`picker_inpaint`]) fills the unobserved texels, tileably;
-//!   [`equalize`] evens out broad light and dark patches on request.
+//!   [`level`] brings a texture taken from an untypical part of the material
+//!   (a vignetted corner) to the material's level; [`equalize`] evens out
+//!   broad light and dark patches on request.
 //! - [`select`]: order statistics (quantiles, medians) of photo-resolution
 //!   values in parallel, without sorting them.
 //! - [`pipeline`]: the whole extraction, material parameters and the
@@ -27,6 +29,7 @@ pub mod export;
 pub mod grain;
 pub mod guided;
 pub mod jpeg;
+pub mod level;
 pub mod lines;
 pub mod mask;
 pub mod material;

@@ -276,6 +276,12 @@ pub struct Options<'a> {
     /// default: it also flattens patterns whose light and dark areas are that
     /// wide).
     pub even_out: Option<f64>,
+    /// Bring a texture whose mean colour lies outside the quartiles of the
+    /// material's local mean colours (its de-lit colours averaged over about
+    /// a quarter of the texture square) to the nearer quartile, per channel
+    /// ([`crate::level`]): a texture taken from a vignetted corner or a
+    /// shadow gets the material's level.
+    pub level: bool,
     /// Seed of the inpainter.
     pub seed: u64,
     /// The inpainter.
@@ -1275,6 +1281,10 @@ pub struct Diagnostics {
     /// texture's texels; absent when it was off or had nothing to do.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub even_out_gain: Option<[f64; 2]>,
+    /// The texture's level against the material's ([`crate::level`]): absent
+    /// for a single-colour material or when the check is off.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub level: Option<crate::level::LevelCheck>,
     /// How far the networks' two passes (the mirror pass) disagreed over
     /// the material's mask ([`PassDisagreement`]): a measure of how sure they
     /// were. Absent when they ran once or the elements are given.
@@ -1720,6 +1730,7 @@ fn extract_as(
         seam_cut: None,
         observed_kept: None,
         even_out_gain: None,
+        level: None,
         mirror_disagreement: p
             .inputs
             .disagreement
@@ -2582,6 +2593,37 @@ fn extract_as(
         };
         let (final_tex, kept) = inpaint(&raw, &known, &mut diag.seam_band)?;
         diag.observed_kept = Some(kept);
+        // The texture's level against the material's (`Options::level`):
+        // the de-lit colours of the material's pixels at the working
+        // resolution, averaged over about a quarter of the texture square's
+        // side in the photo (the whole mask: where the texture comes from a
+        // part of it, that part is what may be untypical).
+        diag.level = opts
+            .level
+            .then(|| {
+                let n = w * h;
+                let mut values = Image::zeros(3, h, w);
+                for &i in idx.iter().filter(|&&i| rw[i] > 0.0) {
+                    let v = p.photo_work.rgb(i) * ratio.rgb(i);
+                    for (c, x) in v.to_array().into_iter().enumerate() {
+                        values.data[c * n + i] = x;
+                    }
+                }
+                let in_square = coords
+                    .u
+                    .par_iter()
+                    .zip(&full.data)
+                    .filter(|(u, &m)| m && u.is_finite())
+                    .count();
+                let scale = (w * h) as f64 / (fw * fh).max(1) as f64;
+                let sigma = crate::level::level_sigma(in_square as f64 * scale);
+                crate::level::check(&final_tex, &values, &rw, sigma)
+            })
+            .flatten();
+        let final_tex = match diag.level {
+            Some(l) => crate::level::apply_gain(final_tex, l.gain),
+            None => final_tex,
+        };
         if let Some(d) = diag.uv.as_mut() {
             d.repeats = uv_fold.as_ref().map(|f| f.1);
         }
@@ -2915,6 +2957,7 @@ mod tests {
             wrap_placement: true,
             seamless: false,
             even_out: None,
+            level: true,
             seed: 1,
             inpainter,
         }
@@ -3713,6 +3756,81 @@ mod tests {
             normals_deg: Image::new(1, 2, 2, vec![0.0; 4]).unwrap(),
         });
         assert_eq!(run(&p).0, None, "maps of another size are not read");
+    }
+
+    /// A material whose texture comes from an untypical part of it
+    /// ([`crate::level`]): on a 128×96 frontal plane, the material is a
+    /// 32×32 block at the top left (albedo 0.08) and a 16-pixel band along
+    /// the right and bottom edges (0.3), 3.25 times the block's pixels. The
+    /// pick is in the block, so the plane mode's texture is the block's
+    /// (the part of the mask at the pick); its level is brought to the first quartile of the
+    /// material's local mean luminances, which is the band's, and the
+    /// texture is the unlevelled one times the recorded gain. `level: false` keeps it and
+    /// records nothing; a uniform plane's texture is typical and kept.
+    #[test]
+    fn a_texture_from_an_untypical_part_gets_the_materials_level() {
+        let (w, h) = (128, 96);
+        let block = |i: usize| i % w < 32 && i / w < 32;
+        let band = |i: usize| i % w >= 112 || i / w >= 80;
+        let albedo = |i: usize| if block(i) { 0.08 } else { 0.3 };
+        let p = frontal_plane_with(
+            w,
+            h,
+            &|i| crate::photo::srgb_encode(albedo(i)),
+            &albedo,
+            false,
+        );
+        let given = Mask {
+            width: w,
+            height: h,
+            data: (0..w * h).map(|i| block(i) || band(i)).collect(),
+        };
+        let inpainter = picker_inpaint::DiffusionInpainter::default();
+        let run = |level: bool| {
+            let pm = p.given_mask(given.clone()).unwrap();
+            let opts = Options {
+                fov_deg: Some(60.0),
+                size: Some(24),
+                fold_period: false,
+                level,
+                ..test_options(&inpainter, UvChoice::Plane)
+            };
+            extract(&p, "m", Some([10, 10]), &pm, &opts).unwrap()
+        };
+        let (kept, kept_diag) = run(false);
+        assert_eq!(kept_diag.level, None);
+        let before = crate::level::mean_colour(&kept.texture.as_ref().unwrap().texture);
+        for c in before {
+            assert!((c - 0.08).abs() < 0.005, "the block's texture: {before:?}");
+        }
+        let (levelled, diag) = run(true);
+        let check = diag.level.unwrap();
+        assert_eq!(check.texture_mean, before);
+        assert!((check.median - 0.3).abs() < 1e-3, "{check:?}");
+        assert!((check.q1 - 0.3).abs() < 1e-3, "{check:?}");
+        let lum = crate::level::luminance(before);
+        assert!((check.gain - check.q1 / lum).abs() < 1e-4, "{check:?}");
+        let (a, b) = (
+            &kept.texture.as_ref().unwrap().texture,
+            &levelled.texture.as_ref().unwrap().texture,
+        );
+        for (k, (x, y)) in a.data.iter().zip(&b.data).enumerate() {
+            assert!((x * check.gain - y).abs() < 1e-6, "texel {k}: {x} → {y}");
+        }
+        for (d, b) in levelled.params.diffuse.iter().zip(before) {
+            assert!(
+                (d - b * check.gain).abs() < 1e-4,
+                "{:?}",
+                levelled.params.diffuse
+            );
+        }
+        // A uniform plane: typical, kept as it is.
+        let uniform = frontal_plane_with(w, h, &|_| 0.5, &|_| 0.214, false);
+        let (_, diag, _) = pick_plane(&uniform, |o| Options {
+            size: Some(16),
+            ..o
+        });
+        assert_eq!(diag.level.map(|l| l.gain), Some(1.0));
     }
 
     /// A 160×96 scene: a chessboard of 8-pixel squares (80×48, from (40,
