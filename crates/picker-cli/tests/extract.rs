@@ -1744,19 +1744,19 @@ fn small_extract(
 /// The texture's level against the material's (`picker_extract::level`):
 /// on the coffee photo's saucer, picked beside the cup's handle, where the
 /// texture comes out much darker than most of the saucer (gain 3.4 when
-/// this test was written), the check is recorded (`diagnostics.level`) and the texture
-/// (EXR, linear) is `--keep-level`'s times the recorded gain, brought to
-/// the nearer quartile of the material's local mean luminances;
-/// `--keep-level` records nothing and the summary's settings say which ran.
+/// this test was written), the check is recorded (`diagnostics.level`) and
+/// the texture (EXR, linear) is `--keep-level`'s times the recorded gain,
+/// brought to the nearer quartile of the material's local mean
+/// luminances; `--keep-level` records nothing and the summary's settings
+/// say which ran.
 #[test]
 fn a_darker_texture_gets_the_materials_level() {
     let tmp = tempfile::tempdir().unwrap();
     let photo = repo().join("fixtures/examples/coffee.jpg");
     let args = ["extract", photo.to_str().unwrap(), "--pick", "160,127"];
     let (_, levelled_sum, levelled) = small_extract(tmp.path(), &args, "levelled");
-    let mut kept_args = args.to_vec();
-    kept_args.push("--keep-level");
-    let (_, kept_sum, kept) = small_extract(tmp.path(), &kept_args, "kept");
+    let (_, kept_sum, kept) =
+        small_extract(tmp.path(), &[&args[..], &["--keep-level"]].concat(), "kept");
     assert_eq!(levelled_sum["settings"]["level"], Value::Bool(true));
     assert_eq!(kept_sum["settings"]["level"], Value::Bool(false));
     assert!(kept["diagnostics"].get("level").is_none());
