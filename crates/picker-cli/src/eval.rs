@@ -234,6 +234,9 @@ pub struct Row {
     /// How far the networks' two passes disagreed over the mask
     /// (`diagnostics.mirror_disagreement`), when they ran twice.
     mirror_disagreement: Option<picker_extract::pipeline::DisagreementStats>,
+    /// The gain the texture was brought to its material's level by
+    /// (`diagnostics.level.gain`; 1: kept as it was), when it was checked.
+    level_gain: Option<f32>,
 }
 
 fn scene_dirs(dir: &Path) -> Result<Vec<PathBuf>> {
@@ -615,6 +618,7 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
             seam_cut: None,
             observed_kept: None,
             mirror_disagreement: None,
+            level_gain: None,
         };
         let Some((mat, diag)) = extracted else {
             rows.push(row);
@@ -645,6 +649,7 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
             .map(|c| u8::from(c.columns.is_some()) + u8::from(c.rows.is_some()));
         row.observed_kept = diag.observed_kept;
         row.mirror_disagreement = diag.mirror_disagreement;
+        row.level_gain = diag.level.map(|l| l.gain);
         if let Some(uv) = diag.uv.as_ref().filter(|u| u.mode == UvMode::Plane) {
             // The true plane at the pick (the same rule as the extraction's:
             // a material of several planes is rectified from the one picked),
@@ -860,6 +865,7 @@ pub fn run(a: Args) -> Result<()> {
         "seam_band_rows": rows.iter().filter(|r| r.seam_band.is_some()).count(),
         "seam_cut_rows": rows.iter().filter(|r| r.seam_cut.is_some_and(|n| n > 0)).count(),
         "mean_observed_kept": mean(tex.iter().filter_map(|r| r.observed_kept)),
+        "levelled_rows": rows.iter().filter(|r| r.level_gain.is_some_and(|g| g != 1.0)).count(),
         "mean_plane_predicted_error_deg": mean(rows.iter().filter_map(|r| r.plane_predicted_error_deg)),
         "mean_plane_error_deg": mean(rows.iter().filter_map(|r| r.plane_error_deg)),
         "median_plane_error_deg": median(rows.iter().filter_map(|r| r.plane_error_deg).collect()),
@@ -875,6 +881,7 @@ pub fn run(a: Args) -> Result<()> {
             "elements": if models.is_none() { "ground truth" } else { "networks" },
             "work_size": models.as_ref().map(|_| a.work_size),
             "mirror_pass": models.as_ref().map(|_| !a.single_pass),
+            "level": !a.keep_level,
             "truth": &a.truth,
             "weights": models.as_ref().map(|m| m.paths().iter().map(|p| p.display().to_string()).collect::<Vec<_>>()),
             "min_area": a.min_area, "aggregate": agg, "rows": rows,

@@ -106,6 +106,26 @@ fn ground_truth_extraction_recovers_masks_and_textures() {
         "only {good} of {} textures reach 25 dB: {psnr:?}",
         psnr.len()
     );
+    // The level check ran (the report says so): textured rows carry its
+    // gain, within its bounds, the others none; the aggregate counts the
+    // rows it changed.
+    assert_eq!(r["level"], Value::Bool(true));
+    let mut levelled = 0;
+    for row in rows {
+        match row["level_gain"].as_f64() {
+            Some(g) => {
+                assert_eq!(row["textured_extracted"], Value::Bool(true), "{row}");
+                assert!((0.125..=8.0).contains(&g), "{row}");
+                levelled += usize::from(g != 1.0);
+            }
+            None => assert!(row["level_gain"].is_null(), "{row}"),
+        }
+    }
+    assert!(rows.iter().any(|r| r["level_gain"].is_number()));
+    assert_eq!(
+        r["aggregate"]["levelled_rows"].as_u64(),
+        Some(levelled as u64)
+    );
     // Every row says whether the net-UV square was found to repeat; the
     // aggregate counts them.
     let repeats = rows.iter().filter(|r| !r["uv_repeats"].is_null()).count();
