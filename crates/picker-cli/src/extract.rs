@@ -136,10 +136,11 @@ pub struct Flags {
     #[arg(long)]
     pub no_seam_cut: bool,
     /// Keep the texture's level as the part of the material it came from shows it. By default a
-    /// texture whose mean colour lies outside the quartiles of the material's local mean colours
-    /// (its de-lit colours averaged over about a quarter of the texture's square) is scaled to
-    /// the nearer quartile per channel, by at most 8x: a texture taken from a vignetted corner or
-    /// a shadow gets the material's level (material.json diagnostics.level).
+    /// texture whose mean luminance lies outside the quartiles of the material's local mean
+    /// luminances (its de-lit colours averaged over about a quarter of the texture's square,
+    /// where they have the texture's chromaticity) is scaled, all channels alike, to the nearer
+    /// quartile, by at most 8x: a texture taken from a vignetted corner or a shadow gets the
+    /// material's level (material.json diagnostics.level).
     #[arg(long)]
     pub keep_level: bool,
     /// The de-lighting's shading where the networks estimated the albedo: the ratio of their

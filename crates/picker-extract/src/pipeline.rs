@@ -276,10 +276,11 @@ pub struct Options<'a> {
     /// default: it also flattens patterns whose light and dark areas are that
     /// wide).
     pub even_out: Option<f64>,
-    /// Bring a texture whose mean colour lies outside the quartiles of the
-    /// material's local mean colours (its de-lit colours averaged over about
-    /// a quarter of the texture square) to the nearer quartile, per channel
-    /// ([`crate::level`]): a texture taken from a vignetted corner or a
+    /// Bring a texture whose mean luminance lies outside the quartiles of
+    /// the material's local mean luminances (its de-lit colours averaged
+    /// over about a quarter of the texture square, where they have the
+    /// texture's chromaticity) to the nearer quartile, all channels by one
+    /// gain ([`crate::level`]): a texture taken from a vignetted corner or a
     /// shadow gets the material's level.
     pub level: bool,
     /// Seed of the inpainter.
