@@ -3764,10 +3764,11 @@ mod tests {
     /// 32×32 block at the top left (albedo 0.08) and a 16-pixel band along
     /// the right and bottom edges (0.3), 3.25 times the block's pixels. The
     /// pick is in the block, so the plane mode's texture is the block's
-    /// (the part of the mask at the pick); its level is brought to the first quartile of the
-    /// material's local mean luminances, which is the band's, and the
-    /// texture is the unlevelled one times the recorded gain. `level: false` keeps it and
-    /// records nothing; a uniform plane's texture is typical and kept.
+    /// (the part of the mask at the pick); its level is brought to the
+    /// first quartile of the material's local mean luminances, which is the
+    /// band's, and the texture is the unlevelled one times the recorded
+    /// gain. `level: false` keeps it and records nothing; a uniform plane's
+    /// texture is typical and kept.
     #[test]
     fn a_texture_from_an_untypical_part_gets_the_materials_level() {
         let (w, h) = (128, 96);
