@@ -89,9 +89,9 @@ pub struct LevelCheck {
     pub gain: f32,
 }
 
-/// Linear luminance (Rec. 709 weights).
+/// Linear luminance of an RGB triple ([`crate::pipeline::luminance`]).
 pub fn luminance(c: [f32; 3]) -> f32 {
-    0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]
+    crate::pipeline::luminance(glam::Vec3::from_array(c))
 }
 
 /// The rg-chromaticity `(R, G) / (R + G + B)`; `None` when the sum is not
