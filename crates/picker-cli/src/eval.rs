@@ -124,9 +124,9 @@ pub struct Args {
     /// whose cut would show gets the band either way).
     #[arg(long)]
     pub no_seam_cut: bool,
-    /// As `extract --shading-sigma`: the de-lighting's shading from the networks' albedo smoothed
-    /// over the material by a Gaussian of this many working pixels (ground-truth albedo is used as
-    /// it is).
+    /// As `extract --shading-sigma`: the de-lighting's shading from the networks' albedo taken
+    /// over a Gaussian window of the material of this many working pixels (ground-truth albedo is
+    /// used as it is).
     #[arg(long, value_name = "PX", default_value_t = picker_extract::shading::SHADING_SIGMA,
           value_parser = crate::extract::parse_sigma, allow_negative_numbers = true)]
     pub shading_sigma: f32,

@@ -144,8 +144,9 @@ pub struct Flags {
     #[arg(long)]
     pub keep_level: bool,
     /// The de-lighting's shading where the networks estimated the albedo: the ratio of their
-    /// albedo to the photo is smoothed over the material's pixels by a Gaussian of this many
-    /// working pixels, so the texture's detail comes from the photo and its level and colour from
+    /// albedo to the photo is taken over a Gaussian window of the material's pixels of this many
+    /// working pixels (the ratio of the two's local sums, so a print's dark channels do not tint
+    /// their surroundings), so the texture's detail comes from the photo and its level and colour from
     /// the network (0: the network's albedo as it is at the working resolution, which is the
     /// texture itself for a photo no larger than it). Albedo given with --elements from a
     /// renderer is exact and used as it is.

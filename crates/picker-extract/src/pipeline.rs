@@ -257,10 +257,11 @@ pub struct Options<'a> {
     /// texels; an axis whose surroundings were not observed gets the band.
     pub cut_seams: bool,
     /// When the inputs' albedo was estimated ([`Inputs::albedo_estimated`]):
-    /// σ, in working pixels, of the Gaussian that smooths the de-lighting
-    /// ratio (albedo ÷ photo) over the material's pixels
-    /// ([`crate::shading::smooth_in_mask`]), so the texture's detail comes
-    /// from the photo; 0 takes the network's albedo as it is.
+    /// σ, in working pixels, of the Gaussian window over the material's
+    /// pixels in which the de-lighting ratio (albedo ÷ photo) is taken, as
+    /// the ratio of the two's local sums ([`crate::shading::delighting_ratio`]),
+    /// so the texture's detail comes from the photo; 0 takes the network's
+    /// albedo as it is.
     pub shading_sigma: f32,
     /// Put a folded tile's wrap edges where its observed texels change least
     /// (any cyclic shift of a repeating tile is the same texture), so that a
@@ -1631,7 +1632,7 @@ fn extract_as(
             alb = Vec3::splat(luminance(alb));
         }
         if ph.min_element() > 0.004 {
-            ratio.set_rgb(i, (alb / ph).min(Vec3::splat(100.0)));
+            ratio.set_rgb(i, (alb / ph).min(Vec3::splat(crate::shading::RATIO_MAX)));
             rw[i] = 1.0;
         }
     }
@@ -1643,7 +1644,21 @@ fn extract_as(
     let mut unsmoothed = None;
     let mut clipped_share = 0.0;
     if p.inputs.albedo_estimated && opts.shading_sigma > 0.0 {
-        let smooth = crate::shading::smooth_in_mask(&ratio, &rw, opts.shading_sigma);
+        // The ratio of the albedo's and the photo's local sums, not the mean
+        // of the pixels' own ratios (`crate::shading::delighting_ratio`).
+        let grey;
+        let albedo = if p.greyscale {
+            let mut g = Image::zeros(3, h, w);
+            for &i in &idx {
+                g.set_rgb(i, Vec3::splat(luminance(el.diffuse.rgb(i))));
+            }
+            grey = g;
+            &grey
+        } else {
+            &el.diffuse
+        };
+        let smooth =
+            crate::shading::delighting_ratio(albedo, &p.photo_work, &rw, opts.shading_sigma);
         unsmoothed = Some(std::mem::replace(&mut ratio, smooth));
     }
     // Only the masked pixels of the de-lit photo are ever read (reprojection,
