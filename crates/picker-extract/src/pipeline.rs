@@ -2686,12 +2686,8 @@ fn extract_as(
             (final_tex, raw, coverage)
         };
         lap("inpaint", &mut timings);
-        let texels = final_tex.plane_len();
-        let mut mean = Vec3::ZERO;
-        for i in 0..texels {
-            mean += final_tex.rgb(i);
-        }
-        diffuse_mean = mean / texels.max(1) as f32;
+        // The final texture's mean, as the level check measures it.
+        diffuse_mean = Vec3::from_array(crate::level::mean_colour(&final_tex));
         if mode == UvMode::Net {
             uv_work = el.uv.as_ref();
         }
