@@ -22,10 +22,11 @@
 use picker_render::Image;
 use rayon::prelude::*;
 
-/// σ, in working pixels, of the Gaussian that [`smooth_in_mask`] applies
-/// to the de-lighting ratio of a network's albedo.
+/// σ, in working pixels, of the Gaussian window in which
+/// [`delighting_ratio`] takes the de-lighting ratio of a network's albedo.
 ///
-/// Measured (stop 51) with the embedded networks, `picker eval --embedded
+/// Measured (stop 51, with the mean of the pixels' ratios; stop 54's ratio
+/// of sums re-checked at σ 2 and 8, README *The ratio of local sums*) with the embedded networks, `picker eval --embedded
 /// --shading-sigma S` on proc-4242 / proc-9191 / proc-5151 (40 scenes
 /// each), mean aligned texture PSNR and colour-statistics distance:
 ///
