@@ -1623,14 +1623,24 @@ fn extract_as(
         .unwrap_or(0.0);
 
     // De-lit colours at full resolution.
+    // The networks' albedo as the de-lighting reads it: grey (its
+    // luminance) for a greyscale photo, whose colour it cannot tell.
+    let grey;
+    let albedo = if p.greyscale {
+        let mut g = Image::zeros(3, h, w);
+        for &i in &idx {
+            g.set_rgb(i, Vec3::splat(luminance(el.diffuse.rgb(i))));
+        }
+        grey = g;
+        &grey
+    } else {
+        &el.diffuse
+    };
     let mut ratio = Image::zeros(3, h, w);
     let mut rw = vec![0.0f32; w * h];
     for &i in &idx {
         let ph = p.photo_work.rgb(i);
-        let mut alb = el.diffuse.rgb(i);
-        if p.greyscale {
-            alb = Vec3::splat(luminance(alb));
-        }
+        let alb = albedo.rgb(i);
         if ph.min_element() > 0.004 {
             ratio.set_rgb(i, (alb / ph).min(Vec3::splat(crate::shading::RATIO_MAX)));
             rw[i] = 1.0;
@@ -1646,17 +1656,6 @@ fn extract_as(
     if p.inputs.albedo_estimated && opts.shading_sigma > 0.0 {
         // The ratio of the albedo's and the photo's local sums, not the mean
         // of the pixels' own ratios (`crate::shading::delighting_ratio`).
-        let grey;
-        let albedo = if p.greyscale {
-            let mut g = Image::zeros(3, h, w);
-            for &i in &idx {
-                g.set_rgb(i, Vec3::splat(luminance(el.diffuse.rgb(i))));
-            }
-            grey = g;
-            &grey
-        } else {
-            &el.diffuse
-        };
         let smooth =
             crate::shading::delighting_ratio(albedo, &p.photo_work, &rw, opts.shading_sigma);
         unsmoothed = Some(std::mem::replace(&mut ratio, smooth));
