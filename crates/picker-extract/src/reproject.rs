@@ -388,15 +388,6 @@ impl Footprint {
         }
     }
 
-    /// Whether this is the one-texel tent ([`Footprint::isotropic`]`(1)`,
-    /// every merged block's and every pixel finer than a texel's): its
-    /// weights are the bilinear ones, `(1 − |dx|)(1 − |dy|)`, on the two
-    /// texels around the sample along each axis ([`unit_taps`]).
-    #[inline]
-    fn is_unit(&self) -> bool {
-        self.inv == [1.0, 0.0, 0.0, 1.0] && self.ext == [1.0, 1.0]
-    }
-
     /// The part of the pixel offsets that depends on the texel row offset
     /// `dy` (shared by a row's texels: [`Footprint::weight`]).
     #[inline]
@@ -811,25 +802,6 @@ fn wrap_i64(v: i64, n: i64) -> i64 {
     }
 }
 
-/// The texels a one-texel tent ([`Footprint::is_unit`]) centred at `p`
-/// (texel units, minus ½) can reach along one axis and the tent's factor at
-/// each: `floor(p)` and `floor(p) + 1`, with `1 − |t − p|`. These are the
-/// only texels of the general loop (`ceil(p − 1)..=floor(p + 1)`) whose
-/// factor can be positive (any other is a whole texel or more away), and
-/// the factor is computed with the general footprint's operations
-/// ([`Footprint::weight`] with `J'⁻¹ = I`: `1·d + 0 = d` exactly), so a
-/// splat or prediction through these taps gives the same bits as the
-/// general loop (`tests::banded_splat_matches_reference`).
-#[inline]
-fn unit_taps(p: f32) -> [(i64, f32); 2] {
-    let t0 = floor_i64(p);
-    let t1 = t0 + 1;
-    [
-        (t0, 1.0 - (t0 as f32 - p).abs()),
-        (t1, 1.0 - (t1 as f32 - p).abs()),
-    ]
-}
-
 /// The texture rows a sample's tent covers (before wrapping).
 #[inline]
 fn sample_rows(s: &Sample, size: usize) -> (i64, i64) {
@@ -939,41 +911,6 @@ fn splat(
                 let py = s.v * size as f32 - 0.5;
                 let fp = &s.fp;
                 let per_area = s.count / fp.area;
-                // One texel's contribution (tent factor `t > 0`).
-                let mut add = |yy: i64, xx: i64, t: f32| {
-                    let lt = (yy - lo) as usize * size + xx as usize;
-                    let mut w = s.weight * t;
-                    if let Some(mean) = reference {
-                        let d = (s.colour - mean[lt + lo as usize * size]).length() / scale;
-                        w /= 1.0 + d * d;
-                    }
-                    bsum[lt] += value * w;
-                    bw[lt] += w;
-                    if track_seen {
-                        bseen[lt] += per_area * t;
-                    }
-                };
-                if fp.is_unit() {
-                    // The bilinear tent: two texels each way, no search.
-                    let (tys, txs) = (unit_taps(py), unit_taps(px));
-                    for (ty, b) in tys {
-                        let yy = if wrap { wrap_i64(ty, n) } else { ty };
-                        if yy < lo || yy >= hi {
-                            continue;
-                        }
-                        for (tx, a) in txs {
-                            if a <= 0.0 || b <= 0.0 {
-                                continue;
-                            }
-                            let xx = if wrap { wrap_i64(tx, n) } else { tx };
-                            if xx < 0 || xx >= n {
-                                continue;
-                            }
-                            add(yy, xx, a * b);
-                        }
-                    }
-                    continue;
-                }
                 let (x0, x1) = (ceil_i64(px - fp.ext[0]), floor_i64(px + fp.ext[0]));
                 let (y0, y1) = (ceil_i64(py - fp.ext[1]), floor_i64(py + fp.ext[1]));
                 for ty in y0..=y1 {
@@ -983,6 +920,7 @@ fn splat(
                         continue;
                     }
                     let row_t = fp.row(ty as f32 - py);
+                    let row = (yy - lo) as usize * size;
                     for tx in x0..=x1 {
                         let t = fp.weight(row_t, tx as f32 - px);
                         if t <= 0.0 {
@@ -992,7 +930,17 @@ fn splat(
                         if xx < 0 || xx >= n {
                             continue;
                         }
-                        add(yy, xx, t);
+                        let lt = row + xx as usize;
+                        let mut w = s.weight * t;
+                        if let Some(mean) = reference {
+                            let d = (s.colour - mean[lt + lo as usize * size]).length() / scale;
+                            w /= 1.0 + d * d;
+                        }
+                        bsum[lt] += value * w;
+                        bw[lt] += w;
+                        if track_seen {
+                            bseen[lt] += per_area * t;
+                        }
                     }
                 }
             }
@@ -1024,29 +972,9 @@ fn predict(s: &Sample, tex: &[Vec3], size: usize, wrap: bool) -> Option<Vec3> {
     let px = s.u * size as f32 - 0.5;
     let py = s.v * size as f32 - 0.5;
     let fp = &s.fp;
-    let (mut acc, mut wsum) = (Vec3::ZERO, 0.0f32);
-    if fp.is_unit() {
-        // The bilinear tent ([`unit_taps`]): the general loop's bits.
-        let txs = unit_taps(px);
-        for (ty, b) in unit_taps(py) {
-            let yy = if wrap { wrap_i64(ty, n) } else { ty };
-            if yy < 0 || yy >= n {
-                continue;
-            }
-            for (tx, a) in txs {
-                let xx = if wrap { wrap_i64(tx, n) } else { tx };
-                if a <= 0.0 || b <= 0.0 || xx < 0 || xx >= n {
-                    continue;
-                }
-                let w = a * b;
-                acc += tex[yy as usize * size + xx as usize] * w;
-                wsum += w;
-            }
-        }
-        return (wsum > 0.0).then(|| acc / wsum);
-    }
     let (x0, x1) = (ceil_i64(px - fp.ext[0]), floor_i64(px + fp.ext[0]));
     let (y0, y1) = (ceil_i64(py - fp.ext[1]), floor_i64(py + fp.ext[1]));
+    let (mut acc, mut wsum) = (Vec3::ZERO, 0.0f32);
     for ty in y0..=y1 {
         let yy = if wrap { wrap_i64(ty, n) } else { ty };
         if yy < 0 || yy >= n {
@@ -2055,8 +1983,6 @@ mod tests {
         assert!(r2 < 0.3, "{r2}");
     }
 
-    /// A footprint from a random Jacobian: isotropic, oblique, degenerate
-    /// (collapsed onto a line) or far beyond the clamps.
     /// A sample coordinate in `[-0.2, 1.2)`, on a texel centre (or an edge
     /// between two) one time in four: where a tent's end taps weigh 0.
     fn random_position(rng: &mut picker_tensor::Rng, size: usize) -> f32 {
@@ -2125,13 +2051,14 @@ mod tests {
         }
     }
 
+    /// A footprint from a random Jacobian: isotropic, the one-texel tent, oblique, degenerate
+    /// (collapsed onto a line) or far beyond the clamps.
     fn random_footprint(rng: &mut picker_tensor::Rng) -> Footprint {
         let mut j = || rng.uniform(-6.0, 6.0);
         let (jx, mut jy) = ([j(), j()], [j(), j()]);
         match rng.range(0, 6) {
             0 => Footprint::isotropic(rng.uniform(1.0, MAX_SPLAT_RADIUS * 3.0)),
-            // The one-texel tent (merged blocks, fine pixels): the splat's
-            // and the prediction's bilinear path.
+            // The one-texel tent (merged blocks, fine pixels).
             4 | 5 => Footprint::isotropic(1.0),
             1 => {
                 // Parallel columns: a degenerate Jacobian.
