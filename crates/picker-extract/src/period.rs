@@ -759,7 +759,8 @@ fn fold_spread(samples: &[(f32, f32, f32, f32)], tile: [f32; 2], bins: usize) ->
 /// other's texels (a chessboard's white squares came out smaller than its
 /// black ones). Each side is scaled by `1 + k·`[`REFINE_STEP`] for `|k| ≤`
 /// [`REFINE_STEPS`], then by a quarter step around the best, `u` then `v`
-/// then `u` again, keeping the scale whose fold leaves the least spread of
+/// then `u` again (unless the first two rounds found less than half the
+/// gain asked for: then the fold stays as measured), keeping the scale whose fold leaves the least spread of
 /// the pixels' luma within bins of the tile ([`fold_spread`], on at most
 /// [`REFINE_MAX_PIXELS`] pixels taken evenly); the result replaces the
 /// measured tile only when it lowers that spread by [`REFINE_MIN_GAIN`].
@@ -797,11 +798,8 @@ pub fn refine_tile(
             && coords.v[i].is_finite()
             && colour.rgb(i).is_finite()
     };
-    let stride = (0..n)
-        .filter(kept)
-        .count()
-        .div_ceil(REFINE_MAX_PIXELS)
-        .max(1);
+    let count = (0..n).into_par_iter().filter(kept).count();
+    let stride = count.div_ceil(REFINE_MAX_PIXELS).max(1);
     let samples: Vec<(f32, f32, f32, f32)> = (0..n)
         .filter(kept)
         .step_by(stride)
@@ -847,7 +845,12 @@ pub fn refine_tile(
     let spread_at =
         |sc: [f32; 2]| fold_spread(&samples, [fold.tile[0] * sc[0], fold.tile[1] * sc[1]], bins);
     let mut best = base;
-    for axis in [0usize, 1, 0] {
+    for (round, axis) in [0usize, 1, 0].into_iter().enumerate() {
+        // After a round along each axis, a fold still short of half the
+        // gain asked for is not refined (the last round only polishes).
+        if round == 2 && best > base * (1.0 - REFINE_MIN_GAIN / 2.0) {
+            return fold;
+        }
         for (step, steps) in [(REFINE_STEP, REFINE_STEPS), (REFINE_STEP / 4.0, 4)] {
             // Candidates nearest the current scale first, so ties keep the
             // smaller change.
