@@ -1296,17 +1296,9 @@ mod tests {
             let dark = ((i % w) / sq + (i / w) / sq) % 2 == 1;
             colour.set_rgb(i, Vec3::splat(if dark { 0.04 } else { 0.7 }));
         }
-        let coords = Coords {
-            width: w,
-            height: h,
-            u: (0..w * h)
-                .map(|i| ((i % w) as f32 + 0.5) / w as f32)
-                .collect(),
-            v: (0..w * h)
-                .map(|i| ((i / w) as f32 + 0.5) / w as f32)
-                .collect(),
-            wrap: false,
-        };
+        // The frame's coordinates, `v` in units of the width (square pixels).
+        let mut coords = Coords::identity(w, h, false);
+        coords.v.iter_mut().for_each(|v| *v *= h as f32 / w as f32);
         let p = 2.0 * sq as f32 / w as f32;
         let fold = Fold {
             period: [p * off[0], p * off[1]],
