@@ -490,6 +490,14 @@ pub struct Fold {
     /// sides (`[u, v]`), when it did: the measured periods drifted over the
     /// repeats. `None`: the tile as measured.
     pub refined: Option<[f32; 2]>,
+    /// The shear `[a, b]` applied to the rectified square's coordinates
+    /// before they are folded: `u' = u + a·v`, `v' = v + b·u` ([`fold_coords`]).
+    /// [`refine_tile`] sets it where the repeats' lattice is turned or
+    /// skewed against the square's axes (a plane rectified a few degrees
+    /// off), which an axis-aligned tile would fold misregistered; the
+    /// tile's sides and periods are then measured along the sheared axes.
+    /// `[0, 0]`: none.
+    pub shear: [f32; 2],
 }
 
 impl Fold {
@@ -502,6 +510,18 @@ impl Fold {
                 0.5 / self.periods_per_tile[1].max(1) as f32,
             ]
         })
+    }
+
+    /// The lengths, as fractions of the rectified square, of the tile's two
+    /// sides on the plane: [`Fold::tile`] with [`Fold::shear`] undone (the
+    /// sheared axes' unit steps are longer than the square's).
+    pub fn sides(&self) -> [f32; 2] {
+        let [a, b] = self.shear;
+        let det = (1.0 - a * b).abs();
+        [
+            self.tile[0] * (1.0 + b * b).sqrt() / det,
+            self.tile[1] * (1.0 + a * a).sqrt() / det,
+        ]
     }
 }
 
@@ -626,14 +646,37 @@ pub fn fold_tile(px: AxisPeriod, py: AxisPeriod, size: usize) -> Fold {
         strength: [px.strength, py.strength],
         centred: None,
         refined: None,
+        shear: [0.0, 0.0],
     }
 }
 
 /// The coordinates `coords` (the rectified square's, not wrapping) folded
-/// by `fold`'s tile: `u' = frac(u / tile_u)`, `v' = frac(v / tile_v)`,
-/// wrapping. Pixels without coordinates keep none.
+/// by `fold`'s tile after its shear `[a, b]`: `u' = frac((u + a·v) / tile_u)`,
+/// `v' = frac((v + b·u) / tile_v)`, wrapping. Pixels without coordinates
+/// keep none.
 pub fn fold_coords(coords: &Coords, fold: &Fold) -> Coords {
-    wrap_by_tile(coords, fold.tile)
+    let [a, b] = fold.shear;
+    if a == 0.0 && b == 0.0 {
+        return wrap_by_tile(coords, fold.tile);
+    }
+    let sheared = Coords {
+        u: coords
+            .u
+            .iter()
+            .zip(&coords.v)
+            .map(|(&u, &v)| u + a * v)
+            .collect(),
+        v: coords
+            .u
+            .iter()
+            .zip(&coords.v)
+            .map(|(&u, &v)| v + b * u)
+            .collect(),
+        width: coords.width,
+        height: coords.height,
+        wrap: coords.wrap,
+    };
+    wrap_by_tile(&sheared, fold.tile)
 }
 
 /// `coords` wrapped by a tile of sides `tile` (fractions of the square):
@@ -703,11 +746,27 @@ pub const REFINE_BINS: usize = 96;
 pub const REFINE_BIN_PIXELS: f32 = 2.0;
 /// Most pixels [`refine_tile`] reads (an even stride through the picked ones).
 pub const REFINE_MAX_PIXELS: usize = 1 << 18;
+/// [`refine_tile`]'s coarse steps read every this many of its pixels (the
+/// quarter steps around the best read them all).
+pub const REFINE_COARSE_STRIDE: usize = 4;
 /// [`refine_tile`]'s coarse step (a share of the tile's side) ...
 pub const REFINE_STEP: f32 = 0.004;
 /// ... and how many steps it looks on each side (±3.2 %), then a quarter
 /// step as far on each side of the best.
 pub const REFINE_STEPS: i32 = 8;
+/// [`refine_tile`]'s coarse step of shear (the tile's shift along one axis
+/// per tile along the other, in tiles) ...
+pub const REFINE_SHEAR_STEP: f32 = 0.01;
+/// ... and how many steps it looks on each side (±0.1: a lattice turned by
+/// up to ~6° against the square's axes), then a quarter step four times on
+/// each side of the best.
+pub const REFINE_SHEAR_STEPS: i32 = 10;
+/// Fewest bins per tile side (a tile of about 40 pixels) with which
+/// [`refine_tile`] shears: a coarse shear step moves a smaller tile by
+/// under 0.4 pixel per repeat, where the spread is bumpy (how the pixels'
+/// phases fall into the bins decides), and with ground-truth elements the
+/// shears found on 20–32-texel tiles were chance (−0.4 to −3.2 dB, stop 56).
+pub const REFINE_SHEAR_MIN_BINS: usize = 20;
 /// A refined tile must lower the within-bin spread by at least this share
 /// (else the measured one is kept). A drifting fold leaves far more spread
 /// than one that lines the repeats up (a chessboard's: 63–89 % less once
@@ -718,19 +777,37 @@ pub const REFINE_MIN_GAIN: f64 = 0.4;
 /// Fewest bins per tile side [`refine_tile`] measures with.
 pub const REFINE_MIN_BINS: usize = 8;
 
+/// A pixel [`refine_tile`] reads: `(u, v, luma, confidence, texture area)`.
+type Taken = (f32, f32, f32, f32, f32);
+
 /// The picked pixels' spread around their fold: the weighted mean, over the
-/// `bins`² bins of a tile of sides `tile`, of the squared distance of each
-/// pixel's luma from its bin's mean (`samples`: `(u, v, luma, weight)` in
-/// the rectified square, unfolded).
-fn fold_spread(samples: &[(f32, f32, f32, f32)], tile: [f32; 2], bins: usize) -> f64 {
+/// `bins`² bins of a tile of sides `tile` after the shear `[a, b]` (as
+/// [`fold_coords`] folds), of the squared distance of each pixel's luma
+/// from its bin's mean (`samples`: `(u, v, luma, weight)` in the rectified
+/// square, unfolded).
+fn fold_spread(
+    samples: &[(f32, f32, f32, f32)],
+    tile: [f32; 2],
+    shear: [f32; 2],
+    bins: usize,
+) -> f64 {
     let b = bins.max(1);
     let mut acc = vec![[0.0f64; 3]; b * b];
-    let bin = |t: f32, side: f32| {
-        let x = t / side;
-        (((x - x.floor()) * b as f32) as usize).min(b - 1)
+    // The bin of `t` in the tile's side `1 / inv`: the fraction of
+    // `t · inv` by a whole-number floor rather than `f32::floor` (a library
+    // call on the baseline x86-64 target, the loop's largest cost).
+    let bf = b as f32;
+    let bin = |t: f32, inv: f32| {
+        let x = t * inv;
+        let i = x as i32;
+        let fl = i - i32::from(x < i as f32);
+        (((x - fl as f32) * bf) as usize).min(b - 1)
     };
+    let (su, sv) = (1.0 / tile[0], 1.0 / tile[1]);
+    let [sa, sb] = shear;
     for &(u, v, l, w) in samples {
-        let a = &mut acc[bin(v, tile[1]) * b + bin(u, tile[0])];
+        let (u, v) = (u + sa * v, v + sb * u);
+        let a = &mut acc[bin(v, sv) * b + bin(u, su)];
         let (l, w) = (f64::from(l), f64::from(w));
         a[0] += w;
         a[1] += w * l;
@@ -750,18 +827,26 @@ fn fold_spread(samples: &[(f32, f32, f32, f32)], tile: [f32; 2], bins: usize) ->
     }
 }
 
-/// `fold` with its tile's sides (and periods) refined to line the picked
-/// pixels up best: the periods [`detect`] measures are precise to about a
-/// percent (its shifts reach half the square, so a square of four periods
-/// refines them by the second's peak at most), and a tile a percent off
-/// drifts by a period's few percent over a few repeats, which blurs the
-/// folded pattern's edges and lets one colour's pixels land on the
-/// other's texels (a chessboard's white squares came out smaller than its
-/// black ones). Each side is scaled by `1 + k·`[`REFINE_STEP`] for `|k| ≤`
-/// [`REFINE_STEPS`], then by a quarter step around the best, `u` then `v`
-/// then `u` again (unless the first two rounds found less than half the
-/// gain asked for: then the fold stays as measured), keeping the scale whose fold leaves the least spread of
-/// the pixels' luma within bins of the tile ([`fold_spread`], on at most
+/// `fold` with its tile's sides (and periods) refined, and its axes
+/// sheared, to line the picked pixels up best: the periods [`detect`]
+/// measures are precise to about a percent (its shifts reach half the
+/// square, so a square of four periods refines them by the second's peak at
+/// most), and a tile a percent off drifts by a period's few percent over a
+/// few repeats, which blurs the folded pattern's edges and lets one
+/// colour's pixels land on the other's texels (a chessboard's white squares
+/// came out smaller than its black ones); a lattice turned or skewed by a
+/// few degrees against the square's axes (a plane rectified slightly off:
+/// a calibration board held up to the camera) drifts the same way along
+/// the other axis. Each side is scaled by `1 + k·`[`REFINE_STEP`] for `|k| ≤`
+/// [`REFINE_STEPS`], then by a quarter step around the best, and each axis
+/// sheared by `k·`[`REFINE_SHEAR_STEP`] tiles per tile for `|k| ≤`
+/// [`REFINE_SHEAR_STEPS`], then by a quarter step: scale `u`, scale `v`,
+/// shear `u`, shear `v`, then (unless those four rounds found less than half
+/// the gain asked for: the fold then stays as measured) all four again
+/// (the spread is bumpy at sub-pixel drifts; a tile spanning fewer than
+/// [`REFINE_SHEAR_MIN_BINS`] bins is only scaled: `u`, `v`, then `u`
+/// again after the same check), keeping the candidate whose fold leaves the least spread of the
+/// pixels' luma within bins of the tile ([`fold_spread`], on at most
 /// [`REFINE_MAX_PIXELS`] pixels taken evenly); the result replaces the
 /// measured tile only when it lowers that spread by [`REFINE_MIN_GAIN`].
 /// Deterministic (ties: the smaller change).
@@ -782,36 +867,81 @@ pub fn refine_tile(
     if !fold.tile.iter().chain(&fold.period).all(|&t| ok(t)) {
         return fold;
     }
-    // Bins about REFINE_BIN_PIXELS pixels wide (the median pixel's side).
-    let Some(area) = coords.sizing_area(mask).filter(|a| ok(*a)) else {
-        return fold;
+    let usable = |i: usize| {
+        confidence[i] > 0.0
+            && coords.u[i].is_finite()
+            && coords.v[i].is_finite()
+            && colour.rgb(i).is_finite()
     };
+    // Every `stride`-th picked pixel in index order (at most about
+    // REFINE_MAX_PIXELS), those with coordinates, colour and confidence,
+    // found in parallel over blocks of pixels: each block's picked pixels
+    // are counted, then taken where their rank among all the picked pixels
+    // is a multiple of the stride (only the mask is read whole). Each
+    // sample is `(u, v, luma, confidence, texture area)`.
+    const BLOCK: usize = 1 << 16;
+    let blocks: Vec<std::ops::Range<usize>> = (0..n)
+        .step_by(BLOCK)
+        .map(|s| s..(s + BLOCK).min(n))
+        .collect();
+    let counts: Vec<usize> = blocks
+        .par_iter()
+        .map(|r| mask[r.clone()].iter().filter(|&&m| m).count())
+        .collect();
+    let count: usize = counts.iter().sum();
+    let stride = count.div_ceil(REFINE_MAX_PIXELS).max(1);
+    let firsts: Vec<usize> = counts
+        .iter()
+        .scan(0, |acc, &c| {
+            let first = *acc;
+            *acc += c;
+            Some(first)
+        })
+        .collect();
+    let taken: Vec<Vec<Taken>> = blocks
+        .par_iter()
+        .zip(&firsts)
+        .map(|(r, &first)| {
+            let skip = (stride - first % stride) % stride;
+            r.clone()
+                .filter(|&i| mask[i])
+                .skip(skip)
+                .step_by(stride)
+                .filter(|&i| usable(i))
+                .filter_map(|i| {
+                    let c = colour.rgb(i);
+                    let luma = 0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z;
+                    let a = coords.pixel_area(mask, i).filter(|a| *a > 0.0)?;
+                    Some((coords.u[i], coords.v[i], luma, confidence[i], a))
+                })
+                .collect()
+        })
+        .collect();
+    let taken: Vec<Taken> = taken.concat();
+    // Bins about REFINE_BIN_PIXELS pixels wide (the median pixel's side,
+    // the median of the samples' texture areas).
+    let mut areas: Vec<f32> = taken.iter().map(|t| t.4).collect();
+    if areas.is_empty() {
+        return fold;
+    }
+    let mid = areas.len() / 2;
+    let area = *areas.select_nth_unstable_by(mid, f32::total_cmp).1;
+    if !ok(area) {
+        return fold;
+    }
     let tile_px = fold.tile[0].min(fold.tile[1]) / area.sqrt();
     let bins = ((tile_px / REFINE_BIN_PIXELS) as usize).min(REFINE_BINS);
     if bins < REFINE_MIN_BINS {
         return fold;
     }
-    let kept = |&i: &usize| {
-        mask[i]
-            && confidence[i] > 0.0
-            && coords.u[i].is_finite()
-            && coords.v[i].is_finite()
-            && colour.rgb(i).is_finite()
-    };
-    let count = (0..n).into_par_iter().filter(kept).count();
-    let stride = count.div_ceil(REFINE_MAX_PIXELS).max(1);
-    let samples: Vec<(f32, f32, f32, f32)> = (0..n)
-        .filter(kept)
-        .step_by(stride)
-        .filter_map(|i| {
-            let c = colour.rgb(i);
-            let luma = 0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z;
-            // Weighted as the splat weighs it (the confidence over the
-            // squared area the pixel covers, here relative to the median
-            // pixel's): the sharp, near pixels count most.
-            let a = coords.pixel_area(mask, i).filter(|a| *a > 0.0)?;
-            let w = confidence[i] * (area / a).powi(2);
-            w.is_finite().then_some((coords.u[i], coords.v[i], luma, w))
+    // Weighted as the splat weighs a pixel (its confidence over the squared
+    // area it covers, here relative to the median pixel's): the sharp, near
+    // pixels count most.
+    let samples: Vec<(f32, f32, f32, f32)> = taken
+        .iter()
+        .filter_map(|&(u, v, l, c, a)| {
+            let w = c * (area / a).powi(2);
+            w.is_finite().then_some((u, v, l, w))
         })
         .collect();
     // Each repeat's own mean taken out (cells of one measured period each
@@ -824,62 +954,149 @@ pub fn refine_tile(
             (v / fold.period[1]).floor() as i64,
         )
     };
-    let mut means: std::collections::BTreeMap<(i64, i64), (f64, f64)> = Default::default();
-    for &(u, v, l, w) in &samples {
-        let e = means.entry(cell(u, v)).or_default();
+    // Each sample's cell, numbered densely over the cells' bounding box when
+    // that is small (it is: the square holds a few dozen periods each way),
+    // else in order of first appearance.
+    let (mut lo, mut hi) = ((i64::MAX, i64::MAX), (i64::MIN, i64::MIN));
+    for &(u, v, _, _) in &samples {
+        let (cu, cv) = cell(u, v);
+        (lo, hi) = ((lo.0.min(cu), lo.1.min(cv)), (hi.0.max(cu), hi.1.max(cv)));
+    }
+    let cols = (hi.0 - lo.0 + 1).max(0) as usize;
+    let rows = (hi.1 - lo.1 + 1).max(0) as usize;
+    let ids: Vec<usize> = match cols.checked_mul(rows).filter(|&c| c <= 1 << 20) {
+        Some(_) => samples
+            .iter()
+            .map(|&(u, v, _, _)| {
+                let (cu, cv) = cell(u, v);
+                (cv - lo.1) as usize * cols + (cu - lo.0) as usize
+            })
+            .collect(),
+        None => {
+            let mut seen = std::collections::HashMap::new();
+            samples
+                .iter()
+                .map(|&(u, v, _, _)| {
+                    let next = seen.len();
+                    *seen.entry(cell(u, v)).or_insert(next)
+                })
+                .collect()
+        }
+    };
+    let mut means = vec![(0.0f64, 0.0f64); ids.iter().max().map_or(0, |m| m + 1)];
+    for (&(_, _, l, w), &id) in samples.iter().zip(&ids) {
+        let e = &mut means[id];
         e.0 += f64::from(w);
         e.1 += f64::from(w) * f64::from(l);
     }
     let samples: Vec<(f32, f32, f32, f32)> = samples
         .iter()
-        .map(|&(u, v, l, w)| {
-            let (sw, sl) = means[&cell(u, v)];
-            (u, v, l - (sl / sw) as f32, w)
+        .zip(&ids)
+        .map(|(&(u, v, l, w), &id)| {
+            let (sw, sl) = means[id];
+            let mean = if sw > 0.0 { (sl / sw) as f32 } else { l };
+            (u, v, l - mean, w)
         })
         .collect();
     if samples.len() < 2 {
         return fold;
     }
-    let base = fold_spread(&samples, fold.tile, bins);
-    let mut scale = [1.0f32; 2];
-    let spread_at =
-        |sc: [f32; 2]| fold_spread(&samples, [fold.tile[0] * sc[0], fold.tile[1] * sc[1]], bins);
-    let mut best = base;
-    for (round, axis) in [0usize, 1, 0].into_iter().enumerate() {
+    // The candidate: `[scale u, scale v, shear u, shear v]`, the shears in
+    // tiles per tile (`u` moves by `p[2]` tiles per tile of `v`).
+    let tile_of = |p: [f32; 4]| [fold.tile[0] * p[0], fold.tile[1] * p[1]];
+    let shear_of = |p: [f32; 4]| {
+        let t = tile_of(p);
+        [p[2] * t[0] / t[1], p[3] * t[1] / t[0]]
+    };
+    let spread_at = |p: [f32; 4]| fold_spread(&samples, tile_of(p), shear_of(p), bins);
+    // The coarse steps look on every REFINE_COARSE_STRIDE-th sample (the
+    // same ones for every candidate), the fine steps on all of them.
+    let coarse: Vec<(f32, f32, f32, f32)> = samples
+        .iter()
+        .step_by(REFINE_COARSE_STRIDE)
+        .copied()
+        .collect();
+    let coarse_at = |p: [f32; 4]| fold_spread(&coarse, tile_of(p), shear_of(p), bins);
+    let none = [1.0f32, 1.0, 0.0, 0.0];
+    let base = spread_at(none);
+    let mut best = (base, none);
+    let moved = |at: [f32; 4], axis: usize, k: i32, step: f32| {
+        let mut p = at;
+        if axis < 2 {
+            p[axis] *= 1.0 + k as f32 * step;
+        } else {
+            p[axis] += k as f32 * step;
+        }
+        p
+    };
+    // Scale and shear, twice; a tile spanning fewer bins only scaled (as
+    // stop 55 did: u, v, u).
+    let (rounds, axes): (&[usize], usize) = if bins >= REFINE_SHEAR_MIN_BINS {
+        (&[0, 1, 2, 3, 0, 1, 2, 3], 4)
+    } else {
+        (&[0, 1, 0], 2)
+    };
+    for (round, &axis) in rounds.iter().enumerate() {
         // After a round along each axis, a fold still short of half the
-        // gain asked for is not refined (the last round only polishes).
-        if round == 2 && best > base * (1.0 - REFINE_MIN_GAIN / 2.0) {
+        // gain asked for is not refined (the last rounds only polish).
+        if round == axes && best.0 > base * (1.0 - REFINE_MIN_GAIN / 2.0) {
             return fold;
         }
-        for (step, steps) in [(REFINE_STEP, REFINE_STEPS), (REFINE_STEP / 4.0, 4)] {
-            // Candidates nearest the current scale first, so ties keep the
-            // smaller change.
-            let ks: Vec<i32> = (0..=steps).flat_map(|k| [k, -k]).skip(1).collect();
-            let found: Vec<(f64, [f32; 2])> = ks
-                .par_iter()
-                .map(|&k| {
-                    let mut sc = scale;
-                    sc[axis] *= 1.0 + k as f32 * step;
-                    (spread_at(sc), sc)
-                })
-                .collect();
-            for (sp, sc) in found {
-                if sp < best {
-                    (best, scale) = (sp, sc);
-                }
+        let (step, steps) = if axis < 2 {
+            (REFINE_STEP, REFINE_STEPS)
+        } else {
+            (REFINE_SHEAR_STEP, REFINE_SHEAR_STEPS)
+        };
+        // Candidates nearest the current one first, so ties keep the
+        // smaller change.
+        let ks = |steps: i32| -> Vec<i32> { (0..=steps).flat_map(|k| [k, -k]).skip(1).collect() };
+        let at = best.1;
+        let mut centre = (coarse_at(at), at);
+        let found: Vec<(f64, [f32; 4])> = ks(steps)
+            .par_iter()
+            .map(|&k| {
+                let p = moved(at, axis, k, step);
+                (coarse_at(p), p)
+            })
+            .collect();
+        for c in found {
+            if c.0 < centre.0 {
+                centre = c;
+            }
+        }
+        // The fine steps around the coarse best, itself included.
+        let mut fine = vec![0];
+        fine.extend(ks(4));
+        let found: Vec<(f64, [f32; 4])> = fine
+            .par_iter()
+            .filter(|&&k| k != 0 || centre.1 != at)
+            .map(|&k| {
+                let p = moved(centre.1, axis, k, step / 4.0);
+                (spread_at(p), p)
+            })
+            .collect();
+        for c in found {
+            if c.0 < best.0 {
+                best = c;
             }
         }
     }
-    if best > base * (1.0 - REFINE_MIN_GAIN) || scale == [1.0, 1.0] {
+    let (spread, p) = best;
+    if spread > base * (1.0 - REFINE_MIN_GAIN) || p == none {
         return fold;
     }
-    let [su, sv] = scale;
-    Fold {
+    let [su, sv, ..] = p;
+    let refined = Fold {
         period: [fold.period[0] * su, fold.period[1] * sv],
-        tile: [fold.tile[0] * su, fold.tile[1] * sv],
-        aspect: fold.aspect * su / sv,
-        refined: Some(scale),
+        tile: tile_of(p),
+        refined: Some([su, sv]),
+        shear: shear_of(p),
         ..fold
+    };
+    let [a, b] = refined.sides();
+    Fold {
+        aspect: fold.aspect * (a / b) / (fold.tile[0] / fold.tile[1]),
+        ..refined
     }
 }
 
@@ -1308,6 +1525,7 @@ mod tests {
             strength: [0.9, 0.9],
             centred: Some(0.9),
             refined: None,
+            shear: [0.0, 0.0],
         };
         (coords, colour, fold)
     }
@@ -1368,6 +1586,127 @@ mod tests {
             refine_tile(&coords, &vec![true; w * h], &colour, &vec![0.0; w * h], off),
             off
         );
+    }
+
+    /// A frontal `w × h` photo of a chessboard of `sq`-pixel squares whose
+    /// photo coordinates `(x, y)` are `m · (x', y')` of the board's own
+    /// (`m` row-major, about the photo's centre: a board turned or skewed
+    /// against the frame), with [`board_fold`]'s coordinates and true tile.
+    fn turned_board(w: usize, h: usize, sq: usize, m: [f32; 4]) -> (Coords, Image, Fold) {
+        let (coords, _, fold) = board_fold(w, h, sq, [1.0, 1.0]);
+        let det = m[0] * m[3] - m[1] * m[2];
+        let mut colour = Image::zeros(3, h, w);
+        // Each pixel the mean of 4 × 4 samples, as a lens and sensor
+        // average it (hard pixel edges would alias with the bins).
+        for i in 0..w * h {
+            let mut sum = 0.0;
+            for s in 0..16 {
+                let x = (i % w) as f32 + (s % 4) as f32 / 4.0 + 0.125 - w as f32 / 2.0;
+                let y = (i / w) as f32 + (s / 4) as f32 / 4.0 + 0.125 - h as f32 / 2.0;
+                // The board's coordinates of the sample: m⁻¹ · (x, y).
+                let bx = (m[3] * x - m[1] * y) / det;
+                let by = (-m[2] * x + m[0] * y) / det;
+                let k = (bx / sq as f32).floor() as i64 + (by / sq as f32).floor() as i64;
+                sum += if k.rem_euclid(2) == 1 { 0.04 } else { 0.7 };
+            }
+            colour.set_rgb(i, Vec3::splat(sum / 16.0));
+        }
+        (coords, colour, fold)
+    }
+
+    #[test]
+    fn refine_tile_straightens_a_turned_or_skewed_fold() {
+        let (w, h, sq) = (240, 200, 20);
+        let conf = vec![1.0; w * h];
+        let turn = |deg: f32| {
+            let (s, c) = deg.to_radians().sin_cos();
+            [c, -s, s, c]
+        };
+        for m in [
+            turn(2.0),
+            turn(-3.5),
+            [1.0, 0.04, 0.0, 1.0],
+            [1.0, 0.0, -0.05, 1.0],
+        ] {
+            let (coords, colour, fold) = turned_board(w, h, sq, m);
+            let r = refine_tile(&coords, &vec![true; w * h], &colour, &conf, fold);
+            assert!(r.refined.is_some(), "{m:?}: not refined");
+            // The board's two lattice steps (one period each way, in units
+            // of the square: the coordinates are pixels over the width)
+            // must each move the sheared coordinates by one whole tile
+            // along its own axis and none along the other, to within a
+            // drift of two pixels over the photo (the spread has minima a
+            // fine step either side of the true lattice: at sub-pixel
+            // drifts, how the pixels' phases fall into the bins decides).
+            let [a, b] = r.shear;
+            let p = 2.0 * sq as f32 / w as f32;
+            for (step, whole) in [
+                ([m[0] * p, m[2] * p], [1.0, 0.0]),
+                ([m[1] * p, m[3] * p], [0.0, 1.0]),
+            ] {
+                let moved = [
+                    (step[0] + a * step[1]) / r.tile[0],
+                    (step[1] + b * step[0]) / r.tile[1],
+                ];
+                for ax in 0..2 {
+                    // Repeats across the photo times the error of one, in
+                    // pixels of one tile (2·sq).
+                    let drift = (moved[ax] - whole[ax]).abs()
+                        * (w as f32 / (2.0 * sq as f32))
+                        * 2.0
+                        * sq as f32;
+                    assert!(
+                        drift <= 2.0,
+                        "{m:?}: fold {r:?} drifts {drift} px along axis {ax}"
+                    );
+                }
+            }
+            // Pixels one lattice step apart fold onto each other.
+            let f = fold_coords(&coords, &r);
+            let (x0, y0) = (60.0f32, 50.0f32);
+            let at = |x: f32, y: f32| (y.round() as usize) * w + x.round() as usize;
+            let (i, j) = (
+                at(x0, y0),
+                at(x0 + 2.0 * sq as f32 * m[0], y0 + 2.0 * sq as f32 * m[2]),
+            );
+            let d = |s: f32, t: f32| (s - t - (s - t).round()).abs();
+            assert!(
+                d(f.u[i], f.u[j]) < 0.06 && d(f.v[i], f.v[j]) < 0.06,
+                "{m:?}: {r:?}"
+            );
+        }
+        // The sides on the plane undo the shear.
+        let r = Fold {
+            shear: [0.1, 0.0],
+            ..board_fold(w, h, sq, [1.0, 1.0]).2
+        };
+        let s = r.sides();
+        assert!((s[0] - r.tile[0]).abs() < 1e-6);
+        assert!((s[1] - r.tile[1] * 1.01f32.sqrt()).abs() < 1e-6);
+    }
+
+    #[test]
+    fn fold_coords_shears_before_wrapping() {
+        let c = Coords {
+            width: 2,
+            height: 1,
+            u: vec![0.3, f32::NAN],
+            v: vec![0.5, 0.2],
+            wrap: false,
+        };
+        let (_, _, fold) = board_fold(10, 10, 1, [1.0, 1.0]);
+        let fold = Fold {
+            tile: [0.25, 0.4],
+            shear: [0.1, -0.2],
+            ..fold
+        };
+        let g = fold_coords(&c, &fold);
+        // u' = frac((0.3 + 0.05) / 0.25) = 0.4, v' = frac((0.5 − 0.06) / 0.4) = 0.1.
+        assert!(
+            (g.u[0] - 0.4).abs() < 1e-5 && (g.v[0] - 0.1).abs() < 1e-5,
+            "{g:?}"
+        );
+        assert!(g.u[1].is_nan() && g.v[1].is_nan() && g.wrap);
     }
 
     /// A grid of tiles `px × py` with grout lines `g` wide, and brightness

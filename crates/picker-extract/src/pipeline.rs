@@ -2252,7 +2252,7 @@ fn extract_as(
         let mut size_m = match (user_plane.as_ref().and_then(|u| u.unit_m), square_side) {
             (Some(unit), Some(sq)) if mode == UvMode::Plane => {
                 let side = f64::from(sq.side) * unit;
-                let t = fold.map_or([1.0, 1.0], |f| f.tile);
+                let t = fold.map_or([1.0, 1.0], |f| f.sides());
                 Some([side * f64::from(t[0]), side * f64::from(t[1])])
             }
             _ => None,
