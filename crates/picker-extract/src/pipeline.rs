@@ -8,7 +8,8 @@
 //!   upsampled within the material (mask-aware bilinear) and multiplied by the
 //!   full-resolution photo. The texture therefore has the photo's detail and
 //!   the network's albedo level. Clipped (saturated) and black pixels get a low
-//!   confidence. With ground-truth elements at the photo's size the ratio is
+//!   confidence (clipped ones take the network's albedo, unless a quarter of
+//!   the material or more is clipped: [`CLIPPED_MATERIAL_SHARE`]). With ground-truth elements at the photo's size the ratio is
 //!   exact and the de-lit colour is the true albedo.
 //! - **UV mode `auto`** reprojects with the predicted UVs when their
 //!   cross-validated consistency ([`reproject::consistency`]) reaches
@@ -107,6 +108,14 @@ pub const USER_PLANE_PART_MIN_SHARE: f64 = 0.5;
 pub const DEFAULT_MAX_SIZE: usize = 1024;
 /// sRGB value from which a photo pixel counts as clipped.
 pub const CLIPPED_SRGB: f32 = 0.995;
+/// Share of a mask's pixels clipped from which the clipping counts as the
+/// material's own colour overexposed (a white card, the white squares of a
+/// chessboard, a lit screen) rather than highlights: those pixels are then
+/// de-lit and weighted as the others instead of taking the networks'
+/// albedo at a twentieth of the weight, whose blurred structure showed as
+/// grey ghosts in the white (stop 56; highlights cover far less of a
+/// material).
+pub const CLIPPED_MATERIAL_SHARE: f64 = 0.25;
 
 /// Which texture coordinates to use.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
@@ -1164,9 +1173,14 @@ pub struct Delight {
     /// ([`Options::shading_sigma`]).
     pub shading_sigma: f32,
     /// Share of the mask's photo pixels that were clipped
-    /// ([`CLIPPED_SRGB`]) and took the network's albedo instead of the
-    /// photo's detail.
+    /// ([`CLIPPED_SRGB`]): they took the network's albedo instead of the
+    /// photo's detail, at a twentieth of the weight, unless
+    /// [`Delight::clipped_as_material`].
     pub clipped_share: f64,
+    /// The clipped pixels were de-lit and weighted as the others: at least
+    /// [`CLIPPED_MATERIAL_SHARE`] of the mask was clipped, so the clipping
+    /// is the material's colour overexposed, not highlights.
+    pub clipped_as_material: bool,
 }
 
 /// How one axis's wrap edge was cut ([`picker_inpaint::AxisCut`]).
@@ -1650,9 +1664,12 @@ fn extract_as(
     // the photo's.
     // Where the photo is clipped its detail is not the material's (a
     // highlight, a lamp's reflection): the network's albedo stands in there,
-    // the ratio as it was.
+    // the ratio as it was — unless so much of the material is clipped
+    // ([`CLIPPED_MATERIAL_SHARE`]) that the clipping is its own colour
+    // overexposed (a white card, a chessboard's white squares).
     let mut unsmoothed = None;
     let mut clipped_share = 0.0;
+    let mut clipped_as_material = false;
     if p.inputs.albedo_estimated && opts.shading_sigma > 0.0 {
         // The ratio of the albedo's and the photo's local sums, not the mean
         // of the pixels' own ratios (`crate::shading::delighting_ratio`).
@@ -1672,7 +1689,8 @@ fn extract_as(
                 .collect();
             let count = clipped.iter().filter(|&&c| c).count();
             clipped_share = count as f64 / full.count().max(1) as f64;
-            if count > 0 {
+            clipped_as_material = clipped_share >= CLIPPED_MATERIAL_SHARE;
+            if count > 0 && !clipped_as_material {
                 let r = resample::masked_bilinear_where(raw, &rw, fw, fh, &clipped);
                 for (i, _) in clipped.iter().enumerate().filter(|(_, &c)| c) {
                     for c in 0..3 {
@@ -1718,7 +1736,7 @@ fn extract_as(
             let s = (0..3)
                 .map(|k| p.inputs.photo.at(k, i))
                 .fold(0.0f32, f32::max);
-            if s >= CLIPPED_SRGB {
+            if s >= CLIPPED_SRGB && !clipped_as_material {
                 c *= 0.05;
             }
             c
@@ -1768,6 +1786,7 @@ fn extract_as(
         delight: unsmoothed.as_ref().map(|_| Delight {
             shading_sigma: opts.shading_sigma,
             clipped_share,
+            clipped_as_material,
         }),
         timings_ms: Default::default(),
     };
@@ -3725,6 +3744,42 @@ mod tests {
         assert!(max < 0.6, "brightest texel {max}");
         let (_, contrast) = mean_contrast(&v);
         assert!(contrast > 0.2, "stripes kept: {contrast}");
+    }
+
+    /// A material half of whose photo is clipped (stripes of full white
+    /// and dark, a chessboard's white squares overexposed): the clipping is
+    /// the material's own colour, so the clipped pixels are de-lit as the
+    /// others and the texture keeps the stripes' full contrast, where the
+    /// networks' flat albedo standing in for the white would flatten it.
+    #[test]
+    fn a_mostly_clipped_material_keeps_its_white() {
+        let shown = |i: usize| {
+            if (i % 96) % 8 < 4 {
+                1.0
+            } else {
+                crate::photo::srgb_encode(0.05)
+            }
+        };
+        let (v, w, clipped) = flat_albedo_texture(&shown, true, crate::shading::SHADING_SIGMA);
+        assert!((clipped - 0.5).abs() < 1e-9, "{clipped}");
+        // The median white and dark texel (split at the mean): the photo
+        // has them at least 20 : 1 (white clipped at 1, dark 0.05). With the
+        // networks' flat albedo standing in for the white, about 10 : 1.
+        let mean = v.iter().sum::<f32>() / v.len() as f32;
+        let median = |bright: bool| {
+            let mut s: Vec<f32> = v
+                .iter()
+                .copied()
+                .filter(|&t| (t > mean) == bright)
+                .collect();
+            s.sort_by(f32::total_cmp);
+            s[s.len() / 2]
+        };
+        let (white, dark) = (median(true), median(false));
+        assert!(
+            white / dark > 15.0,
+            "white {white} over dark {dark} (width {w})"
+        );
     }
 
     /// The networks' two passes' disagreement, when given, is averaged over
