@@ -659,38 +659,30 @@ pub fn fold_coords(coords: &Coords, fold: &Fold) -> Coords {
     if a == 0.0 && b == 0.0 {
         return wrap_by_tile(coords, fold.tile);
     }
-    let sheared = Coords {
-        u: coords
-            .u
-            .iter()
-            .zip(&coords.v)
-            .map(|(&u, &v)| u + a * v)
-            .collect(),
-        v: coords
-            .u
-            .iter()
-            .zip(&coords.v)
-            .map(|(&u, &v)| v + b * u)
-            .collect(),
+    let (uv, (tu, tv)) = (coords.u.iter().zip(&coords.v), (fold.tile[0], fold.tile[1]));
+    Coords {
         width: coords.width,
         height: coords.height,
-        wrap: coords.wrap,
-    };
-    wrap_by_tile(&sheared, fold.tile)
+        u: uv.clone().map(|(&u, &v)| frac_of(u + a * v, tu)).collect(),
+        v: uv.map(|(&u, &v)| frac_of(v + b * u, tv)).collect(),
+        wrap: true,
+    }
+}
+
+/// The fraction of `t` in tiles of `side`: `frac(t / side)`; NaN stays NaN.
+fn frac_of(t: f32, side: f32) -> f32 {
+    let x = t / side;
+    x - x.floor()
 }
 
 /// `coords` wrapped by a tile of sides `tile` (fractions of the square):
 /// `u' = frac(u / tile_u)`, `v' = frac(v / tile_v)`, wrapping; NaN stays NaN.
 fn wrap_by_tile(coords: &Coords, tile: [f32; 2]) -> Coords {
-    let f = |t: f32, side: f32| {
-        let x = t / side;
-        x - x.floor()
-    };
     Coords {
         width: coords.width,
         height: coords.height,
-        u: coords.u.iter().map(|&u| f(u, tile[0])).collect(),
-        v: coords.v.iter().map(|&v| f(v, tile[1])).collect(),
+        u: coords.u.iter().map(|&u| frac_of(u, tile[0])).collect(),
+        v: coords.v.iter().map(|&v| frac_of(v, tile[1])).collect(),
         wrap: true,
     }
 }
