@@ -785,15 +785,11 @@ fn fold_spread(
 ) -> f64 {
     let b = bins.max(1);
     let mut acc = vec![[0.0f64; 3]; b * b];
-    // The bin of `t` in the tile's side `1 / inv`: the fraction of
-    // `t · inv` by a whole-number floor rather than `f32::floor` (a library
-    // call on the baseline x86-64 target, the loop's largest cost).
+    // The bin of `t` in a tile of side `1 / inv`.
     let bf = b as f32;
     let bin = |t: f32, inv: f32| {
         let x = t * inv;
-        let i = x as i32;
-        let fl = i - i32::from(x < i as f32);
-        (((x - fl as f32) * bf) as usize).min(b - 1)
+        (((x - x.floor()) * bf) as usize).min(b - 1)
     };
     let (su, sv) = (1.0 / tile[0], 1.0 / tile[1]);
     let [sa, sb] = shear;

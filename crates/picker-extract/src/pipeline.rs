@@ -9,8 +9,9 @@
 //!   full-resolution photo. The texture therefore has the photo's detail and
 //!   the network's albedo level. Clipped (saturated) and black pixels get a low
 //!   confidence (clipped ones take the network's albedo, unless a quarter of
-//!   the material or more is clipped: [`CLIPPED_MATERIAL_SHARE`]). With ground-truth elements at the photo's size the ratio is
-//!   exact and the de-lit colour is the true albedo.
+//!   the material or more is clipped: [`CLIPPED_MATERIAL_SHARE`]). With
+//!   ground-truth elements at the photo's size the ratio is exact and the
+//!   de-lit colour is the true albedo.
 //! - **UV mode `auto`** reprojects with the predicted UVs when their
 //!   cross-validated consistency ([`reproject::consistency`]) reaches
 //!   [`AUTO_MIN_R2`] (or cannot be measured because the material shows less
