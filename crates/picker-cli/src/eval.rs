@@ -101,6 +101,9 @@ pub struct Args {
     /// Keep only the picked colour of a two-colour pattern (`extract --no-pattern`).
     #[arg(long)]
     pub no_pattern: bool,
+    /// Keep the regions the photo sets apart in the networks' masks (`extract --no-split`).
+    #[arg(long)]
+    pub no_split: bool,
     /// Keep a folded tile's wrap edges where the fold put them, rather than where its texels change
     /// least (for measuring what the placement does).
     #[arg(long)]
@@ -505,6 +508,7 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
     let opts = pipeline::Options {
         mask: picker_extract::mask::MaskOptions {
             no_pattern: a.no_pattern,
+            no_split: a.no_split,
             ..Default::default()
         },
         uv: a.uv.choice(),

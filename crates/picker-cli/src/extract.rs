@@ -81,6 +81,12 @@ pub struct Flags {
     /// whose surroundings are mostly one other material, interleaved with it, takes it in.
     #[arg(long)]
     pub no_pattern: bool,
+    /// Keep the regions the photo sets apart in a mask of the networks' segmentation. By default
+    /// a region that looks different in the photo (chromaticity) and that the segmentation also
+    /// gives another colour, one object rather than a repeated element of a pattern (a plant in
+    /// front of the picked wallpaper, the objects on a picked table), leaves the mask.
+    #[arg(long)]
+    pub no_split: bool,
     /// Segmentation-colour tolerance (an RGB distance, 0 to 1, in the segmentation the masks read:
     /// the network's, smoothed along the photo; with an MSN that has a material embedding, as the
     /// embedded one does, a distance in the embedding scaled by 0.25); default automatic. A given
@@ -257,6 +263,7 @@ impl Flags {
             connected: self.connected,
             tolerance: self.tolerance,
             no_pattern: self.no_pattern,
+            no_split: self.no_split,
         }
     }
 
@@ -282,6 +289,7 @@ impl Flags {
             "connected": self.connected,
             "tolerance": self.tolerance,
             "pattern": !self.no_pattern,
+            "split": !self.no_split,
             "uv": format!("{:?}", self.uv).to_lowercase(),
             "fov": self.fov,
             "normal": self.normal.map(|p| match p {
@@ -1245,7 +1253,7 @@ pub fn write_materials(
     }
     let mut palette_ids = None;
     if req.all {
-        let pal = prepared.palette(flags.min_area, 64, !flags.no_pattern);
+        let pal = prepared.palette(flags.min_area, 64, !flags.no_pattern, !flags.no_split);
         if pal.is_empty() {
             bail!(
                 "{label}: no material covers --min-area {} of the image",
@@ -1451,6 +1459,8 @@ fn photo_path(a: &Args) -> Result<PathBuf> {
 /// Below this share of observed texels `picker extract` says that most of
 /// the texture was inpainted ([`hints`]).
 const LOW_COVERAGE: f64 = 0.25;
+/// Share of a mask the photo's split took out ([`picker_extract::split`]) from which a note says so.
+const SPLIT_NOTE_SHARE: f64 = 0.01;
 
 /// Advice for the user from what the extraction found (`summary.json`,
 /// `materials[].hints`; printed by `picker extract`).
@@ -1465,6 +1475,18 @@ fn hints(m: &Material, diag: &pipeline::Diagnostics) -> Vec<String> {
             "the photo shows {:.0} % of the texture; the rest was filled in by inpainting \
              (coverage.png): a closer or more frontal photo of the material shows more of it",
             100.0 * t.coverage_fraction
+        ));
+    }
+    if let Some(s) = diag
+        .split
+        .as_ref()
+        .filter(|s| s.removed_share >= SPLIT_NOTE_SHARE)
+    {
+        out.push(format!(
+            "the photo sets {} region(s) apart from the picked material that the segmentation had \
+             taken in ({:.0} % of its mask): they were left out; --no-split keeps them",
+            s.regions_removed,
+            100.0 * s.removed_share
         ));
     }
     if let Some(p) = diag.pattern.as_ref().filter(|p| p.merged) {

@@ -45,6 +45,7 @@ pub mod resample;
 pub mod select;
 pub mod shading;
 pub mod smooth;
+pub mod split;
 
 pub use error::{Error, Result};
 pub use material::{Material, MaterialParams, TextureResult, UvMode};

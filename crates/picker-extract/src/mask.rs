@@ -163,6 +163,9 @@ pub struct MaskOptions {
     /// Keep only the picked colour of a two-colour pattern (a chessboard's
     /// black squares) rather than the whole pattern ([`crate::pattern`]).
     pub no_pattern: bool,
+    /// Keep the regions of an estimated segmentation's mask that the photo
+    /// sets apart ([`crate::split`]) instead of leaving them out.
+    pub no_split: bool,
 }
 
 /// The pick's material at the segmentation's resolution.
@@ -190,6 +193,8 @@ pub struct PickMask {
     /// The two-colour pattern check ([`crate::pattern`]), when it ran: an
     /// automatic mask's companion and whether it joined the mask.
     pub pattern: Option<crate::pattern::PatternCheck>,
+    /// The photo's split of the mask ([`crate::split`]), when it ran.
+    pub split: Option<crate::split::SplitCheck>,
 }
 
 fn median(v: &mut [f32]) -> f32 {
@@ -921,6 +926,7 @@ pub fn pick_mask_on(
         photo: None,
         sure,
         pattern: None,
+        split: None,
     })
 }
 

@@ -534,15 +534,40 @@ impl Prepared {
         self.check_pick(pick)?;
         let (x, y) = self.to_work(pick[0] as usize, pick[1] as usize);
         let seg = self.mask_segmentation();
-        let pm = mask::pick_mask_on(seg, self.relief(), &self.valid, x, y, opts)?;
+        let mut pm = mask::pick_mask_on(seg, self.relief(), &self.valid, x, y, opts)?;
         if opts.tolerance.is_some() {
             return Ok(pm);
+        }
+        if self.inputs.segmentation_estimated && !opts.no_split {
+            self.split(&mut pm, x, y, opts.connected);
         }
         let pm = self.with_raw_sure(pm, &self.valid, x, y)?;
         if opts.no_pattern {
             return Ok(pm);
         }
         Ok(self.with_pattern(pm, opts, (x, y), &self.valid))
+    }
+
+    /// An automatic mask of an estimated segmentation without the regions
+    /// the photo and the segmentation both set apart ([`crate::split`]): from
+    /// the mask and from its surest part. The check is recorded in
+    /// [`PickMask::split`].
+    fn split(&self, pm: &mut PickMask, x: usize, y: usize, connected: bool) {
+        let (sub, check) = crate::split::split_mask(
+            &self.photo_work,
+            self.mask_source(),
+            &pm.mask,
+            x,
+            y,
+            connected,
+        );
+        if let Some(sub) = sub {
+            for (s, &m) in pm.sure.iter_mut().zip(&sub.data) {
+                *s &= m;
+            }
+            pm.mask = sub;
+        }
+        pm.split = Some(check);
     }
 
     /// An automatic mask completed to its two-colour pattern when it is one
@@ -720,6 +745,7 @@ impl Prepared {
             photo: Some(full),
             mask,
             pattern: None,
+            split: None,
         })
     }
 
@@ -753,12 +779,16 @@ impl Prepared {
     /// cluster first; a pixel belongs to at most one material), at most `max`.
     /// With `patterns`, a material whose mask makes a two-colour pattern
     /// with a companion among the pixels not yet taken is the whole pattern
-    /// ([`crate::pattern`], as [`Self::pick_mask`] does).
+    /// ([`crate::pattern`], as [`Self::pick_mask`] does). With `split`, the
+    /// regions of an estimated segmentation's mask that the photo sets apart
+    /// leave it and stay free for other materials ([`crate::split`], as
+    /// [`Self::pick_mask`] does).
     pub fn palette(
         &self,
         min_fraction: f64,
         max: usize,
         patterns: bool,
+        split: bool,
     ) -> Vec<([u32; 2], PickMask)> {
         let (w, h) = self.work_size();
         let (fw, fh) = self.photo_size();
@@ -819,6 +849,12 @@ impl Prepared {
                 y,
                 &MaskOptions::default(),
             )
+            .map(|mut pm| {
+                if split && self.inputs.segmentation_estimated {
+                    self.split(&mut pm, x, y, false);
+                }
+                pm
+            })
             .and_then(|pm| self.with_raw_sure(pm, &remaining, x, y));
             let Ok(pm) = pm else {
                 remaining[seed] = false;
@@ -1279,6 +1315,12 @@ pub struct Diagnostics {
     /// tolerance, `no_pattern`, a mask with no surroundings).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub pattern: Option<crate::pattern::PatternCheck>,
+    /// The photo's split of an automatic mask of an estimated segmentation
+    /// ([`crate::split`], [`PickMask::split`]): the regions the photo and
+    /// the segmentation both set apart that left the mask; absent when it
+    /// did not run (ground truth, a given mask or tolerance, `no_split`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub split: Option<crate::split::SplitCheck>,
     /// The seam ratio for which a band across the wrap edges was inpainted
     /// ([`Options::heal_seams`]): the observed texels'
     /// ([`picker_inpaint::known_seam_ratio`]), or, when they could not tell,
@@ -1759,6 +1801,7 @@ fn extract_as(
         filled_from_mask: None,
         mask_given: pm.photo.is_some(),
         pattern: pm.pattern.clone(),
+        split: pm.split.clone(),
         greyscale_photo: p.greyscale,
         seam_band: None,
         seam_cut: None,
@@ -3387,7 +3430,7 @@ mod tests {
         })
         .unwrap();
         // Bins 8 and 9 of channel 0 hold 4 and 6 columns: 12.5 % and 19 %.
-        let pal = p.palette(0.25, 8, true);
+        let pal = p.palette(0.25, 8, true, true);
         assert_eq!(
             pal.len(),
             2,
@@ -3400,7 +3443,7 @@ mod tests {
                 assert_eq!(right.data[y * w + x], x >= 22, "({x}, {y})");
             }
         }
-        assert_eq!(p.palette(0.4, 8, true).len(), 1);
+        assert_eq!(p.palette(0.4, 8, true, true).len(), 1);
     }
 
     #[test]
@@ -3443,6 +3486,34 @@ mod tests {
         inputs.embedding = Some(Image::new(3, 12, 16, vec![0.0; 3 * 12 * 16]).unwrap());
         let e = Prepared::new(inputs).err().expect("refused").to_string();
         assert!(e.contains("material embedding"), "{e}");
+    }
+
+    /// The photo's split ([`crate::split`]) runs on the automatic masks of an
+    /// estimated segmentation, and is recorded; not on ground truth, nor with
+    /// `no_split` or a given tolerance.
+    #[test]
+    fn the_photos_split_runs_on_estimated_automatic_masks_only() {
+        let split = |estimated: bool, opts: MaskOptions| {
+            twins(true, estimated)
+                .pick_mask([5, 12], &opts)
+                .unwrap()
+                .split
+        };
+        let check = split(true, MaskOptions::default()).expect("ran");
+        // One look (the photo is uniform noise): nothing leaves.
+        assert_eq!(check.regions_removed, 0);
+        assert_eq!(check.removed_share, 0.0);
+        assert!(split(false, MaskOptions::default()).is_none());
+        let no_split = MaskOptions {
+            no_split: true,
+            ..Default::default()
+        };
+        assert!(split(true, no_split).is_none());
+        let given = MaskOptions {
+            tolerance: Some(0.1),
+            ..Default::default()
+        };
+        assert!(split(true, given).is_none());
     }
 
     /// A 64×48 photo (working resolution 32×24) of one flat material whose
@@ -3524,7 +3595,7 @@ mod tests {
         );
         // The palette's threshold is a share of the visible area: the one
         // material covers all of it.
-        let all = p.palette(0.99, 4, false);
+        let all = p.palette(0.99, 4, false, true);
         assert_eq!(all.len(), 1);
         assert!(all[0]
             .1
@@ -4018,7 +4089,7 @@ mod tests {
                 .filter(|(&m, &b)| m && b)
                 .count()
         };
-        let pal = p.palette(0.05, 8, true);
+        let pal = p.palette(0.05, 8, true, true);
         let boards: Vec<usize> = pal
             .iter()
             .map(|(_, pm)| on_board(pm))
@@ -4026,7 +4097,7 @@ mod tests {
             .collect();
         assert_eq!(boards.len(), 1, "{boards:?}");
         assert!(boards[0] >= area - 4, "{boards:?} of {area}");
-        let pal = p.palette(0.05, 8, false);
+        let pal = p.palette(0.05, 8, false, true);
         let boards: Vec<usize> = pal
             .iter()
             .map(|(_, pm)| on_board(pm))
@@ -4357,6 +4428,7 @@ mod tests {
             photo: None,
             sure: (0..w * h).map(sure).collect(),
             pattern: None,
+            split: None,
         }
     }
 
