@@ -465,6 +465,7 @@ fn shards_jobs_and_staleness() {
         "--no-fold",
         "--no-centring",
         "--no-pattern",
+        "--no-split",
         "--no-mask-fill",
         "--keep-seams",
     ] {
