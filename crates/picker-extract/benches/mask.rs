@@ -1,9 +1,10 @@
 //! Mask-step benchmarks (`cargo bench -p picker-extract --bench mask`): the
-//! segmentation's smoothing along the photo and the leak guard's relief at
-//! the default working size (240×320) and at 480×640, throughput in pixels.
+//! segmentation's smoothing along the photo, the leak guard's relief and the
+//! photo's split of a mask (the whole image, picked at its centre) at the
+//! default working size (240×320) and at 480×640, throughput in pixels.
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
-use picker_extract::{mask, smooth};
+use picker_extract::{mask, smooth, split};
 use picker_render::io::Image;
 use picker_tensor::Rng;
 
@@ -41,6 +42,14 @@ fn bench(c: &mut Criterion) {
         });
         g.bench_function(format!("leak_guard_relief {w}x{h}"), |b| {
             b.iter(|| mask::leak_guard_relief(&seg))
+        });
+        let whole = mask::Mask {
+            width: w,
+            height: h,
+            data: valid.clone(),
+        };
+        g.bench_function(format!("split_mask {w}x{h}"), |b| {
+            b.iter(|| split::split_mask(&photo, &seg, &whole, w / 2, h / 2, false))
         });
     }
     let (seg, photo, valid) = problem(320, 240);

@@ -263,7 +263,7 @@ pub fn split_mask(
         })
         .collect();
     let mut inside: Vec<f32> = d.iter().copied().filter(|v| !v.is_nan()).collect();
-    inside.sort_by(|a, b| a.total_cmp(b));
+    inside.sort_unstable_by(|a, b| a.total_cmp(b));
     let (t, fisher) = otsu(&inside);
     check.threshold = t;
     check.fisher = fisher;
