@@ -348,6 +348,9 @@ pub fn split_mask(
         }
         check.regions_removed += 1;
     }
+    if check.regions_removed == 0 {
+        return (None, check);
+    }
     // The pick's own pixel stays; what the regions leave of the mask is
     // kept as the mask's regions were (specks dropped, or the one region).
     out.data[y * w + x] = m.data[y * w + x];
@@ -357,11 +360,7 @@ pub fn split_mask(
     for (o, &l) in out.data.iter_mut().zip(&label) {
         *o = l != 0 && (l == at || (!connected && sizes[l as usize] >= min_speck));
     }
-    let removed = count - out.count();
-    check.removed_share = removed as f64 / count as f64;
-    if removed == 0 {
-        return (None, check);
-    }
+    check.removed_share = (count - out.count()) as f64 / count as f64;
     (Some(out), check)
 }
 
