@@ -197,7 +197,9 @@ pub struct PickMask {
     pub split: Option<crate::split::SplitCheck>,
 }
 
-fn median(v: &mut [f32]) -> f32 {
+/// The median of `v` (its upper middle for an even length; 0 when empty),
+/// reordering it.
+pub(crate) fn median(v: &mut [f32]) -> f32 {
     if v.is_empty() {
         return 0.0;
     }
@@ -206,11 +208,13 @@ fn median(v: &mut [f32]) -> f32 {
     v[mid]
 }
 
-fn dist(a: [f32; 3], b: [f32; 3]) -> f32 {
+/// Euclidean distance of two colours.
+pub(crate) fn dist(a: [f32; 3], b: [f32; 3]) -> f32 {
     ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
 }
 
-fn colour(seg: &Image, i: usize) -> [f32; 3] {
+/// The first three channels of pixel `i`.
+pub(crate) fn colour(seg: &Image, i: usize) -> [f32; 3] {
     [seg.at(0, i), seg.at(1, i), seg.at(2, i)]
 }
 

@@ -181,13 +181,7 @@ pub fn otsu(v: &[f32]) -> (f32, f64) {
 
 fn median_colour(img: &Image, pixels: impl Iterator<Item = usize> + Clone) -> [f32; 3] {
     std::array::from_fn(|c| {
-        let mut v: Vec<f32> = pixels.clone().map(|i| img.at(c, i)).collect();
-        if v.is_empty() {
-            return 0.0;
-        }
-        let mid = v.len() / 2;
-        v.select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
-        v[mid]
+        mask::median(&mut pixels.clone().map(|i| img.at(c, i)).collect::<Vec<_>>())
     })
 }
 
@@ -254,10 +248,7 @@ pub fn split_mask(
     let d: Vec<f32> = (0..w * h)
         .map(|i| {
             if m.data[i] {
-                (0..3)
-                    .map(|c| (f.at(c, i) - f0[c]).powi(2))
-                    .sum::<f32>()
-                    .sqrt()
+                mask::dist(mask::colour(&f, i), f0)
             } else {
                 f32::NAN
             }
@@ -272,12 +263,7 @@ pub fn split_mask(
         return (None, check);
     }
     let near_colour = median_colour(seg, (0..w * h).filter(|&i| m.data[i] && d[i] <= t));
-    let gap_of = |c: [f32; 3]| {
-        (0..3)
-            .map(|k| (c[k] - near_colour[k]).powi(2))
-            .sum::<f32>()
-            .sqrt()
-    };
+    let gap_of = |c: [f32; 3]| mask::dist(c, near_colour);
     // Candidates: far in the photo and, pixel by pixel, at least half the
     // gap away in the segmentation (the far half of a shaded table is not).
     let far = Mask {
@@ -285,10 +271,7 @@ pub fn split_mask(
         height: h,
         data: (0..w * h)
             .map(|i| {
-                m.data[i]
-                    && d[i] > t
-                    && gap_of([seg.at(0, i), seg.at(1, i), seg.at(2, i)])
-                        >= 0.5 * MIN_SEGMENTATION_GAP
+                m.data[i] && d[i] > t && gap_of(mask::colour(seg, i)) >= 0.5 * MIN_SEGMENTATION_GAP
             })
             .collect(),
     };
@@ -327,12 +310,7 @@ pub fn split_mask(
         }
         let enclosed = held as f64 / outline.max(1) as f64;
         let gap = gap_of(median_colour(seg, px.iter().copied()));
-        let look = {
-            let mut v: Vec<f32> = px.iter().map(|&i| d[i]).collect();
-            let mid = v.len() / 2;
-            v.select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
-            v[mid]
-        };
+        let look = mask::median(&mut px.iter().map(|&i| d[i]).collect::<Vec<_>>());
         if gap < MIN_SEGMENTATION_GAP || look < MIN_LOOK_DISTANCE || enclosed < MIN_ENCLOSURE {
             continue;
         }
