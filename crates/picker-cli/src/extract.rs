@@ -19,7 +19,7 @@ use picker_extract::export::{self, ExportOptions};
 use picker_extract::mask::{Mask, MaskOptions};
 use picker_extract::report::{self, Tile};
 use picker_extract::{
-    pipeline, Inputs, Material, PassDisagreement, Prepared, Quad, UserPlane, UvChoice,
+    pipeline, Inputs, LensChoice, Material, PassDisagreement, Prepared, Quad, UserPlane, UvChoice,
 };
 use picker_inpaint::{DiffusionInpainter, Inpainter, LearnedInpainter, PatchMatchInpainter};
 use picker_nets::conventions as conv;
@@ -107,6 +107,13 @@ pub struct Flags {
     /// rectifies the predicted one, without refining it by the photo's lines.
     #[arg(long, value_name = "front|X,Y,Z", value_parser = parse_normal, allow_hyphen_values = true)]
     pub normal: Option<UserPlane>,
+    /// The lens distortion the plane mode undoes before rectifying: `auto` (estimated from the
+    /// photo's long straight edges; barrel distortion only, none when they do not agree), `none`,
+    /// or the division model's coefficient (radii in half-diagonals of the photo; negative for
+    /// barrel distortion, e.g. -0.15 for a wide-angle webcam; material.json reports the one used
+    /// under `diagnostics.uv.lens`).
+    #[arg(long, value_name = "auto|none|LAMBDA", default_value = "auto", value_parser = parse_lens, allow_hyphen_values = true)]
+    pub lens: LensChoice,
     /// Keep the predicted normals' plane for --uv plane: do not refine it with the vanishing
     /// directions of the photo's straight lines in the picked region.
     #[arg(long)]
@@ -297,6 +304,10 @@ impl Flags {
                 UserPlane::Quad(q) => json!(q.0),
             }),
             "lines": !self.no_lines,
+            "lens": match self.lens {
+                LensChoice::Auto => json!("auto"),
+                LensChoice::Given(v) => json!(v),
+            },
             "grain": !self.no_grain,
             "fold": !self.no_fold,
             "centring": !self.no_centring,
@@ -392,6 +403,31 @@ pub fn parse_normal(s: &str) -> std::result::Result<UserPlane, String> {
     }
     let v = parse_numbers::<3>(s, "front or X,Y,Z (e.g. 0,0.7,0.7)")?;
     UserPlane::normal(v)
+}
+
+/// Parses `--lens`: `auto`, `none`, or a division-model coefficient within
+/// [`picker_extract::lens::LAMBDA_MIN`]..=[`picker_extract::lens::LAMBDA_MAX`].
+pub fn parse_lens(s: &str) -> std::result::Result<LensChoice, String> {
+    let t = s.trim();
+    if t.eq_ignore_ascii_case("auto") {
+        return Ok(LensChoice::Auto);
+    }
+    if t.eq_ignore_ascii_case("none") {
+        return Ok(LensChoice::Given(0.0));
+    }
+    let (lo, hi) = (
+        picker_extract::lens::LAMBDA_MIN,
+        picker_extract::lens::LAMBDA_MAX,
+    );
+    match t.parse::<f32>() {
+        Ok(v) if (lo..=hi).contains(&v) => Ok(LensChoice::Given(v)),
+        Ok(v) => Err(format!(
+            "lens coefficient {v} is outside {lo}..={hi} (negative: barrel distortion)"
+        )),
+        Err(_) => Err(format!(
+            "expected auto, none or a number such as -0.15, found {s:?}"
+        )),
+    }
 }
 
 /// Parses `--quad`: eight pixel coordinates `X1,Y1,X2,Y2,X3,Y3,X4,Y4`.
@@ -782,6 +818,7 @@ pub fn load_inputs_from(
     let mut prepared =
         Prepared::new(inputs).with_context(|| format!("preparing {}", photo_path.display()))?;
     prepared.focal_35mm = focal_35mm;
+    prepared.lens_choice = flags.lens;
     timings.insert("prepare".into(), json!(prepared.prepare_ms));
     Ok(Loaded {
         prepared,
@@ -1712,6 +1749,26 @@ mod tests {
                 assert_eq!(shown.data[c * w * h + i], want, "({x}, {y})");
             }
         }
+    }
+
+    #[test]
+    fn lens_choices_parse() {
+        assert_eq!(parse_lens("auto"), Ok(LensChoice::Auto));
+        assert_eq!(parse_lens(" AUTO "), Ok(LensChoice::Auto));
+        assert_eq!(parse_lens("none"), Ok(LensChoice::Given(0.0)));
+        assert_eq!(parse_lens("-0.15"), Ok(LensChoice::Given(-0.15)));
+        assert_eq!(parse_lens("0"), Ok(LensChoice::Given(0.0)));
+        assert_eq!(parse_lens("0.4"), Ok(LensChoice::Given(0.4)));
+        for bad in [
+            "", "-0.61", "0.41", "nan", "inf", "-inf", "barrel", "-0.1,0.2",
+        ] {
+            let e = parse_lens(bad).expect_err(bad);
+            assert!(
+                e.contains("outside") || e.contains("expected"),
+                "{bad:?}: {e}"
+            );
+        }
+        assert!(parse_lens("-0.7").unwrap_err().contains("barrel"));
     }
 
     #[test]

@@ -29,6 +29,7 @@ pub mod export;
 pub mod grain;
 pub mod guided;
 pub mod jpeg;
+pub mod lens;
 pub mod level;
 pub mod lines;
 pub mod mask;
@@ -49,5 +50,5 @@ pub mod split;
 
 pub use error::{Error, Result};
 pub use material::{Material, MaterialParams, TextureResult, UvMode};
-pub use pipeline::{extract, Inputs, Options, PassDisagreement, Prepared, UvChoice};
+pub use pipeline::{extract, Inputs, LensChoice, Options, PassDisagreement, Prepared, UvChoice};
 pub use quad::{Quad, UserPlane};

@@ -123,10 +123,29 @@ pub const HYPOTHESES: usize = 600;
 /// the mask take part, so the mask's own outline makes no segment. Same
 /// input, same segments.
 pub fn segments(luma: &[f32], mask: &[bool], w: usize, h: usize) -> Vec<Segment> {
+    let mut out = Vec::new();
+    edge_regions(luma, mask, w, h, |region, mag| {
+        if let Some(s) = fit_segment(region, w, mag) {
+            out.push(s);
+        }
+    });
+    out
+}
+
+/// The regions [`segments`] fits its segments to: pixels of strong gradient
+/// grown while their level-line angles agree, each handed to `visit` with
+/// the gradient magnitude of any pixel (index `y·w + x`), in a fixed order.
+pub(crate) fn edge_regions(
+    luma: &[f32],
+    mask: &[bool],
+    w: usize,
+    h: usize,
+    mut visit: impl FnMut(&[usize], &dyn Fn(usize) -> f32),
+) {
     assert_eq!(luma.len(), w * h, "luma is w × h");
     assert_eq!(mask.len(), w * h, "mask is w × h");
     if w < 3 || h < 3 {
-        return Vec::new();
+        return;
     }
     // Sobel gradients of interior pixels.
     let n = w * h;
@@ -156,7 +175,6 @@ pub fn segments(luma: &[f32], mask: &[bool], w: usize, h: usize) -> Vec<Segment>
     let dir = |i: usize| Vec2::new(-grad[i].1, grad[i].0) / grad[i].2;
     let cos_tol = GROW_TOLERANCE_DEG.to_radians().cos();
     let mut used = vec![false; n];
-    let mut out = Vec::new();
     let mut region = Vec::new();
     let mut stack = Vec::new();
     for &seed in &order {
@@ -188,11 +206,8 @@ pub fn segments(luma: &[f32], mask: &[bool], w: usize, h: usize) -> Vec<Segment>
                 }
             }
         }
-        if let Some(s) = fit_segment(&region, w, mag) {
-            out.push(s);
-        }
+        visit(&region, &mag);
     }
-    out
 }
 
 /// The segment of a region of pixels: their magnitude-weighted principal
@@ -503,7 +518,7 @@ pub fn texture_axis(vanishing: &[Vanishing], n: Vec3) -> Option<[f32; 3]> {
 /// (photo pixels), as [`refine_plane_normal`] finds them.
 pub fn region_vanishing(small: &SmallLuma, mask: &[bool], focal: f32) -> Vec<Vanishing> {
     let m = small.mask(mask);
-    let segs = segments(&small.luma, &m, small.w, small.h);
+    let segs = small.segments(&m);
     vanishing_directions(&segs, small.centre(), focal / small.k as f32, 0x11ae5)
 }
 
@@ -542,6 +557,9 @@ pub struct SmallLuma {
     pub k: usize,
     /// The photo's size.
     pub full: (usize, usize),
+    /// The photo's lens distortion ([`crate::lens`]): the segments are
+    /// undistorted by it before they point anywhere (0: a pinhole).
+    pub lambda: f32,
 }
 
 impl SmallLuma {
@@ -569,7 +587,24 @@ impl SmallLuma {
             h,
             k,
             full: (fw, fh),
+            lambda: 0.0,
         }
+    }
+
+    /// The line segments of the region `m` (at this size, [`SmallLuma::mask`]),
+    /// their ends undistorted by the photo's lens ([`SmallLuma::lambda`]).
+    pub fn segments(&self, m: &[bool]) -> Vec<Segment> {
+        let mut segs = segments(&self.luma, m, self.w, self.h);
+        if self.lambda != 0.0 {
+            let (fw, fh) = self.full;
+            let lens = crate::lens::Lens::new(self.lambda, fw, fh);
+            let k = self.k as f32;
+            let undistort = |p: Vec2| lens.undistort(p * k) / k;
+            for s in &mut segs {
+                (s.a, s.b) = (undistort(s.a), undistort(s.b));
+            }
+        }
+        segs
     }
 
     /// A full-resolution mask at this size: a block is in it when all its
@@ -609,7 +644,7 @@ impl SmallLuma {
 pub fn focal_from_lines(small: &SmallLuma) -> Option<LineFocal> {
     let (w, h, k) = (small.w, small.h, small.k);
     let fh = small.full.1;
-    let segs = segments(&small.luma, &vec![true; w * h], w, h);
+    let segs = small.segments(&vec![true; w * h]);
     let c = small.centre();
     // Any focal finds the same vanishing points (the test is in the image).
     let f0 = w.max(h) as f32;
@@ -749,9 +784,9 @@ pub fn refine_plane_normal(
     focal: f32,
     axes: Option<&[[f32; 3]; 3]>,
 ) -> (Vec3, LineRefinement) {
-    let (w, h, k) = (small.w, small.h, small.k);
+    let (w, k) = (small.w, small.k);
     let m = small.mask(mask);
-    let segs = segments(&small.luma, &m, w, h);
+    let segs = small.segments(&m);
     // In downsampled pixels: the photo's centre and focal divided by k.
     let (centre, f) = (small.centre(), focal / k as f32);
     let vanishing = vanishing_directions(&segs, centre, f, 0x11ae5);

@@ -344,9 +344,13 @@ pub struct Prepared {
     /// since it was taken has a shorter diagonal than the frame the
     /// equivalent refers to: give `--fov` for it.
     pub focal_35mm: Option<f32>,
-    /// The focal length from the photo's lines, found once at the first
-    /// pick that needs it ([`Prepared::line_focal`]).
-    line_focal: std::sync::OnceLock<(crate::lines::SmallLuma, Option<crate::lines::LineFocal>)>,
+    /// How the plane mode finds the photo's lens distortion
+    /// ([`crate::lens`]; [`LensChoice::Auto`] from [`Prepared::new`]). Set it
+    /// before the first pick: the estimate is made once.
+    pub lens_choice: LensChoice,
+    /// The photo's lens distortion and its focal length from its lines,
+    /// found once at the first pick that needs them ([`Prepared::line_focal`]).
+    line_focal: std::sync::OnceLock<LineCamera>,
     /// What masks are cut from before any smoothing: the segmentation, or the
     /// embedding in mask units when there is one ([`Prepared::mask_source`]).
     embedding_mask: Option<Image>,
@@ -358,6 +362,22 @@ pub struct Prepared {
     relief: std::sync::OnceLock<Vec<f32>>,
     /// The estimated lighting prepared for shading ([`Prepared::shader`]).
     shader: std::sync::OnceLock<Option<Shader>>,
+}
+
+/// How the plane mode finds a photo's lens distortion ([`crate::lens`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum LensChoice {
+    /// Estimated from the photo's straight lines ([`crate::lens::estimate`]).
+    Auto,
+    /// Given: the division model's `λ` ([`crate::lens::Lens`]; 0: none).
+    Given(f32),
+}
+
+/// What [`Prepared::line_focal`] and [`Prepared::lens`] find, once.
+struct LineCamera {
+    small: crate::lines::SmallLuma,
+    lens: crate::lens::LensEstimate,
+    focal: Option<crate::lines::LineFocal>,
 }
 
 fn check_size(what: &str, img: &Image, c: usize, w: usize, h: usize) -> Result<()> {
@@ -444,6 +464,7 @@ impl Prepared {
             greyscale,
             prepare_ms: t.elapsed().as_secs_f64() * 1e3,
             focal_35mm: None,
+            lens_choice: LensChoice::Auto,
             line_focal: std::sync::OnceLock::new(),
             embedding_mask,
             smoothed: std::sync::OnceLock::new(),
@@ -461,16 +482,34 @@ impl Prepared {
             .as_ref()
     }
 
-    /// The photo's downsampled luma and its focal length from its straight
-    /// lines ([`crate::lines::focal_from_lines`]), computed once.
+    /// The photo's downsampled luma (its segments undistorted by the
+    /// photo's lens, [`Prepared::lens`]) and its focal length from its
+    /// straight lines ([`crate::lines::focal_from_lines`]), computed once.
     pub fn line_focal(&self) -> (&crate::lines::SmallLuma, Option<&crate::lines::LineFocal>) {
+        let c = self.line_camera();
+        (&c.small, c.focal.as_ref())
+    }
+
+    /// The photo's lens distortion as [`Prepared::lens_choice`] says: given,
+    /// or estimated from its lines ([`crate::lens::estimate`]) once.
+    pub fn lens(&self) -> &crate::lens::LensEstimate {
+        &self.line_camera().lens
+    }
+
+    fn line_camera(&self) -> &LineCamera {
         let (fw, fh) = self.photo_size();
-        let (small, focal) = self.line_focal.get_or_init(|| {
-            let small = crate::lines::SmallLuma::new(&self.luma, fw, fh);
+        self.line_focal.get_or_init(|| {
+            let mut small = crate::lines::SmallLuma::new(&self.luma, fw, fh);
+            let lens = match self.lens_choice {
+                LensChoice::Auto => crate::lens::estimate(&small).1,
+                LensChoice::Given(lambda) => {
+                    crate::lens::LensEstimate::given(&crate::lens::Lens::new(lambda, fw, fh))
+                }
+            };
+            small.lambda = lens.lambda;
             let focal = crate::lines::focal_from_lines(&small);
-            (small, focal)
-        });
-        (small, focal.as_ref())
+            LineCamera { small, lens, focal }
+        })
     }
 
     /// Photo size `(width, height)`.
@@ -1015,6 +1054,9 @@ pub struct UvDecision {
     /// vanishing points), `"view vectors"` (the predicted ones) or
     /// `"default"` ([`plane::DEFAULT_FOV_Y_DEG`]).
     pub focal_source: Option<&'static str>,
+    /// The plane mode's lens distortion ([`crate::lens`]): estimated from
+    /// the photo's lines, or given.
+    pub lens: Option<crate::lens::LensEstimate>,
     /// The plane mode's line refinement, when it ran.
     pub lines: Option<crate::lines::LineRefinement>,
     /// The plane mode's grain ([`crate::grain`]), when it was measured (no
@@ -1978,10 +2020,14 @@ fn extract_as(
                             diag_user: &mut Option<UserPlaneUsed>,
                             side_out: &mut Option<plane::Square>,
                             rest_src: &mut Option<Mask>,
-                            replan: &mut Option<(Vec3, f32, Option<Vec3>, bool)>|
+                            replan: &mut Option<(Vec3, plane::Camera, Option<Vec3>, bool)>|
          -> Option<Coords> {
+            // The photo's lens: the quad's corners and every pixel are
+            // undistorted before they become rays.
+            let lambda = p.lens().lambda;
+            let lens = crate::lens::Lens::new(lambda, fw, fh);
             let quad = match opts.plane {
-                Some(UserPlane::Quad(q)) => Some(q),
+                Some(UserPlane::Quad(q)) => Some(q.undistorted(&lens)),
                 _ => None,
             };
             // --fov, else a given quad's (when it tells it), else the
@@ -2045,7 +2091,8 @@ fn extract_as(
                     });
                     (n, along.flatten().map(Vec3::from))
                 }
-                Some(UserPlane::Quad(q)) => {
+                Some(UserPlane::Quad(given)) => {
+                    let q = given.undistorted(&lens);
                     let qp = q.plane(fw, fh, f).ok()?;
                     // Metres per plane unit from the quad's real size: the
                     // geometric mean of its two sides' (they agree when the
@@ -2061,7 +2108,7 @@ fn extract_as(
                     *diag_user = Some(UserPlaneUsed {
                         source: "quad",
                         normal: qp.normal.to_array(),
-                        quad: Some(q.0),
+                        quad: Some(given.0),
                         corner_angle_deg: Some(qp.corner_angle_deg),
                         texture_axis: Some(qp.along.to_array()),
                         size_m: opts.quad_size_m,
@@ -2099,6 +2146,7 @@ fn extract_as(
             } else {
                 plane::Framing::Covered
             };
+            let cam = plane::Camera::new(f, lambda);
             let coords_along = |along: Option<Vec3>| {
                 plane::plane_coords_with_side(
                     fw,
@@ -2106,7 +2154,7 @@ fn extract_as(
                     &full.data,
                     rest.as_ref().map(|m| &m.data[..]),
                     n,
-                    f,
+                    cam,
                     along,
                     framing,
                 )
@@ -2128,7 +2176,7 @@ fn extract_as(
             let usable = c.u.iter().zip(&full.data).any(|(u, &m)| m && u.is_finite());
             *rest_src = rest;
             *side_out = side;
-            *replan = Some((n, f, along, framing == plane::Framing::Whole));
+            *replan = Some((n, cam, along, framing == plane::Framing::Whole));
             usable.then_some(c)
         };
         // Why auto finds no coordinates, if it finds none.
@@ -2328,6 +2376,7 @@ fn extract_as(
             plane_spread_deg: spread,
             focal_px: focal.map(|f| f.0),
             focal_source: focal.map(|f| f.1),
+            lens: (mode == UvMode::Plane).then(|| p.lens().clone()),
             lines,
             grain: grain.0,
             grain_applied: grain.1,
@@ -4623,10 +4672,26 @@ mod tests {
         w: usize,
         h: usize,
         f: f32,
-        (n, turn_deg): (Vec3, f32),
+        plane: (Vec3, f32),
         cell: f32,
         predicted: Vec3,
     ) -> (Prepared, impl Fn(f32, f32) -> Vec3) {
+        chessboard_photo_through(w, h, f, plane, cell, predicted, 0.0)
+    }
+
+    /// [`chessboard_photo`] seen through a lens of distortion `lambda`
+    /// ([`crate::lens::Lens`]): each sample point of the photo is
+    /// undistorted before its ray meets the board.
+    fn chessboard_photo_through(
+        w: usize,
+        h: usize,
+        f: f32,
+        (n, turn_deg): (Vec3, f32),
+        cell: f32,
+        predicted: Vec3,
+        lambda: f32,
+    ) -> (Prepared, impl Fn(f32, f32) -> Vec3) {
+        let lens = crate::lens::Lens::new(lambda, w, h);
         let (x, y) = plane::plane_basis(n, None);
         let turn = turn_deg.to_radians();
         let e1 = x * turn.cos() + y * turn.sin();
@@ -4634,7 +4699,8 @@ mod tests {
         let o = Vec3::new(0.0, 0.0, -3.0);
         let (cx, cy) = (w as f32 / 2.0, h as f32 / 2.0);
         let shade = |x: f32, y: f32| {
-            let d = Vec3::new((x - cx) / f, -(y - cy) / f, -1.0);
+            let u = lens.undistort(glam::Vec2::new(x, y));
+            let d = Vec3::new((u.x - cx) / f, -(u.y - cy) / f, -1.0);
             let q = d * (n.dot(o) / n.dot(d)) - o;
             let (s, t) = ((q.dot(e1) / cell).floor(), (q.dot(e2) / cell).floor());
             if (s + t).rem_euclid(2.0) == 0.0 {
@@ -4781,6 +4847,85 @@ mod tests {
         assert_eq!(uv.focal_source, Some("fov"));
         let r = period_ratio(&d2).expect("the board's period");
         assert!((r - 1.0).abs() < 0.05, "periods {:?}", uv.period);
+    }
+
+    /// A chessboard on a floor seen through a barrel lens (λ = −0.25), the
+    /// true plane and focal length given: with the lens given, the fold's
+    /// periods are square and its repeats line up (a stronger period) and
+    /// `diagnostics.uv.lens` says so; taken as a pinhole (none given, and a
+    /// photo of one board has no long edges to estimate it from), the
+    /// rectified board bends and its periods are neither. A quad picked on
+    /// the distorted photo (the corners of a 4 × 4-square block) gives the
+    /// true plane through the lens, and a plane off by its distortion
+    /// without it.
+    #[test]
+    fn a_given_lens_is_undone_before_the_plane_is_rectified() {
+        let (w, h, f) = (240, 180, 150.0f32);
+        let tilt = 45f32.to_radians();
+        let n = Vec3::new(0.0, tilt.sin(), tilt.cos());
+        let cell = 0.25;
+        let lambda = -0.25;
+        let pick = [120, 90];
+        let inpainter = picker_inpaint::DiffusionInpainter::default();
+        let run = |choice: LensChoice, plane: UserPlane| {
+            let (mut p, at) = chessboard_photo_through(w, h, f, (n, 0.0), cell, Vec3::Z, lambda);
+            p.lens_choice = choice;
+            let pm = p.pick_mask(pick, &MaskOptions::default()).unwrap();
+            let opts = Options {
+                plane: Some(plane),
+                fov_deg: Some(plane::fov_from_focal(h, f)),
+                ..test_options(&inpainter, UvChoice::Plane)
+            };
+            let d = extract(&p, "board", Some(pick), &pm, &opts).unwrap().1;
+            (d, at)
+        };
+        let strength = |d: &Diagnostics| {
+            let s = d.uv.as_ref().unwrap().period.as_ref().unwrap().strength;
+            s[0].min(s[1])
+        };
+        let (lens, _) = run(LensChoice::Given(lambda), UserPlane::Normal(n));
+        let (pinhole, _) = run(LensChoice::Auto, UserPlane::Normal(n));
+        let used = lens.uv.as_ref().unwrap().lens.clone().unwrap();
+        assert_eq!((used.source, used.lambda), ("given", lambda), "{used:?}");
+        let none = pinhole.uv.as_ref().unwrap().lens.clone().unwrap();
+        assert_eq!((none.source, none.lambda), ("none", 0.0), "{none:?}");
+        let r = period_ratio(&lens).expect("the board's period");
+        assert!((r - 1.0).abs() < 0.03, "{:?}", lens.uv.unwrap().period);
+        assert!(
+            period_ratio(&pinhole).is_none_or(|r| (r - 1.0).abs() > 0.03),
+            "{:?}",
+            pinhole.uv.as_ref().unwrap().period
+        );
+        assert!(
+            pinhole.uv.as_ref().unwrap().period.is_none()
+                || strength(&pinhole) + 0.1 < strength(&lens),
+            "{} vs {}",
+            strength(&pinhole),
+            strength(&lens)
+        );
+        // A quad on the photo: its corners where the lens put them.
+        let (_, at) = run(LensChoice::Given(lambda), UserPlane::Normal(n));
+        let a = 2.0 * cell;
+        let lens_of = crate::lens::Lens::new(lambda, w, h);
+        let corners = [(0.0, -a), (2.0 * a, -a), (2.0 * a, a), (0.0, a)].map(|(s, t)| {
+            let [x, y] = pixel_of(at(s, t), w, h, f);
+            let d = lens_of.distort(glam::Vec2::new(x + 0.5, y + 0.5)).unwrap();
+            [d.x - 0.5, d.y - 0.5]
+        });
+        let quad = UserPlane::Quad(crate::quad::Quad(corners));
+        let angle = |d: &Diagnostics| {
+            let used = d.uv.as_ref().unwrap().user_plane.as_ref().unwrap();
+            Vec3::from(used.normal).angle_between(n).to_degrees()
+        };
+        let (through, _) = run(LensChoice::Given(lambda), quad);
+        let (without, _) = run(LensChoice::Given(0.0), quad);
+        assert!(angle(&through) < 1.0, "{}", angle(&through));
+        assert!(angle(&without) > 2.0, "{}", angle(&without));
+        assert_eq!(
+            through.uv.unwrap().user_plane.unwrap().quad,
+            Some(corners),
+            "the quad is reported as given"
+        );
     }
 
     /// A head-on photo of a chessboard whose predicted normals say a floor

@@ -233,6 +233,63 @@ pub fn faces_camera(n: Vec3, (x, y): (usize, usize), w: usize, h: usize) -> bool
     })
 }
 
+/// How a photo's pixels become rays: the focal length (photo pixels) and
+/// the lens distortion ([`crate::lens`]; `lambda = 0`: a pinhole). A bare
+/// focal length converts into a pinhole camera.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Camera {
+    focal: f32,
+    lambda: f32,
+}
+
+impl From<f32> for Camera {
+    fn from(focal: f32) -> Self {
+        Self { focal, lambda: 0.0 }
+    }
+}
+
+impl Camera {
+    /// A camera of focal length `focal` (photo pixels) and lens distortion
+    /// `lambda` ([`crate::lens::Lens`]).
+    ///
+    /// # Panics
+    /// When `lambda` is outside [`crate::lens::LAMBDA_MIN`]..=[`crate::lens::LAMBDA_MAX`]
+    /// (a lens that folds the photo's corners over).
+    pub fn new(focal: f32, lambda: f32) -> Self {
+        let (lo, hi) = (crate::lens::LAMBDA_MIN, crate::lens::LAMBDA_MAX);
+        assert!(
+            (lo..=hi).contains(&lambda),
+            "lens λ {lambda} outside {lo}..={hi}"
+        );
+        Self { focal, lambda }
+    }
+
+    /// Focal length, photo pixels.
+    pub fn focal(&self) -> f32 {
+        self.focal
+    }
+
+    /// The division model's coefficient.
+    pub fn lambda(&self) -> f32 {
+        self.lambda
+    }
+
+    /// The camera-space ray (not normalised, `z = −1`) through the point
+    /// `(x, y)` (pixels, y down) of a `w × h` photo: its undistorted
+    /// position relative to the centre over the focal length.
+    #[inline]
+    pub fn ray(&self, x: f32, y: f32, w: usize, h: usize) -> Vec3 {
+        let (cx, cy) = (w as f32 / 2.0, h as f32 / 2.0);
+        let (mut dx, mut dy) = (x - cx, y - cy);
+        if self.lambda != 0.0 {
+            let r2 = (w * w + h * h) as f32 / 4.0;
+            let k = 1.0 + self.lambda * (dx * dx + dy * dy) / r2;
+            (dx, dy) = (dx / k, dy / k);
+        }
+        Vec3::new(dx / self.focal, -dy / self.focal, -1.0)
+    }
+}
+
 /// A direction `along` turns the texture axes only when it is within this
 /// many degrees of the plane (the plane's own lines are; a direction far
 /// out of it says nothing about the plane's axes).
@@ -328,10 +385,10 @@ pub fn plane_coords(
     h: usize,
     mask: &[bool],
     n: Vec3,
-    focal: f32,
+    cam: impl Into<Camera>,
     along: Option<Vec3>,
 ) -> Coords {
-    plane_coords_with(w, h, mask, None, n, focal, along)
+    plane_coords_with(w, h, mask, None, n, cam, along)
 }
 
 /// [`plane_coords`] that also gives coordinates to the pixels of `extra`
@@ -348,10 +405,10 @@ pub fn plane_coords_with(
     mask: &[bool],
     extra: Option<&[bool]>,
     n: Vec3,
-    focal: f32,
+    cam: impl Into<Camera>,
     along: Option<Vec3>,
 ) -> Coords {
-    plane_coords_with_side(w, h, mask, extra, n, focal, along, Framing::Covered).0
+    plane_coords_with_side(w, h, mask, extra, n, cam, along, Framing::Covered).0
 }
 
 /// The plane coordinates `(s, t)` (plane units, the texture's axes
@@ -364,11 +421,11 @@ fn rectified(
     h: usize,
     wanted: impl Fn(usize) -> bool + Sync,
     n: Vec3,
-    focal: f32,
+    cam: impl Into<Camera>,
     along: Option<Vec3>,
 ) -> (Vec<f32>, Vec<f32>) {
     let (e1, e2) = plane_basis(n, along);
-    let (cx, cy) = (w as f32 / 2.0, h as f32 / 2.0);
+    let cam = cam.into();
     let mut s = vec![f32::NAN; w * h];
     let mut t = vec![f32::NAN; w * h];
     let step = w.max(1);
@@ -381,8 +438,7 @@ fn rectified(
                 if !wanted(i) {
                     continue;
                 }
-                let (x, y) = (col as f32 + 0.5, row as f32 + 0.5);
-                let d = Vec3::new((x - cx) / focal, -(y - cy) / focal, -1.0);
+                let d = cam.ray(col as f32 + 0.5, row as f32 + 0.5, w, h);
                 let nd = n.dot(d);
                 if nd >= -1e-4 {
                     continue;
@@ -413,13 +469,13 @@ pub fn plane_coords_in(
     h: usize,
     mask: &[bool],
     n: Vec3,
-    focal: f32,
+    cam: impl Into<Camera>,
     along: Option<Vec3>,
     origin: [f32; 2],
     side: f32,
 ) -> Coords {
     assert_eq!(mask.len(), w * h, "mask size");
-    let (mut s, mut t) = rectified(w, h, |i| mask[i], n, focal, along);
+    let (mut s, mut t) = rectified(w, h, |i| mask[i], n, cam, along);
     into_square(&mut s, &mut t, w, origin, side);
     Coords {
         width: w,
@@ -474,14 +530,14 @@ pub fn plane_coords_with_side(
     mask: &[bool],
     extra: Option<&[bool]>,
     n: Vec3,
-    focal: f32,
+    cam: impl Into<Camera>,
     along: Option<Vec3>,
     framing: Framing,
 ) -> (Coords, Option<Square>) {
     assert_eq!(mask.len(), w * h, "mask size");
     assert!(extra.is_none_or(|e| e.len() == w * h), "extra size");
     let wanted = |i: usize| mask[i] || extra.is_some_and(|e| e[i]);
-    let (mut s, mut t) = rectified(w, h, wanted, n, focal, along);
+    let (mut s, mut t) = rectified(w, h, wanted, n, cam, along);
     let step = w.max(1);
     // Both percentiles of the finite values, found in parallel without
     // collecting them (`select::kth_smallest`: the values a selection over
@@ -850,12 +906,15 @@ pub fn plane_coords_reference(
     mask: &[bool],
     extra: Option<&[bool]>,
     n: Vec3,
-    focal: f32,
+    cam: impl Into<Camera>,
     along: Option<Vec3>,
     framing: Framing,
 ) -> Coords {
     let (e1, e2) = plane_basis(n, along);
+    let cam = cam.into();
+    let (focal, lambda) = (cam.focal(), cam.lambda());
     let (cx, cy) = (w as f32 / 2.0, h as f32 / 2.0);
+    let r2 = (w * w + h * h) as f32 / 4.0;
     let mut s = vec![f32::NAN; w * h];
     let mut t = vec![f32::NAN; w * h];
     for i in 0..w * h {
@@ -863,7 +922,13 @@ pub fn plane_coords_reference(
             continue;
         }
         let (x, y) = ((i % w) as f32 + 0.5, (i / w) as f32 + 0.5);
-        let d = Vec3::new((x - cx) / focal, -(y - cy) / focal, -1.0);
+        let (mut dx, mut dy) = (x - cx, y - cy);
+        if lambda != 0.0 {
+            // The division model written out (crate::lens).
+            let k = 1.0 + lambda * (dx * dx + dy * dy) / r2;
+            (dx, dy) = (dx / k, dy / k);
+        }
+        let d = Vec3::new(dx / focal, -dy / focal, -1.0);
         let nd = n.dot(d);
         if nd >= -1e-4 {
             continue;
@@ -943,7 +1008,15 @@ mod tests {
                     rng.uniform(-0.2, 1.0),
                 );
                 let n = if k == 5 { Vec3::X } else { n.normalize() };
-                let focal = rng.uniform(5.0, 200.0);
+                // A pinhole, or a lens (barrel or pincushion).
+                let focal = Camera::new(
+                    rng.uniform(5.0, 200.0),
+                    if k % 3 == 0 {
+                        0.0
+                    } else {
+                        rng.uniform(-0.5, 0.3)
+                    },
+                );
                 let along = (k % 2 == 1).then(|| {
                     let d = Vec3::new(rng.uniform(-1.0, 1.0), rng.uniform(-1.0, 1.0), 0.3);
                     d - d.dot(n) * n

@@ -222,6 +222,16 @@ impl Quad {
         (f2 > 0.0 && f2.is_finite()).then(|| f2.sqrt())
     }
 
+    /// The quad with its corners undistorted by `lens` ([`crate::lens`]):
+    /// where they would lie through a pinhole, which the plane and focal
+    /// length are found from.
+    pub fn undistorted(&self, lens: &crate::lens::Lens) -> Self {
+        Self(self.0.map(|c| {
+            let u = lens.undistort(glam::Vec2::from(c));
+            [u.x, u.y]
+        }))
+    }
+
     /// The focal length (photo pixels) under which the quad's sides meet at
     /// right angles on the surface, when the quad tells it well
     /// ([`FOCAL_PROBE_SHARE`]) and it gives a field of view within
