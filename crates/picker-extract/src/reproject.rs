@@ -1318,10 +1318,22 @@ where
     out
 }
 
+/// Where `other` outweighs `own` by this factor at a texel both observed,
+/// [`fill_unknown_from`] takes the texel from `other`.
+pub const OUTWEIGHED: f32 = 4.0;
+
 /// The texels `own` did not observe that `other` (a reprojection of other
 /// pixels through the same coordinates at the same size) did, taken from
-/// `other`: colour, weight, coverage and the known flag. Texels `own` knows
-/// keep their values whatever `other` says. Returns how many were filled.
+/// `other`: colour, weight, coverage and the known flag; and the texels
+/// `own` observed with less than `1 / OUTWEIGHED` of `other`'s weight. In
+/// a fold of repeats (`own` the surest part of the mask, `other` the rest)
+/// such a texel was shown by a few repeats of the surest part only, while
+/// many repeats of the rest showed it: a strip of the material's border or
+/// of something else that the mask took in and that lines up with the
+/// pattern's phase there (a chessboard's white frame, folded into the
+/// bottom of its black squares, which only the rest of the mask shows),
+/// not the pattern. The other texels `own` knows keep their values. Returns
+/// how many were taken.
 ///
 /// # Panics
 /// When the two squares' sizes or channels differ.
@@ -1335,7 +1347,8 @@ pub fn fill_unknown_from(own: &mut Reprojected, other: &Reprojected) -> usize {
     let (n, channels) = (own.known.len(), t.channels);
     let mut filled = 0;
     for i in 0..n {
-        if own.known[i] || !other.known[i] {
+        let weak = other.weight.data[i] >= OUTWEIGHED * own.weight.data[i];
+        if !other.known[i] || (own.known[i] && !weak) {
             continue;
         }
         for c in 0..channels {
@@ -1602,8 +1615,9 @@ mod tests {
 
     /// Two halves of a picture reprojected apart: filling the first's
     /// unknown texels from the second's gives exactly the union's known set,
-    /// keeps every texel the first knew bit for bit, and takes the second's
-    /// values elsewhere.
+    /// keeps every texel the first knew bit for bit unless the second saw it
+    /// [`OUTWEIGHED`] times as much (along the seam between the halves),
+    /// and takes the second's values elsewhere.
     #[test]
     fn unknown_texels_are_filled_from_another_reprojection() {
         let tex = |u: f32, v: f32| Vec3::new(u, v, (u * 7.0).sin().abs());
@@ -1615,12 +1629,19 @@ mod tests {
         let b = reproject(&coords, &right, &img, &conf, 24);
         let mut f = a.clone();
         let n = fill_unknown_from(&mut f, &b);
-        let expect = (0..24 * 24).filter(|&i| !a.known[i] && b.known[i]).count();
+        let outweighed = |i: usize| {
+            a.known[i] && b.known[i] && b.weight.data[i] >= OUTWEIGHED * a.weight.data[i]
+        };
+        let expect = (0..24 * 24)
+            .filter(|&i| b.known[i] && (!a.known[i] || outweighed(i)))
+            .count();
         assert_eq!(n, expect);
         assert!(n > 0);
+        let seam = (0..24 * 24).filter(|&i| outweighed(i)).count();
+        assert!(seam <= 2 * 24, "{seam} texels outweighed");
         for i in 0..24 * 24 {
             assert_eq!(f.known[i], a.known[i] || b.known[i]);
-            let src = if a.known[i] {
+            let src = if a.known[i] && !outweighed(i) {
                 &a
             } else if b.known[i] {
                 &b
@@ -1640,6 +1661,61 @@ mod tests {
         let mut g = a.clone();
         assert_eq!(fill_unknown_from(&mut g, &a), 0);
         assert_eq!(g.known, a.known);
+    }
+
+    /// A fold of 8 × 8 repeats of a chessboard (wrapped coordinates of
+    /// period 12 pixels) whose surest part is the white squares and a strip
+    /// of white frame one repeat tall lying across the black squares' lower
+    /// rows; the rest of the mask is the black squares. The strip's texels,
+    /// shown by one row of repeats of the surest part and by seven of the
+    /// rest, come out black, as the rest shows them; the white squares keep
+    /// the surest part's values.
+    #[test]
+    fn a_strip_the_surest_part_shows_in_few_repeats_gives_way_to_the_rest() {
+        let (w, h, p) = (96usize, 96usize, 12.0f32);
+        let board = |x: usize, y: usize| ((x / 6) + (y / 6)) % 2 == 0;
+        // The frame: the last row of repeats, its black squares' lower rows white.
+        let frame = |x: usize, y: usize| y >= 84 && y % 12 >= 9 && !board(x, y);
+        let mut img = Image::zeros(3, h, w);
+        let (mut u, mut v) = (vec![0.0; w * h], vec![0.0; w * h]);
+        for y in 0..h {
+            for x in 0..w {
+                let i = y * w + x;
+                u[i] = ((x as f32 + 0.5) / p).fract();
+                v[i] = ((y as f32 + 0.5) / p).fract();
+                let white = board(x, y) || frame(x, y);
+                img.set_rgb(i, Vec3::splat(if white { 0.8 } else { 0.05 }));
+            }
+        }
+        let coords = Coords {
+            width: w,
+            height: h,
+            u,
+            v,
+            wrap: true,
+        };
+        let sure: Vec<bool> = (0..w * h)
+            .map(|i| board(i % w, i / w) || frame(i % w, i / w))
+            .collect();
+        let rest: Vec<bool> = sure.iter().map(|&b| !b).collect();
+        let conf = vec![1.0; w * h];
+        let size = 12;
+        let mut own = reproject(&coords, &sure, &img, &conf, size);
+        let other = reproject(&coords, &rest, &img, &conf, size);
+        let before = own.clone();
+        let n = fill_unknown_from(&mut own, &other);
+        assert!(n > 0);
+        let lum = |r: &Reprojected, x: usize, y: usize| r.texture.rgb(y * size + x).x;
+        // A strip texel (a black square's lower rows): white before, black after.
+        assert!(lum(&before, 2, 10) > 0.5, "{}", lum(&before, 2, 10));
+        assert!(lum(&own, 2, 10) < 0.2, "{}", lum(&own, 2, 10));
+        // A black square's upper rows: never shown by the surest part.
+        assert!(!before.known[7 * size + 2]);
+        assert!(lum(&own, 2, 7) < 0.2);
+        // The white squares' centres keep the surest part's values.
+        for (x, y) in [(2, 2), (8, 8)] {
+            assert_eq!(lum(&own, x, y).to_bits(), lum(&before, x, y).to_bits());
+        }
     }
 
     /// A frontal chessboard (squares of 6 pixels, a 12-pixel period that
