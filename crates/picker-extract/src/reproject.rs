@@ -1673,7 +1673,7 @@ mod tests {
     #[test]
     fn a_strip_the_surest_part_shows_in_few_repeats_gives_way_to_the_rest() {
         let (w, h, p) = (96usize, 96usize, 12.0f32);
-        let board = |x: usize, y: usize| ((x / 6) + (y / 6)) % 2 == 0;
+        let board = |x: usize, y: usize| ((x / 6) + (y / 6)).is_multiple_of(2);
         // The frame: the last row of repeats, its black squares' lower rows white.
         let frame = |x: usize, y: usize| y >= 84 && y % 12 >= 9 && !board(x, y);
         let mut img = Image::zeros(3, h, w);
