@@ -1539,6 +1539,15 @@ fn hints(m: &Material, diag: &pipeline::Diagnostics) -> Vec<String> {
         ));
     }
     let uv = diag.uv.as_ref();
+    if let Some(l) = uv
+        .and_then(|u| u.lens.as_ref())
+        .filter(|l| l.source == "lines")
+    {
+        out.push(format!(
+            "the photo's straight edges bow outwards (a wide-angle or webcam lens): the plane was              rectified with that distortion undone (λ {:.3}, the corners moved by {:.0} px);              --lens none keeps the photo as taken",
+            l.lambda, l.corner_shift_px
+        ));
+    }
     if let Some(turn) = uv
         .and_then(|u| u.lines.as_ref())
         .and_then(|l| l.refused_turn_deg)

@@ -1875,3 +1875,113 @@ fn shading_sigma_smooths_only_an_estimated_albedo() {
         );
     }
 }
+
+/// A 320×240 photo of straight edges (ten half-planes at seeded angles,
+/// each a step of light) seen through a barrel lens of coefficient
+/// `lambda` (`picker_extract::lens`), 4 × 4 samples a pixel, written as an
+/// 8-bit PNG to `path`.
+fn straight_edges_through(lambda: f32, path: &Path) {
+    use glam::Vec2;
+    let (w, h) = (320usize, 240usize);
+    let lens = picker_extract::lens::Lens::new(lambda, w, h);
+    let mut state = 0x9e37_79b9_7f4a_7c15u64;
+    let mut next = || {
+        state = state
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        (state >> 40) as f32 / (1u64 << 24) as f32
+    };
+    let edges: Vec<(Vec2, f32)> = (0..10)
+        .map(|_| {
+            let a = next() * std::f32::consts::PI;
+            let n = Vec2::new(a.cos(), a.sin());
+            let p = Vec2::new(
+                (0.1 + 0.8 * next()) * w as f32,
+                (0.1 + 0.8 * next()) * h as f32,
+            );
+            (n, n.dot(p))
+        })
+        .collect();
+    let mut img = image::RgbImage::new(w as u32, h as u32);
+    for (x, y, px) in img.enumerate_pixels_mut() {
+        let mut acc = 0.0;
+        for k in 0..16 {
+            let p = Vec2::new(
+                x as f32 + (k % 4) as f32 / 4.0 + 0.125,
+                y as f32 + (k / 4) as f32 / 4.0 + 0.125,
+            );
+            let u = lens.undistort(p);
+            acc += 0.15 + edges.iter().filter(|&&(n, d)| n.dot(u) > d).count() as f32 * 0.07;
+        }
+        let v = (acc / 16.0 * 255.0).round() as u8;
+        *px = image::Rgb([v, v, v]);
+    }
+    img.save(path).unwrap();
+}
+
+/// `--lens`: on a photo of straight edges through a barrel lens (λ −0.2),
+/// `auto` (the default) finds it (`diagnostics.uv.lens`, within 0.03) and
+/// says so in a hint; `none` and a coefficient are taken as given (no
+/// hint); one out of range is refused, naming it.
+#[test]
+fn the_lens_is_estimated_or_taken_as_given() {
+    let tmp = tempfile::tempdir().unwrap();
+    let photo = tmp.path().join("edges.png");
+    straight_edges_through(-0.2, &photo);
+    let extract = |lens: Option<&str>, name: &str| {
+        let out = tmp.path().join(name);
+        let mut args = vec![
+            "extract",
+            photo.to_str().unwrap(),
+            "--pick",
+            "160,120",
+            "--normal",
+            "front",
+            "--out",
+            out.to_str().unwrap(),
+            "--threads",
+            "2",
+        ];
+        if let Some(l) = lens {
+            args.extend(["--lens", l]);
+        }
+        let o = ok(&args);
+        let lens = json_file(&out.join("material.json"))["diagnostics"]["uv"]["lens"].clone();
+        (lens, String::from_utf8_lossy(&o.stderr).into_owned())
+    };
+    let (auto, told) = extract(None, "auto");
+    assert_eq!(auto["source"], "lines", "{auto}");
+    let lambda = auto["lambda"].as_f64().unwrap();
+    assert!((lambda + 0.2).abs() < 0.03, "{auto}");
+    assert!(
+        told.contains("hint: ") && told.contains("--lens none"),
+        "{told}"
+    );
+    let (none, told) = extract(Some("none"), "none");
+    assert_eq!(
+        (none["source"].as_str(), none["lambda"].as_f64()),
+        (Some("none"), Some(0.0))
+    );
+    assert!(!told.contains("--lens none"), "{told}");
+    let (given, _) = extract(Some("-0.1"), "given");
+    assert_eq!(given["source"], "given", "{given}");
+    assert!(
+        (given["lambda"].as_f64().unwrap() + 0.1).abs() < 1e-6,
+        "{given}"
+    );
+    let out = tmp.path().join("bad");
+    let bad = run(&[
+        "extract",
+        photo.to_str().unwrap(),
+        "--pick",
+        "160,120",
+        "--lens",
+        "-0.9",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(!bad.status.success());
+    let e = String::from_utf8_lossy(&bad.stderr);
+    assert!(e.contains("--lens") && e.contains("outside"), "{e}");
+    assert!(!out.exists());
+}
