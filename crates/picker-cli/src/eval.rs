@@ -87,6 +87,9 @@ pub struct Args {
     /// Do not refine the plane mode's focal and normal with the photo's lines (`extract --no-lines`).
     #[arg(long)]
     pub no_lines: bool,
+    /// The lens distortion the plane mode undoes (`extract --lens`): auto, none or a coefficient.
+    #[arg(long, value_name = "auto|none|LAMBDA", default_value = "auto", value_parser = crate::extract::parse_lens, allow_hyphen_values = true)]
+    pub lens: picker_extract::LensChoice,
     /// Do not turn the plane mode's texture axes to the pattern's grain (`extract --no-grain`).
     #[arg(long)]
     pub no_grain: bool,
@@ -503,7 +506,8 @@ fn eval_scene(dir: &Path, a: &Args, models: Option<&crate::extract::Models>) -> 
             photo_path.display()
         );
     }
-    let prepared = Prepared::new(inputs)?;
+    let mut prepared = Prepared::new(inputs)?;
+    prepared.lens_choice = a.lens;
     let inpainter = PatchMatchInpainter::default();
     let opts = pipeline::Options {
         mask: picker_extract::mask::MaskOptions {
