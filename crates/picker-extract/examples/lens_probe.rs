@@ -34,8 +34,8 @@ fn main() {
             fits.sort_by(|a, b| b.weight.total_cmp(&a.weight));
             for f in fits.iter().take(40) {
                 println!(
-                    "   λ {:+.3} weight {:9.1} pixels {:5} width {:.2} at ({:.0}, {:.0}) length {:.0}",
-                    f.lambda, f.weight, f.pixels, f.width_px, f.centroid[0], f.centroid[1], f.length_px
+                    "   λ {:+.3} weight {:9.1} points {:5} width {:.2} at ({:.0}, {:.0}) length {:.0}",
+                    f.lambda, f.weight, f.points, f.width_px, f.centroid[0], f.centroid[1], f.length_px
                 );
             }
         }

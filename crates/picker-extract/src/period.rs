@@ -834,7 +834,7 @@ fn fold_spread(
 /// (the spread is bumpy at sub-pixel drifts; a tile spanning fewer than
 /// [`REFINE_SHEAR_MIN_BINS`] bins is only scaled: `u`, `v`, then `u`
 /// again after the same check), keeping the candidate whose fold leaves the least spread of the
-/// pixels' luma within bins of the tile ([`fold_spread`], on at most
+/// pixels' luma within bins of the tile (`fold_spread`, on at most
 /// [`REFINE_MAX_PIXELS`] pixels taken evenly); the result replaces the
 /// measured tile only when it lowers that spread by [`REFINE_MIN_GAIN`].
 /// Deterministic (ties: the smaller change).

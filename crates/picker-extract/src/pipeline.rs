@@ -369,7 +369,9 @@ pub struct Prepared {
 pub enum LensChoice {
     /// Estimated from the photo's straight lines ([`crate::lens::estimate`]).
     Auto,
-    /// Given: the division model's `λ` ([`crate::lens::Lens`]; 0: none).
+    /// Given: the division model's `λ` ([`crate::lens::Lens`]; 0: none),
+    /// within [`crate::lens::LAMBDA_MIN`]..=[`crate::lens::LAMBDA_MAX`]
+    /// (outside it the first plane-mode pick panics, as [`crate::lens::Lens::new`]).
     Given(f32),
 }
 

@@ -372,14 +372,14 @@ pub struct Square {
 }
 
 /// The rectified plane coordinates of the picked pixels of a `w×h` photo
-/// (focal `focal` in photo pixels), mapped into the texture square
-/// ([`Framing::Covered`]); pixels whose ray misses the plane's front get
-/// `NaN`. The texture's axes follow `along` when given ([`plane_basis`]).
-/// The square's size and position: see [`Framing`] and `frame_with`; when
-/// no size can be searched (a region thousands of times longer than wide),
-/// the box's geometric-mean side centred on the box, or on the median pixel
-/// when that would hold none of them (separate clusters, the box's centre
-/// empty).
+/// (camera `cam`: a focal length in photo pixels, or a [`Camera`] with a
+/// lens), mapped into the texture square ([`Framing::Covered`]); pixels
+/// whose ray misses the plane's front get `NaN`. The texture's axes follow
+/// `along` when given ([`plane_basis`]). The square's size and position:
+/// see [`Framing`] and `frame_with`; when no size can be searched (a region
+/// thousands of times longer than wide), the box's geometric-mean side
+/// centred on the box, or on the median pixel when that would hold none of
+/// them (separate clusters, the box's centre empty).
 pub fn plane_coords(
     w: usize,
     h: usize,
@@ -412,8 +412,8 @@ pub fn plane_coords_with(
 }
 
 /// The plane coordinates `(s, t)` (plane units, the texture's axes
-/// [`plane_basis`]) of the `wanted` pixels of a `w×h` photo (focal `focal`
-/// in photo pixels); `NaN` elsewhere and where a pixel's ray misses the
+/// [`plane_basis`]) of the `wanted` pixels of a `w×h` photo (camera
+/// `cam`); `NaN` elsewhere and where a pixel's ray misses the
 /// plane's front. Rows in parallel; every pixel is computed alone (the same
 /// bits for any thread count).
 fn rectified(
@@ -453,7 +453,7 @@ fn rectified(
 
 /// The coordinates of the picked pixels of a `w×h` photo in the square of
 /// side `side` (plane units) whose corner is `origin` (`(s, t)`, plane
-/// units) on the plane `n` (focal `focal`, axes following `along`, as
+/// units) on the plane `n` (camera `cam`, axes following `along`, as
 /// [`plane_coords_with_side`]): `u, v ∈ [0, 1)` inside it, `NaN` elsewhere.
 /// With a [`Square`]'s own `origin` and `side` they are
 /// [`plane_coords_with_side`]'s, bit for bit; the pipeline passes a larger
