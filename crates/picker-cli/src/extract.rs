@@ -1212,7 +1212,12 @@ pub fn write_materials(
                     let q = req
                         .quad
                         .ok_or_else(|| anyhow!("--mask quad needs --quad"))?;
-                    (q.interior(fw, fh), "the --quad's interior".to_string())
+                    // Its sides bent as the photo's lens bends them.
+                    let lens = picker_extract::lens::Lens::new(prepared.lens().lambda, fw, fh);
+                    (
+                        q.interior_through(&lens, fw, fh),
+                        "the --quad's interior".to_string(),
+                    )
                 }
                 MaskArg::File(f) => {
                     let m = picker_extract::photo::load_mask(f, &flags.photo_limits())
@@ -1544,7 +1549,9 @@ fn hints(m: &Material, diag: &pipeline::Diagnostics) -> Vec<String> {
         .filter(|l| l.source == "lines")
     {
         out.push(format!(
-            "the photo's straight edges bow outwards (a wide-angle or webcam lens): the plane was              rectified with that distortion undone (λ {:.3}, the corners moved by {:.0} px);              --lens none keeps the photo as taken",
+            "the photo's straight edges bow outwards (a wide-angle or webcam lens): the plane was \
+             rectified with that distortion undone (λ {:.3}, the corners moved by {:.0} px); \
+             --lens none keeps the photo as taken",
             l.lambda, l.corner_shift_px
         ));
     }

@@ -175,14 +175,28 @@ impl Quad {
     /// inner side of all four sides). The mask of the region the quad
     /// outlines (`--mask quad`).
     pub fn interior(&self, w: usize, h: usize) -> crate::mask::Mask {
-        let p = self.points();
+        self.interior_through(&crate::lens::Lens::pinhole(w, h), w, h)
+    }
+
+    /// [`Quad::interior`] through a lens ([`crate::lens`]): the pixels whose
+    /// undistorted centres lie inside the undistorted quad, so that its sides
+    /// follow the rectangle's edges where the lens bends them. Through a
+    /// pinhole, [`Quad::interior`].
+    pub fn interior_through(
+        &self,
+        lens: &crate::lens::Lens,
+        w: usize,
+        h: usize,
+    ) -> crate::mask::Mask {
+        let p = self.undistorted(lens).points();
         // Twice the signed area: its sign says which way the corners go.
         let area2: f64 = (0..4).map(|k| p[k].perp_dot(p[(k + 1) % 4])).sum();
         let s = if area2 < 0.0 { -1.0 } else { 1.0 };
         let data = (0..w * h)
             .into_par_iter()
             .map(|i| {
-                let q = DVec2::new((i % w) as f64 + 0.5, (i / w) as f64 + 0.5);
+                let c = glam::Vec2::new((i % w) as f32 + 0.5, (i / w) as f32 + 0.5);
+                let q = lens.undistort(c).as_dvec2();
                 (0..4).all(|k| s * (p[(k + 1) % 4] - p[k]).perp_dot(q - p[k]) >= -1e-9)
             })
             .collect();
@@ -226,8 +240,9 @@ impl Quad {
     /// where they would lie through a pinhole, which the plane and focal
     /// length are found from.
     pub fn undistorted(&self, lens: &crate::lens::Lens) -> Self {
+        // Corners are in pick coordinates (a pixel's centre at +½).
         Self(self.0.map(|c| {
-            let u = lens.undistort(glam::Vec2::from(c));
+            let u = lens.undistort(glam::Vec2::from(c) + 0.5) - 0.5;
             [u.x, u.y]
         }))
     }
@@ -346,6 +361,48 @@ mod tests {
     /// A rectangle's interior is its pixels, corners and sides included,
     /// either way round; a tilted quad's count is its area within its
     /// perimeter, and each pixel agrees with a winding-number test.
+    /// A rectangle of the pinhole picture seen through a barrel lens: its
+    /// sides bow outwards between its corners, so the pixels just outside
+    /// the straight quad through its (distorted) corners, at the middle of
+    /// a side, are inside it through the lens; a pinhole gives `interior`.
+    #[test]
+    fn the_interior_through_a_lens_follows_the_bent_sides() {
+        let (w, h) = (200, 150);
+        let lens = crate::lens::Lens::new(-0.3, w, h);
+        let rect = [
+            [30.0f32, 20.0],
+            [170.0, 20.0],
+            [170.0, 130.0],
+            [30.0, 130.0],
+        ];
+        // The rectangle's corners (continuous coordinates) as picked.
+        let corners = rect.map(|c| {
+            let d = lens.distort(glam::Vec2::from(c)).unwrap() - 0.5;
+            [d.x, d.y]
+        });
+        let q = Quad(corners);
+        let straight = q.interior(w, h);
+        let bent = q.interior_through(&lens, w, h);
+        assert_eq!(
+            q.interior_through(&crate::lens::Lens::pinhole(w, h), w, h),
+            straight
+        );
+        assert!(bent.count() > straight.count());
+        // The top side's middle: the chord through the two top corners at
+        // x = 100, and a pixel two rows above it.
+        let top = (corners[0][1] + corners[1][1]) / 2.0 + 0.5;
+        let i = (top as usize - 2) * w + 100;
+        assert!(bent.data[i] && !straight.data[i], "top chord at {top}");
+        // Every pixel of the bent interior undistorts into the rectangle.
+        for (i, _) in bent.data.iter().enumerate().filter(|(_, &b)| b) {
+            let u = lens.undistort(glam::Vec2::new((i % w) as f32 + 0.5, (i / w) as f32 + 0.5));
+            assert!(
+                (29.9..=170.1).contains(&u.x) && (19.9..=130.1).contains(&u.y),
+                "{u}"
+            );
+        }
+    }
+
     #[test]
     fn the_interior_is_the_pixels_inside() {
         let q = Quad([[10.0, 10.0], [20.0, 10.0], [20.0, 15.0], [10.0, 15.0]]);
