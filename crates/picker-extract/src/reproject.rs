@@ -1369,12 +1369,45 @@ pub fn fill_unknown_from(own: &mut Reprojected, other: &Reprojected) -> usize {
         let mid = known_weights.len() / 2;
         OUTWEIGHED_MIN_SHARE * *known_weights.select_nth_unstable_by(mid, f32::total_cmp).1
     };
-    for i in 0..n {
-        let weak = own.weight.data[i] >= min_own
-            && other.weight.data[i] >= OUTWEIGHED * own.weight.data[i];
-        if !other.known[i] || (own.known[i] && !weak) {
-            continue;
+    let outweighed = |i: usize| {
+        other.known[i] && own.known[i] && other.weight.data[i] >= OUTWEIGHED * own.weight.data[i]
+    };
+    // Which texels come from `other`: those `own` did not see, and those it
+    // saw with a fair weight that `other` outweighs.
+    let mut take: Vec<bool> = (0..n)
+        .map(|i| {
+            other.known[i] && (!own.known[i] || (outweighed(i) && own.weight.data[i] >= min_own))
+        })
+        .collect();
+    // A faint outweighed texel among texels taken from `other` (a speck of
+    // the frame's faintest part inside a black square) goes too: one with
+    // at least three of its four neighbours (wrapping) taken, repeated
+    // until none is left, so a short dash goes from its ends. A faint
+    // texel along the border of `own`'s region (a splat's tail) has `own`'s
+    // texels on two sides and stays.
+    let (w, h) = (t.width, t.height);
+    loop {
+        let add: Vec<usize> = (0..n)
+            .filter(|&i| !take[i] && outweighed(i))
+            .filter(|&i| {
+                let (x, y) = (i % w, i / w);
+                let near = [
+                    y * w + (x + w - 1) % w,
+                    y * w + (x + 1) % w,
+                    ((y + h - 1) % h) * w + x,
+                    ((y + 1) % h) * w + x,
+                ];
+                near.iter().filter(|&&j| take[j]).count() >= 3
+            })
+            .collect();
+        if add.is_empty() {
+            break;
         }
+        for i in add {
+            take[i] = true;
+        }
+    }
+    for (i, _) in take.iter().enumerate().filter(|(_, &t)| t) {
         for c in 0..channels {
             own.texture.data[c * n + i] = other.texture.data[c * n + i];
         }
@@ -1739,6 +1772,58 @@ mod tests {
         // The white squares' centres keep the surest part's values.
         for (x, y) in [(2, 2), (8, 8)] {
             assert_eq!(lum(&own, x, y).to_bits(), lum(&before, x, y).to_bits());
+        }
+    }
+
+    /// `fill_unknown_from`'s faint texels: a lone one inside a hole of
+    /// `own`'s (a speck) is taken from `other`; a row of them along `own`'s
+    /// strong texels (a splat's tail) keeps `own`'s values.
+    #[test]
+    fn a_faint_speck_goes_and_a_faint_border_stays() {
+        let n = 8;
+        let at = |x: usize, y: usize| y * n + x;
+        let hole = |x: usize, y: usize| (2..6).contains(&x) && (3..7).contains(&y);
+        let mut own = Reprojected {
+            texture: Image::zeros(3, n, n),
+            weight: Image::zeros(1, n, n),
+            coverage: Image::zeros(1, n, n),
+            known: vec![false; n * n],
+        };
+        let mut other = own.clone();
+        for y in 0..n {
+            for x in 0..n {
+                let i = at(x, y);
+                other.texture.set_rgb(i, Vec3::splat(0.05));
+                other.weight.data[i] = 5.0;
+                other.known[i] = true;
+                // Strong everywhere but the hole and a faint row 2 (the
+                // tail along the hole's top border).
+                let w = if hole(x, y) {
+                    continue;
+                } else if y == 2 {
+                    0.01
+                } else {
+                    10.0
+                };
+                own.texture.set_rgb(i, Vec3::splat(0.8));
+                own.weight.data[i] = w;
+                own.known[i] = true;
+            }
+        }
+        // The speck.
+        own.known[at(3, 4)] = true;
+        own.weight.data[at(3, 4)] = 0.01;
+        own.texture.set_rgb(at(3, 4), Vec3::splat(0.8));
+        let before = own.clone();
+        let taken = fill_unknown_from(&mut own, &other);
+        assert_eq!(taken, 16, "the hole, its speck included");
+        assert_eq!(own.texture.rgb(at(3, 4)).x, 0.05);
+        for x in 0..n {
+            assert_eq!(
+                own.texture.rgb(at(x, 2)),
+                before.texture.rgb(at(x, 2)),
+                "row 2, x {x}"
+            );
         }
     }
 
