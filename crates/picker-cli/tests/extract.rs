@@ -1884,20 +1884,14 @@ fn straight_edges_through(lambda: f32, path: &Path) {
     use glam::Vec2;
     let (w, h) = (320usize, 240usize);
     let lens = picker_extract::lens::Lens::new(lambda, w, h);
-    let mut state = 0x9e37_79b9_7f4a_7c15u64;
-    let mut next = || {
-        state = state
-            .wrapping_mul(6_364_136_223_846_793_005)
-            .wrapping_add(1_442_695_040_888_963_407);
-        (state >> 40) as f32 / (1u64 << 24) as f32
-    };
+    let mut rng = picker_tensor::Rng::new(7);
     let edges: Vec<(Vec2, f32)> = (0..10)
         .map(|_| {
-            let a = next() * std::f32::consts::PI;
+            let a = rng.uniform(0.0, std::f32::consts::PI);
             let n = Vec2::new(a.cos(), a.sin());
             let p = Vec2::new(
-                (0.1 + 0.8 * next()) * w as f32,
-                (0.1 + 0.8 * next()) * h as f32,
+                rng.uniform(0.1, 0.9) * w as f32,
+                rng.uniform(0.1, 0.9) * h as f32,
             );
             (n, n.dot(p))
         })
