@@ -1381,31 +1381,29 @@ pub fn fill_unknown_from(own: &mut Reprojected, other: &Reprojected) -> usize {
         .collect();
     // A faint outweighed texel among texels taken from `other` (a speck of
     // the frame's faintest part inside a black square) goes too: one with
-    // at least three of its four neighbours (wrapping) taken, repeated
-    // until none is left, so a short dash goes from its ends. A faint
-    // texel along the border of `own`'s region (a splat's tail) has `own`'s
-    // texels on two sides and stays.
+    // at least three of its four neighbours (wrapping) taken, until none is
+    // left, so a short dash goes from its ends. A faint texel along the
+    // border of `own`'s region (a splat's tail) has `own`'s texels on two
+    // sides and stays. Taking only adds takers, so the texels taken do not
+    // depend on the order they are looked at in (a worklist: each texel is
+    // looked at again only when a neighbour was taken).
     let (w, h) = (t.width, t.height);
-    loop {
-        let add: Vec<usize> = (0..n)
-            .filter(|&i| !take[i] && outweighed(i))
-            .filter(|&i| {
-                let (x, y) = (i % w, i / w);
-                let near = [
-                    y * w + (x + w - 1) % w,
-                    y * w + (x + 1) % w,
-                    ((y + h - 1) % h) * w + x,
-                    ((y + 1) % h) * w + x,
-                ];
-                near.iter().filter(|&&j| take[j]).count() >= 3
-            })
-            .collect();
-        if add.is_empty() {
-            break;
+    let near = |i: usize| {
+        let (x, y) = (i % w, i / w);
+        [
+            y * w + (x + w - 1) % w,
+            y * w + (x + 1) % w,
+            ((y + h - 1) % h) * w + x,
+            ((y + 1) % h) * w + x,
+        ]
+    };
+    let mut work: Vec<usize> = (0..n).filter(|&i| !take[i] && outweighed(i)).collect();
+    while let Some(i) = work.pop() {
+        if take[i] || near(i).iter().filter(|&&j| take[j]).count() < 3 {
+            continue;
         }
-        for i in add {
-            take[i] = true;
-        }
+        take[i] = true;
+        work.extend(near(i).into_iter().filter(|&j| !take[j] && outweighed(j)));
     }
     for (i, _) in take.iter().enumerate().filter(|(_, &t)| t) {
         for c in 0..channels {
