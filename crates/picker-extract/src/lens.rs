@@ -48,8 +48,27 @@ pub struct Lens {
     pub lambda: f32,
     /// The centre, photo pixels.
     centre: Vec2,
-    /// `1 / R²`, `R` the half-diagonal in photo pixels.
-    inv_r2: f32,
+    /// `R²`, `R` the half-diagonal in photo pixels ([`half_diagonal_sq`]).
+    r2: f32,
+}
+
+/// `R²`, the square of a `w × h` photo's half-diagonal (pixels²): the unit
+/// of the division model's radii.
+pub fn half_diagonal_sq(w: usize, h: usize) -> f32 {
+    (w * w + h * h) as f32 / 4.0
+}
+
+/// The division model on an offset `d` from the centre (pixels) of a photo
+/// of half-diagonal `√r2`: `d / (1 + λ |d|² / r2)`, where the pinhole would
+/// put it. `d` itself, bit for bit, for `λ = 0` (or an empty photo). The one
+/// place the model is computed: [`Lens::undistort`] and the plane mode's
+/// rays ([`crate::plane::Camera::ray`]) call it.
+#[inline]
+pub fn divide(d: Vec2, lambda: f32, r2: f32) -> Vec2 {
+    if lambda == 0.0 || r2 <= 0.0 {
+        return d;
+    }
+    d / (1.0 + lambda * d.length_squared() / r2)
 }
 
 /// The most negative `λ` accepted (given or estimated): a photo's corner
@@ -68,12 +87,10 @@ impl Lens {
             (LAMBDA_MIN..=LAMBDA_MAX).contains(&lambda),
             "lens λ {lambda} outside {LAMBDA_MIN}..={LAMBDA_MAX}"
         );
-        let (w, h) = (w as f32, h as f32);
-        let r2 = (w * w + h * h) / 4.0;
         Self {
             lambda,
-            centre: Vec2::new(w, h) / 2.0,
-            inv_r2: if r2 > 0.0 { 1.0 / r2 } else { 0.0 },
+            centre: Vec2::new(w as f32, h as f32) / 2.0,
+            r2: half_diagonal_sq(w, h),
         }
     }
 
@@ -94,8 +111,7 @@ impl Lens {
         if self.lambda == 0.0 {
             return p;
         }
-        let d = p - self.centre;
-        self.centre + d / (1.0 + self.lambda * d.length_squared() * self.inv_r2)
+        self.centre + divide(p - self.centre, self.lambda, self.r2)
     }
 
     /// The inverse of [`Lens::undistort`]: the photo point of the pinhole
@@ -108,7 +124,10 @@ impl Lens {
             return Some(u);
         }
         let d = u - self.centre;
-        let ru = d.length() * self.inv_r2.sqrt();
+        if self.r2 <= 0.0 {
+            return Some(u);
+        }
+        let ru = d.length() / self.r2.sqrt();
         if ru == 0.0 {
             return Some(u);
         }

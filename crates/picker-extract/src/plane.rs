@@ -280,13 +280,12 @@ impl Camera {
     #[inline]
     pub fn ray(&self, x: f32, y: f32, w: usize, h: usize) -> Vec3 {
         let (cx, cy) = (w as f32 / 2.0, h as f32 / 2.0);
-        let (mut dx, mut dy) = (x - cx, y - cy);
-        if self.lambda != 0.0 {
-            let r2 = (w * w + h * h) as f32 / 4.0;
-            let k = 1.0 + self.lambda * (dx * dx + dy * dy) / r2;
-            (dx, dy) = (dx / k, dy / k);
-        }
-        Vec3::new(dx / self.focal, -dy / self.focal, -1.0)
+        let d = crate::lens::divide(
+            glam::Vec2::new(x - cx, y - cy),
+            self.lambda,
+            crate::lens::half_diagonal_sq(w, h),
+        );
+        Vec3::new(d.x / self.focal, -d.y / self.focal, -1.0)
     }
 }
 
@@ -912,23 +911,13 @@ pub fn plane_coords_reference(
 ) -> Coords {
     let (e1, e2) = plane_basis(n, along);
     let cam = cam.into();
-    let (focal, lambda) = (cam.focal(), cam.lambda());
-    let (cx, cy) = (w as f32 / 2.0, h as f32 / 2.0);
-    let r2 = (w * w + h * h) as f32 / 4.0;
     let mut s = vec![f32::NAN; w * h];
     let mut t = vec![f32::NAN; w * h];
     for i in 0..w * h {
         if !mask[i] && !extra.is_some_and(|e| e[i]) {
             continue;
         }
-        let (x, y) = ((i % w) as f32 + 0.5, (i / w) as f32 + 0.5);
-        let (mut dx, mut dy) = (x - cx, y - cy);
-        if lambda != 0.0 {
-            // The division model written out (crate::lens).
-            let k = 1.0 + lambda * (dx * dx + dy * dy) / r2;
-            (dx, dy) = (dx / k, dy / k);
-        }
-        let d = Vec3::new(dx / focal, -dy / focal, -1.0);
+        let d = cam.ray((i % w) as f32 + 0.5, (i / w) as f32 + 0.5, w, h);
         let nd = n.dot(d);
         if nd >= -1e-4 {
             continue;
