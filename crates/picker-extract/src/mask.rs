@@ -682,6 +682,41 @@ fn labelled(mask: &Mask, eight: bool) -> (Vec<u32>, Vec<usize>) {
     (label, sizes)
 }
 
+/// The holes of `set` (a `w × h` grid): the pixels outside it whose
+/// 4-connected region outside it does not reach the grid's border (the
+/// dual of `set`'s 8-connectivity: a diagonal gap in an 8-connected ring
+/// does not let its inside out).
+///
+/// # Panics
+/// When `set` does not hold `w × h` values.
+pub fn enclosed(set: &[bool], w: usize, h: usize) -> Vec<bool> {
+    assert_eq!(
+        set.len(),
+        w * h,
+        "enclosed: {} values for {w}x{h}",
+        set.len()
+    );
+    let mut reached = vec![false; w * h];
+    let mut stack: Vec<usize> = (0..w * h)
+        .filter(|&i| {
+            let (x, y) = (i % w, i / w);
+            !set[i] && (x == 0 || y == 0 || x + 1 == w || y + 1 == h)
+        })
+        .collect();
+    for &i in &stack {
+        reached[i] = true;
+    }
+    while let Some(i) = stack.pop() {
+        for j in neighbours4(i, w, h) {
+            if !set[j] && !reached[j] {
+                reached[j] = true;
+                stack.push(j);
+            }
+        }
+    }
+    (0..w * h).map(|i| !set[i] && !reached[i]).collect()
+}
+
 /// Chamfer distance from each pixel of `set` (a `w × h` grid) to the
 /// nearest pixel outside it, 0 outside (the grid's border counts as
 /// outside): two passes with steps of `straight` to the 4 and `diagonal` to
@@ -1096,6 +1131,63 @@ mod tests {
             height: h,
             data: out,
         }
+    }
+
+    /// The holes of `set` the slow way: 4-connected components outside
+    /// it, those with a pixel on the border left out.
+    fn enclosed_reference(set: &[bool], w: usize, h: usize) -> Vec<bool> {
+        let outside = Mask {
+            width: w,
+            height: h,
+            data: set.iter().map(|&b| !b).collect(),
+        };
+        let (label, sizes) = components4(&outside);
+        let mut open = vec![false; sizes.len()];
+        for (i, &l) in label.iter().enumerate() {
+            let (x, y) = (i % w, i / w);
+            if x == 0 || y == 0 || x + 1 == w || y + 1 == h {
+                open[l as usize] = true;
+            }
+        }
+        (0..w * h)
+            .map(|i| label[i] != 0 && !open[label[i] as usize])
+            .collect()
+    }
+
+    #[test]
+    fn enclosed_matches_its_reference_and_lets_diagonals_through_nothing() {
+        let mut rng = picker_tensor::Rng::new(59);
+        for &(w, h) in &[(1, 1), (1, 6), (7, 1), (2, 2), (3, 3), (9, 7), (31, 17)] {
+            for density in [0.2f32, 0.5, 0.7, 0.9] {
+                for _ in 0..8 {
+                    let set: Vec<bool> = (0..w * h)
+                        .map(|_| rng.uniform(0.0, 1.0) < density)
+                        .collect();
+                    assert_eq!(
+                        enclosed(&set, w, h),
+                        enclosed_reference(&set, w, h),
+                        "{w}x{h} density {density}: {set:?}"
+                    );
+                }
+            }
+        }
+        // A diamond (8-connected ring, 4-connected gaps only at corners)
+        // holds its centre; a ring cut open does not.
+        #[rustfmt::skip]
+        let diamond = [
+            false, false, true,  false, false,
+            false, true,  false, true,  false,
+            true,  false, false, false, true,
+            false, true,  false, true,  false,
+            false, false, true,  false, false,
+        ];
+        let holes = enclosed(&diamond, 5, 5);
+        let want: Vec<usize> = vec![7, 11, 12, 13, 17];
+        assert_eq!((0..25).filter(|&i| holes[i]).collect::<Vec<_>>(), want);
+        let mut cut = diamond;
+        cut[2] = false;
+        assert!(enclosed(&cut, 5, 5).iter().all(|&b| !b));
+        assert!(enclosed(&[], 0, 0).is_empty());
     }
 
     #[test]

@@ -142,7 +142,9 @@ pub const PART_MIN_PIXELS: usize = 16;
 /// region nearest to it). Only the connected region: a table top and the
 /// floor are parallel but not one plane (rectified together, their pixels
 /// would be two clusters of the texture plane, which [`plane_coords`]
-/// frames as one). `None` when the normals
+/// frames as one), with the masked pixels of the holes it encloses that
+/// are blotches of the normals rather than parallel faces
+/// ([`BLOTCH_MAX_ON_PLANE`]); its normal and spread are the region's own. `None` when the normals
 /// are unusable, the part is smaller than [`PART_MIN_SHARE`] of the mask or
 /// [`PART_MIN_PIXELS`], or its own spread exceeds `max_dev_deg`.
 ///
@@ -199,14 +201,17 @@ pub fn coplanar_part(
     if at == 0 {
         return None;
     }
-    let part: Vec<bool> = label.iter().map(|&l| l == at).collect();
+    let on: Vec<bool> = label.iter().map(|&l| l == at).collect();
+    let part = with_enclosed_blotches(&on, &on_plane.data, mask, w, h);
     let count = part.iter().filter(|&&b| b).count();
     let share = count as f64 / total as f64;
     if count < PART_MIN_PIXELS || share < PART_MIN_SHARE {
         return None;
     }
-    let normal = plane_normal(normals, &part)?;
-    let spread_deg = normal_spread_deg(normals, &part, normal);
+    // The plane and its spread are the region's own (the holes' normals
+    // are the ones that disagreed).
+    let normal = plane_normal(normals, &on)?;
+    let spread_deg = normal_spread_deg(normals, &on, normal);
     (spread_deg <= max_dev_deg).then_some(PlanePart {
         mask: part,
         normal,
@@ -214,6 +219,46 @@ pub fn coplanar_part(
         share,
     })
 }
+
+/// `on` (a region of the plane) with the masked pixels of its holes
+/// ([`crate::mask::enclosed`]) where fewer than [`BLOTCH_MAX_ON_PLANE`] of
+/// a hole's masked pixels are on the plane (`on_plane`). The networks'
+/// normals on a photo are blotchy — a gravel path's or a table's patches
+/// tilted 20–60° — and such a blotch inside the region is on its plane; a
+/// hole that holds a parallel face of its own (a table top on the floor,
+/// ringed by its sides) is another surface and stays out.
+fn with_enclosed_blotches(
+    on: &[bool],
+    on_plane: &[bool],
+    mask: &[bool],
+    w: usize,
+    h: usize,
+) -> Vec<bool> {
+    let holes = crate::mask::Mask {
+        width: w,
+        height: h,
+        data: crate::mask::enclosed(on, w, h),
+    };
+    let (label, sizes) = crate::mask::components4(&holes);
+    let (mut masked, mut level) = (vec![0usize; sizes.len()], vec![0usize; sizes.len()]);
+    for i in (0..w * h).filter(|&i| label[i] != 0 && mask[i]) {
+        masked[label[i] as usize] += 1;
+        level[label[i] as usize] += usize::from(on_plane[i]);
+    }
+    let blotch: Vec<bool> = masked
+        .iter()
+        .zip(&level)
+        .map(|(&m, &l)| (l as f64) < BLOTCH_MAX_ON_PLANE * m as f64)
+        .collect();
+    (0..w * h)
+        .map(|i| on[i] || (mask[i] && label[i] != 0 && blotch[label[i] as usize]))
+        .collect()
+}
+
+/// A hole of a plane's region whose masked pixels are at least this share
+/// on the plane (a parallel face of another surface) is not taken into it
+/// ([`coplanar_part`]).
+pub const BLOTCH_MAX_ON_PLANE: f64 = 0.25;
 
 /// Whether the plane of normal `n` shows its front at pixel `(x, y)` of a
 /// `w × h` image for every focal length of a plausible room photo
@@ -1294,6 +1339,49 @@ mod tests {
         assert!(coplanar_part(&normals, &vec![false; w * h], w, h, (5, 5), 20.0).is_none());
         let zero = Image::zeros(3, h, w);
         assert!(coplanar_part(&zero, &mask, w, h, (5, 20), 20.0).is_none());
+    }
+
+    #[test]
+    fn coplanar_part_takes_in_the_blotches_it_encloses() {
+        let (w, h) = (60, 40);
+        let a = Vec3::new(0.0, 0.8, 0.6).normalize();
+        let tilted = Vec3::new(0.6, 0.8, 0.2).normalize();
+        assert!(a.dot(tilted).acos().to_degrees() > 30.0);
+        let mut normals = two_planes(w, h, w, a, a, 5);
+        let inside = |i: usize, x0: usize, x1: usize, y0: usize, y1: usize| {
+            (x0..x1).contains(&(i % w)) && (y0..y1).contains(&(i / w))
+        };
+        // Blotches of tilted normals: one inside, one at the top border,
+        // one inside with a small island of the plane's normal.
+        let blotch = |i: usize| {
+            inside(i, 10, 18, 10, 16) || inside(i, 40, 50, 0, 6) || inside(i, 25, 35, 25, 35)
+        };
+        for i in (0..w * h).filter(|&i| blotch(i) && !inside(i, 29, 31, 29, 31)) {
+            normals.set_rgb(i, tilted);
+        }
+        // A few pixels inside the first blotch are not the material.
+        let mask: Vec<bool> = (0..w * h).map(|i| !inside(i, 12, 14, 12, 14)).collect();
+        let p = coplanar_part(&normals, &mask, w, h, (5, 30), 20.0).expect("a part");
+        let want: Vec<bool> = (0..w * h)
+            .map(|i| mask[i] && !inside(i, 40, 50, 0, 6))
+            .collect();
+        assert_eq!(p.mask, want);
+        assert!(p.normal.dot(a) > 0.999, "{:?}", p.normal);
+        assert!(p.spread_deg < 5.0, "{}", p.spread_deg);
+        let share = want.iter().filter(|&&b| b).count() as f64 / (w * h - 4) as f64;
+        assert!((p.share - share).abs() < 1e-12);
+        // A hole that is a quarter or more the plane's own normal (a
+        // parallel face ringed by its sides) stays out.
+        for i in (0..w * h).filter(|&i| inside(i, 26, 32, 26, 32)) {
+            normals.set_rgb(i, a);
+        }
+        let p = coplanar_part(&normals, &mask, w, h, (5, 30), 20.0).expect("a part");
+        assert!((0..w * h)
+            .filter(|&i| inside(i, 25, 35, 25, 35))
+            .all(|i| !p.mask[i]));
+        assert!((0..w * h)
+            .filter(|&i| inside(i, 10, 18, 10, 16))
+            .all(|i| p.mask[i] == mask[i]));
     }
 
     #[test]
