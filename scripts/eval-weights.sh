@@ -72,6 +72,11 @@ if [ "${PHOTOS:-1}" = 1 ]; then
     if [ ! -d "$PHOTO_DATA" ]; then
         (cd "$EVAL_DATA" && apt-get download opencv-doc > /dev/null && dpkg -x opencv-doc_*.deb opencv-doc)
     fi
+    SKIMAGE_DATA="$EVAL_DATA/skimage/skimage/data"
+    if [ ! -d "$SKIMAGE_DATA" ]; then
+        (cd "$EVAL_DATA" && "$PYTHON" -m pip download --no-deps -q scikit-image==0.26.0 -d skimage \
+            && unzip -q skimage/*.whl 'skimage/data/*' -d skimage)
+    fi
 fi
 
 for c in "$@"; do
@@ -98,7 +103,8 @@ for c in "$@"; do
         while read -r photo_name photo pick; do
             "$PICKER" extract "$photo" --pick "$pick" "${WX[@]}" --out "$OUT/photos/$name/$photo_name" \
                 --no-timings --threads "$THREADS" > /dev/null
-        done < <(grep -v '^#' scripts/model-card-photos.txt | sed "s|OPENCV_DATA|$PHOTO_DATA|")
+        done < <(grep -v '^#' scripts/model-card-photos.txt \
+            | sed -e "s|OPENCV_DATA|$PHOTO_DATA|" -e "s|SKIMAGE_DATA|$SKIMAGE_DATA|")
     fi
 done
 python3 "$ROOT/scripts/eval_summary.py" "$OUT"
