@@ -388,17 +388,16 @@ fn enclosed_pattern_holes(
     blend: &[bool],
     largest: usize,
 ) -> Vec<usize> {
-    let outside = Mask {
+    let holes = Mask {
         width: w,
         height: h,
-        data: union.iter().map(|&b| !b).collect(),
+        data: crate::mask::enclosed(union, w, h),
     };
-    let (label, sizes) = crate::mask::components4(&outside);
+    let (label, sizes) = crate::mask::components4(&holes);
     let mut ok = vec![true; sizes.len()];
     ok[0] = false;
     for (i, &l) in label.iter().enumerate() {
-        let (x, y) = (i % w, i / w);
-        if l != 0 && (x == 0 || y == 0 || x + 1 == w || y + 1 == h || !blend[i]) {
+        if l != 0 && !blend[i] {
             ok[l as usize] = false;
         }
     }
