@@ -53,8 +53,17 @@ fn bench(c: &mut Criterion) {
         let bias = vec![0.1; s.c_out];
         // The default algorithm, and for the residual-block shapes the
         // low-memory Winograd, both F(6×6) ones, the bf16 one (where the CPU
-        // has it) and the plain packed GEMM beside it.
+        // has it) and the plain packed GEMM beside it; for the 3×3 stride-2
+        // shapes both stride-2 Winograd variants and the pixel tiles (the
+        // ones Auto does not take run too).
         let mut algos = vec![ConvAlgorithm::Auto];
+        if s.kh == 3 && s.stride == 2 {
+            algos.extend([
+                ConvAlgorithm::WinogradStride2,
+                ConvAlgorithm::WinogradStride2LowMemory,
+                ConvAlgorithm::PixelTiles,
+            ]);
+        }
         if name.ends_with("res") {
             algos.extend([
                 ConvAlgorithm::WinogradLowMemory,
@@ -65,6 +74,18 @@ fn bench(c: &mut Criterion) {
             ]);
         }
         algos.retain(|a| a.runs_on(Isa::best()));
+        let auto = Conv2d::with_algorithm(
+            Isa::best(),
+            ConvAlgorithm::Auto,
+            s,
+            &wt,
+            Some(&bias),
+            Activation::Relu,
+        )
+        .unwrap()
+        .algorithm();
+        // Auto once, under the name of what it resolves to.
+        algos.retain(|&a| a == ConvAlgorithm::Auto || a != auto);
         let x = rng.tensor([1, s.c_in, h, w]);
         for algo in algos {
             let conv =

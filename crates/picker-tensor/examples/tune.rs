@@ -1,6 +1,6 @@
 //! Times one layer shape of the thesis networks at 240×320, for quick tuning
 //! without criterion: `cargo run --release -p picker-tensor --example tune -- res`
-//! (`TUNE_RUNS` sets the number of timed runs, default 49; `res`, `resmany`, `envres`, `envresmany`, `decout`, `encin`, `down0`, `down1`, `envin`, `envdown0`, `envdown1`, `up0`, `up1`, `dectail` (`up1` and `decout` fused in bands), `dectail-unfused`; `RAYON_NUM_THREADS`, `PICKER_ISA` apply).
+//! (`TUNE_RUNS` sets the number of timed runs, default 49; `res`, `resmany`, `envres`, `envresmany`, `shape` (with `TUNE_SHAPE`), `decout`, `encin`, `down0`, `down1`, `envin`, `envdown0`, `envdown1`, `up0`, `up1`, `head` / `envhead` (the input conv and `down0` fused in bands), `dectail` (`up1` and `decout` fused in bands), `dectail-unfused`; `RAYON_NUM_THREADS`, `PICKER_ISA` apply).
 
 use picker_tensor::{
     Activation, Conv2d, ConvAlgorithm, ConvSpec, ConvTranspose2d, ConvTransposeSpec, Isa, Rng,
@@ -64,6 +64,37 @@ fn main() {
             convs[i].forward(&x).expect("forward")
         });
     }
+    if which == "head" || which == "envhead" {
+        // An encoder's first two layers fused in bands (`reflect_then`):
+        // the 7×7 input conv (stride 1, or 2 in the EnvMap) with reflection
+        // padding 3, then the first down conv (TUNE_ALGO picks its algorithm).
+        let (h, w) = (240, 320);
+        let first = ConvSpec::square(3, 64, 7, if which == "head" { 1 } else { 2 }, 0);
+        let down = ConvSpec::square(64, 128, 3, 2, 1);
+        let firstl = Conv2d::new(
+            first,
+            &rng.normal_vec(first.weight_len(), 0.05),
+            None,
+            Activation::Relu,
+        )
+        .expect("layer");
+        let downl = Conv2d::with_algorithm(
+            Isa::best(),
+            algo_from_env(),
+            down,
+            &rng.normal_vec(down.weight_len(), 0.05),
+            None,
+            Activation::Relu,
+        )
+        .expect("layer");
+        println!("{which}: down conv {:?}", downl.algorithm());
+        let x = rng.tensor([1, 3, h, w]);
+        let (h1, w1) = first.out_hw(h + 6, w + 6).expect("shape");
+        let flops = first.flops(h + 6, w + 6) + down.flops(h1, w1);
+        return time_it(&which, flops, || {
+            firstl.reflect_then(&x, 3, &downl).expect("forward")
+        });
+    }
     if which == "dectail" || which == "dectail-unfused" {
         // A decoder's last two layers: `up1` then the 7×7 `decout` with
         // reflection padding 3, fused in bands or one after the other.
@@ -103,6 +134,19 @@ fn main() {
         return time_it(&which, s.flops(h, w), || conv.forward(&x).expect("forward"));
     }
     let (h, w, s) = match which.as_str() {
+        // `TUNE_SHAPE=h,w,c_in,c_out,k,stride,pad`: any layer.
+        "shape" => {
+            let v: Vec<usize> = std::env::var("TUNE_SHAPE")
+                .unwrap_or_default()
+                .split(',')
+                .filter_map(|x| x.trim().parse().ok())
+                .collect();
+            let [h, w, ci, co, k, st, p] = v[..] else {
+                eprintln!("TUNE_SHAPE=h,w,c_in,c_out,k,stride,pad");
+                std::process::exit(2);
+            };
+            (h, w, ConvSpec::square(ci, co, k, st, p))
+        }
         "res" => (62, 82, ConvSpec::square(256, 256, 3, 1, 0)),
         "envres" => (32, 42, ConvSpec::square(256, 256, 3, 1, 0)),
         "decout" => (246, 326, ConvSpec::square(64, 3, 7, 1, 0)),
@@ -113,27 +157,33 @@ fn main() {
         "envdown0" => (120, 160, ConvSpec::square(64, 128, 3, 2, 1)),
         "envdown1" => (60, 80, ConvSpec::square(128, 256, 3, 2, 1)),
         other => {
-            eprintln!("unknown layer {other:?}: use res, resmany, envres, decout, encin, down0, down1, envin, envdown0, envdown1, up0, up1, dectail or dectail-unfused");
+            eprintln!("unknown layer {other:?}: use res, resmany, envres, envresmany, shape, decout, encin, down0, down1, envin, envdown0, envdown1, up0, up1, head, envhead, dectail or dectail-unfused");
             std::process::exit(2);
         }
     };
     let wt = rng.normal_vec(s.weight_len(), 0.05);
-    // TUNE_ALGO=gemm|direct|winograd|winograd-lazy|winograd6|winograd6-lazy|shifted|pixtile
-    // forces an algorithm.
-    let algo = match std::env::var("TUNE_ALGO").as_deref() {
+    let algo = algo_from_env();
+    let conv =
+        Conv2d::with_algorithm(Isa::best(), algo, s, &wt, None, Activation::Relu).expect("layer");
+    println!("{which}: {:?}", conv.algorithm());
+    let x = rng.tensor([1, s.c_in, h, w]);
+    time_it(&which, s.flops(h, w), || conv.forward(&x).expect("forward"));
+}
+
+/// TUNE_ALGO=gemm|direct|winograd|winograd-lazy|winograd6|winograd6-lazy|winograd-s2|winograd-s2-lazy|shifted|pixtile
+/// forces an algorithm.
+fn algo_from_env() -> ConvAlgorithm {
+    match std::env::var("TUNE_ALGO").as_deref() {
         Ok("gemm") => ConvAlgorithm::Gemm,
         Ok("direct") => ConvAlgorithm::Direct,
         Ok("winograd") => ConvAlgorithm::Winograd,
         Ok("winograd-lazy") => ConvAlgorithm::WinogradLowMemory,
         Ok("winograd6") => ConvAlgorithm::Winograd6,
         Ok("winograd6-lazy") => ConvAlgorithm::Winograd6LowMemory,
+        Ok("winograd-s2") => ConvAlgorithm::WinogradStride2,
+        Ok("winograd-s2-lazy") => ConvAlgorithm::WinogradStride2LowMemory,
         Ok("shifted") => ConvAlgorithm::Shifted,
         Ok("pixtile") => ConvAlgorithm::PixelTiles,
         _ => ConvAlgorithm::Auto,
-    };
-    let conv =
-        Conv2d::with_algorithm(Isa::best(), algo, s, &wt, None, Activation::Relu).expect("layer");
-    println!("{which}: {:?}", conv.algorithm());
-    let x = rng.tensor([1, s.c_in, h, w]);
-    time_it(&which, s.flops(h, w), || conv.forward(&x).expect("forward"));
+    }
 }

@@ -261,16 +261,24 @@ pub enum ConvAlgorithm {
     /// variant would choose per image; `PICKER_WINOGRAD_WEIGHTS=lazy` or
     /// [`crate::low_memory`] picks
     /// [`ConvAlgorithm::WinogradLowMemory`]; [`crate::precision`] bf16 the
-    /// bf16 variants); on the AVX-512 family, the pixel tiles
-    /// ([`ConvAlgorithm::PixelTiles`]) for strided layers with ≥ 32 outputs;
-    /// the shifted GEMM for other kernels larger than 1×1 or with padding;
-    /// else (1×1) the packed GEMM.
+    /// bf16 variants); on the AVX-512 family, the stride-2 Winograd
+    /// ([`ConvAlgorithm::WinogradStride2`], its weights made per pass with
+    /// `PICKER_WINOGRAD_WEIGHTS=lazy` or [`crate::low_memory`]; in f32 at
+    /// either precision) for 3×3 stride-2 layers with ≥ 16 input channels
+    /// and at least as many outputs (the encoders' down convs: 13–24% faster
+    /// than the pixel tiles on a 2-core Zen 4; slower than the pixel tiles
+    /// where the outputs are fewer, e.g. 256→128, and than the shifted GEMM
+    /// with the AVX2 kernels, which keep those), and the pixel tiles
+    /// ([`ConvAlgorithm::PixelTiles`]) for other strided layers with ≥ 32
+    /// outputs; the shifted GEMM for other kernels larger than 1×1 or with
+    /// padding; else (1×1) the packed GEMM.
     /// With the environment variable `PICKER_CONV=gemm` set when a layer is
     /// built, every layer takes the packed GEMM (for comparisons).
     Auto,
     /// As [`ConvAlgorithm::Auto`], with the Winograd weights made at every
     /// pass ([`ConvAlgorithm::WinogradLowMemoryAutoTile`] in f32, the tile
-    /// chosen per image, or the bf16 twin) unless
+    /// chosen per image, or the bf16 twin;
+    /// [`ConvAlgorithm::WinogradStride2LowMemory`] for stride 2) unless
     /// `PICKER_WINOGRAD_WEIGHTS=packed`: for layers that see few tiles (the
     /// EnvMap's residual blocks, at 1/8 of the input), where making each
     /// chunk's weights from the 3×3 ones beats reading the packed ones (4×
@@ -314,6 +322,15 @@ pub enum ConvAlgorithm {
     /// [`ConvAlgorithm::WinogradBf16`] keeping only the 3×3 weights, as
     /// [`ConvAlgorithm::WinogradLowMemory`] does.
     WinogradBf16LowMemory,
+    /// Winograd for 3×3 stride-2 layers (any zero padding): per axis the
+    /// polyphase split, F(4, 2) on the even inputs with the even taps and the
+    /// odd inputs times the middle tap, 81 products per 4×4 output tile
+    /// instead of 144; its transformed weights packed once (9× the memory
+    /// of the 3×3 weights).
+    WinogradStride2,
+    /// [`ConvAlgorithm::WinogradStride2`] keeping only the 3×3 weights, as
+    /// [`ConvAlgorithm::WinogradLowMemory`] does.
+    WinogradStride2LowMemory,
     /// Packed-A GEMM that reads the B rows in place from a padded copy of
     /// the input (any kernel; stride `s > 1` through the `s × s` phase planes
     /// of the input): no im2col packing.
@@ -329,7 +346,7 @@ pub enum ConvAlgorithm {
 
 impl ConvAlgorithm {
     /// Every algorithm that can be asked for explicitly.
-    pub const EXPLICIT: [ConvAlgorithm; 11] = [
+    pub const EXPLICIT: [ConvAlgorithm; 13] = [
         ConvAlgorithm::Gemm,
         ConvAlgorithm::Direct,
         ConvAlgorithm::Winograd,
@@ -339,6 +356,8 @@ impl ConvAlgorithm {
         ConvAlgorithm::WinogradLowMemoryAutoTile,
         ConvAlgorithm::WinogradBf16,
         ConvAlgorithm::WinogradBf16LowMemory,
+        ConvAlgorithm::WinogradStride2,
+        ConvAlgorithm::WinogradStride2LowMemory,
         ConvAlgorithm::Shifted,
         ConvAlgorithm::PixelTiles,
     ];
@@ -372,6 +391,9 @@ impl ConvAlgorithm {
             | ConvAlgorithm::WinogradLowMemoryAutoTile
             | ConvAlgorithm::WinogradBf16
             | ConvAlgorithm::WinogradBf16LowMemory => s.kh == 3 && s.kw == 3 && s.stride == 1,
+            ConvAlgorithm::WinogradStride2 | ConvAlgorithm::WinogradStride2LowMemory => {
+                s.kh == 3 && s.kw == 3 && s.stride == 2
+            }
             ConvAlgorithm::Shifted => true,
             ConvAlgorithm::PixelTiles => s.stride <= pixtile::MAX_STRIDE,
         }
@@ -399,6 +421,28 @@ impl ConvAlgorithm {
                     (_, true, _) => ConvAlgorithm::WinogradLowMemoryAutoTile,
                     (_, false, Ok("6")) => ConvAlgorithm::Winograd6,
                     (_, false, _) => ConvAlgorithm::Winograd,
+                }
+            }
+            _ if auto
+                && isa == Isa::Avx512
+                && s.c_out >= s.c_in
+                && ConvAlgorithm::WinogradStride2.applies(s)
+                && s.c_in >= 16
+                && s.c_out >= 16 =>
+            {
+                // Small packed weights stay packed even when low on memory: the
+                // encoders' first down conv runs in bands (`reflect_then`),
+                // each of which would make them again.
+                let packed_bytes = Tile::S4.points() * s.c_in * s.c_out * 4;
+                if crate::low_memory()
+                    || weights.as_deref() == Ok("lazy")
+                    || (self == ConvAlgorithm::AutoLowMemory
+                        && weights.as_deref() != Ok("packed")
+                        && packed_bytes > WINO_S2_PACKED_MAX_BYTES)
+                {
+                    ConvAlgorithm::WinogradStride2LowMemory
+                } else {
+                    ConvAlgorithm::WinogradStride2
                 }
             }
             _ if auto
@@ -638,7 +682,9 @@ impl Conv2d {
             | ConvAlgorithm::Winograd6LowMemory
             | ConvAlgorithm::WinogradLowMemoryAutoTile
             | ConvAlgorithm::WinogradBf16
-            | ConvAlgorithm::WinogradBf16LowMemory) => ConvPath::Winograd {
+            | ConvAlgorithm::WinogradBf16LowMemory
+            | ConvAlgorithm::WinogradStride2
+            | ConvAlgorithm::WinogradStride2LowMemory) => ConvPath::Winograd {
                 isa,
                 wino: Winograd::new(
                     kernel,
@@ -650,12 +696,15 @@ impl Conv2d {
                         ConvAlgorithm::Winograd
                             | ConvAlgorithm::Winograd6
                             | ConvAlgorithm::WinogradBf16
+                            | ConvAlgorithm::WinogradStride2
                     ),
                     algo.is_bf16(),
                     match algo {
                         ConvAlgorithm::Winograd6 | ConvAlgorithm::Winograd6LowMemory => {
                             Some(Tile::F6)
                         }
+                        ConvAlgorithm::WinogradStride2
+                        | ConvAlgorithm::WinogradStride2LowMemory => Some(Tile::S4),
                         ConvAlgorithm::WinogradLowMemoryAutoTile => None,
                         _ => Some(Tile::F4),
                     },
@@ -732,6 +781,8 @@ impl Conv2d {
             ConvPath::Direct { .. } => ConvAlgorithm::Direct,
             ConvPath::Winograd { wino, .. } => {
                 match (wino.is_bf16(), wino.is_packed(), wino.tile()) {
+                    (false, true, Some(Tile::S4)) => ConvAlgorithm::WinogradStride2,
+                    (false, false, Some(Tile::S4)) => ConvAlgorithm::WinogradStride2LowMemory,
                     (false, true, Some(Tile::F6)) => ConvAlgorithm::Winograd6,
                     (false, false, Some(Tile::F6)) => ConvAlgorithm::Winograd6LowMemory,
                     (false, false, None) => ConvAlgorithm::WinogradLowMemoryAutoTile,
@@ -757,7 +808,10 @@ impl Conv2d {
     }
 
     /// `next.forward(&self.forward_reflect(x, pad, None)?)`, the same values
-    /// bit for bit, without ever holding this layer's whole output: `next`'s
+    /// bit for bit (a stride-2 Winograd `next`: within its rounding, see
+    /// [`Conv2d::reflect_then_bands`]; its bands are 16 rows whatever the
+    /// threads, so its bits do not depend on them either), without ever
+    /// holding this layer's whole output: `next`'s
     /// output is made a band of rows at a time, each from the rows of this
     /// layer's output it reads (computed from the reflection-padded input rows
     /// they read), `next` run on them with its own zero padding, and the rows
@@ -770,13 +824,25 @@ impl Conv2d {
         let row_bytes = s.c_out * w1 * std::mem::size_of::<f32>();
         // This layer's rows for one band of `next`'s: about `stride` each.
         let per_band = THEN_CONV_BAND_BYTES / rayon::current_num_threads().max(1);
-        let band = (per_band / row_bytes.max(1) / next.spec.stride.max(1)).max(THEN_CONV_MIN_BAND);
+        let band = match &next.path {
+            // Four rows of its 4×4 tiles: measured fastest (2-core Zen 4, `tune
+            // head` / `envhead`, five interleaved rounds: 20.2–21.0 ms against
+            // 22.3–25.3 with the bytes' 12-row bands for the IRN/MSN's
+            // 240×320 head, 5.5–6.6 against 5.9–8.6 with 20-row bands for
+            // the EnvMap's, whose three bands left one thread idle a third
+            // of the time).
+            ConvPath::Winograd { wino, .. } if wino.tile() == Some(Tile::S4) => THEN_CONV_S2_BAND,
+            _ => (per_band / row_bytes.max(1) / next.spec.stride.max(1)).max(THEN_CONV_MIN_BAND),
+        };
         self.reflect_then_bands(x, pad, next, band)
     }
 
     /// As [`Conv2d::reflect_then`] with bands of `band` rows of `next`'s output
-    /// (at least 1; any band size gives the same values), in one contiguous
-    /// run of bands per thread of the pool, side by side.
+    /// (at least 1; any band size gives the same values, bit for bit unless
+    /// `next` is a stride-2 Winograd layer, whose tiles a band cuts
+    /// differently: then within its rounding, and the same bits for the same
+    /// band size whatever the threads), in one contiguous run of bands per
+    /// thread of the pool, side by side.
     pub fn reflect_then_bands(
         &self,
         x: &Tensor,
@@ -1579,6 +1645,15 @@ fn in_bands(
 const THEN_CONV_BAND_BYTES: usize = 4 << 20;
 /// Fewest output rows a band of [`ConvTranspose2d::then_reflect_conv`] has.
 const THEN_CONV_MIN_BAND: usize = 8;
+/// [`ConvAlgorithm::AutoLowMemory`] keeps a stride-2 Winograd layer's
+/// transformed weights packed up to this size (the encoders' 64→128 down
+/// conv: 2.7 MB; in bands, 2-core Zen 4, `tune head`: 21.9–23.9 ms packed
+/// against 24.6–25.1 made per band); larger ones are made per pass.
+const WINO_S2_PACKED_MAX_BYTES: usize = 4 << 20;
+
+/// Rows of `next`'s output per band in [`Conv2d::reflect_then`] when `next`
+/// is a stride-2 Winograd layer (four rows of its tiles).
+const THEN_CONV_S2_BAND: usize = 16;
 
 /// Where [`ConvTranspose2d::rows_into`] writes: channel stride `cs`, row
 /// stride `rs`, first column `col0`.

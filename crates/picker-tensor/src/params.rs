@@ -51,6 +51,15 @@ pub const WINO_CO_PER_TASK: usize = 32;
 /// products per panel stay in L2 for the output transform.
 pub const WINO_CO_PER_TASK_MAX: usize = 128;
 
+/// Stride-2 Winograd (81 points): most output channels per product task, so
+/// that a task's `81 × this × NR` products per panel (0.5 MB) stay in L2
+/// for the output transform (2-core Zen 4, 2 threads, five interleaved
+/// rounds of `tune` on the thesis layers: the EnvMap's 64→128 at 120×160
+/// 3.0–3.7 ms and 128→256 at 60×80 2.62–2.74 ms with 32, against 3.0–4.1
+/// and 2.72–2.87 ms with 128; the IRN's 128→256 at 120×160 10.6–12.0 ms
+/// against 10.9–11.6).
+pub const WINO_S2_CO_PER_TASK_MAX: usize = 32;
+
 /// Winograd: most tile panels whose products one task runs before their
 /// output transform, each `U` panel being read once for all of them (fewer
 /// where the L2 cannot hold their products).

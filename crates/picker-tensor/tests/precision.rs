@@ -36,10 +36,19 @@ fn precision_switch_picks_the_bf16_winograd() {
     set_precision(Precision::Bf16).unwrap();
     assert_eq!(precision(), Precision::Bf16);
     assert_eq!(build(res, &mut rng), ConvAlgorithm::WinogradBf16);
-    // Only the Winograd layers change precision.
-    // (AVX512_BF16 implies the AVX-512 family, whose strided layers take
-    // the f32 pixel tiles.)
-    assert_eq!(build(strided, &mut rng), ConvAlgorithm::PixelTiles);
+    // Only the stride-1 Winograd layers change precision.
+    // (AVX512_BF16 implies the AVX-512 family, whose 3×3 stride-2 layers
+    // take the f32 stride-2 Winograd.)
+    let lazy = std::env::var("PICKER_WINOGRAD_WEIGHTS").as_deref() == Ok("lazy")
+        || std::env::var("PICKER_MEMORY").as_deref() == Ok("low");
+    assert_eq!(
+        build(strided, &mut rng),
+        if lazy {
+            ConvAlgorithm::WinogradStride2LowMemory
+        } else {
+            ConvAlgorithm::WinogradStride2
+        }
+    );
     set_precision(Precision::F32).unwrap();
     assert_eq!(build(res, &mut rng), ConvAlgorithm::Winograd);
 }

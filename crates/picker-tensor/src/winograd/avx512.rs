@@ -156,6 +156,63 @@ unsafe fn phases6(p: *const f32) -> [__m512; 6] {
     std::array::from_fn(|c| pair_permute(&F6_SPLIT, c, &z))
 }
 
+/// Index tables of the three stages of [`phases8`]: per stage, for output
+/// vectors whose stage bit is 0 and 1, the `vpermt2ps` index of every lane.
+///
+/// 128 floats `f = 16·v + l` (vector `v`, lane `l`) are `f = 8·t + c` (tile
+/// `t`, phase `c`); phase `c` of tile `t` must end in vector `c`, lane `t`.
+/// Stage `k` (0, 1, 2) swaps bit `k` of the vector index with bit `k` of
+/// the lane: an output vector `v'` draws from the pair `v' & !(1 << k)`,
+/// `v' | (1 << k)`, lane `l'` from lane `l'` with bit `k` set to bit `k` of
+/// `v'`, of the pair's vector given by bit `k` of `l'`. After the three
+/// swaps lane bits 3..0 hold `t₀ t₃ t₂ t₁`; the last stage's table also puts
+/// the lanes in tile order.
+const fn phase8_tables() -> [[[i32; 16]; 2]; 3] {
+    let mut t = [[[0i32; 16]; 2]; 3];
+    let mut k = 0;
+    while k < 3 {
+        let mut vb = 0;
+        while vb < 2 {
+            let mut lo = 0;
+            while lo < 16 {
+                // Lane `lo` of the output; in the last stage it takes what the
+                // swap alone would leave at lane `(t₀ t₃ t₂ t₁)` for tile `lo`.
+                let lp = if k == 2 {
+                    ((lo & 1) << 3) | (lo >> 1)
+                } else {
+                    lo
+                };
+                let l = (lp & !(1 << k)) | (vb << k);
+                let src = (lp >> k) & 1;
+                t[k][vb][lo] = (l + 16 * src) as i32;
+                lo += 1;
+            }
+            vb += 1;
+        }
+        k += 1;
+    }
+    t
+}
+
+/// See [`phase8_tables`].
+const PHASE8: [[[i32; 16]; 2]; 3] = phase8_tables();
+
+/// The eight column phases of 16 tiles: `q_c[t] = z[8t + c]` for the 128
+/// floats at `p`, by three stages of eight two-source permutes.
+#[inline(always)]
+unsafe fn phases8(p: *const f32) -> [__m512; 8] {
+    let mut z: [__m512; 8] = std::array::from_fn(|v| _mm512_loadu_ps(p.add(16 * v)));
+    for (k, tables) in PHASE8.iter().enumerate() {
+        let idx = tables.map(|t| _mm512_loadu_si512(t.as_ptr().cast()));
+        z = std::array::from_fn(|v| {
+            let vb = (v >> k) & 1;
+            let (a, b) = (z[v & !(1 << k)], z[v | (1 << k)]);
+            _mm512_permutex2var_ps(a, idx[vb], b)
+        });
+    }
+    z
+}
+
 /// Lanes `1..16` of `a` followed by lane 0 of `b`.
 #[inline(always)]
 unsafe fn next_lane(a: __m512, b: __m512) -> __m512 {
@@ -184,10 +241,12 @@ pub(super) unsafe fn input<const T: usize, const M: usize, W: Points<T, M>>(
 ) {
     let (h, w, tw, pad) = (g.h, g.w, g.tw, g.pad);
     let plane = g.x[ci * h * w..(ci + 1) * h * w].as_ptr();
+    // Tile k starts at padded column step·k.
+    let step = M * W::STRIDE;
     // A run has at most `tw` tiles; the column pass reads whole groups of
-    // 16 tiles (`16·M` floats), and one group past the run.
+    // 16 tiles (`16·step` floats), and one group past the run.
     let groups = tw.div_ceil(16) + 1;
-    let zs = 16 * M * groups;
+    let zs = 16 * step * groups;
     scratch.resize(T * zs + w, 0.0);
     let (z, zero_row) = scratch.split_at_mut(T * zs);
     zero_row.fill(0.0);
@@ -199,13 +258,13 @@ pub(super) unsafe fn input<const T: usize, const M: usize, W: Points<T, M>>(
         let p1 = (p0 + nr).min(t1);
         segments(p0, p1, tw, &mut segs);
         for &(l0, ty, tx0, len) in &segs {
-            let src: [*const f32; T] = std::array::from_fn(|r| match g.row_map[M * ty + r] {
+            let src: [*const f32; T] = std::array::from_fn(|r| match g.row_map[step * ty + r] {
                 Some(sy) => plane.add(sy * w),
                 None => zero_row,
             });
-            // z_i[x] = Σ_r Bᵀ[i][r] padded[M·ty + r][M·tx0 + x], x < nx.
-            let nx = M * len + 2;
-            let qb = M * tx0;
+            // z_i[x] = Σ_r Bᵀ[i][r] padded[step·ty + r][step·tx0 + x], x < nx.
+            let nx = step * (len - 1) + T;
+            let qb = step * tx0;
             let xa = pad.saturating_sub(qb).min(nx);
             let xb = (pad + w).saturating_sub(qb).min(nx).max(xa);
             let mut x = xa;
@@ -232,12 +291,35 @@ pub(super) unsafe fn input<const T: usize, const M: usize, W: Points<T, M>>(
             // run: past `nx` it reads what earlier rows left in `z` (zero
             // when the scratch was made), only ever into lanes of tiles past
             // the run, which are not stored (tile `k < len` reads
-            // `z[M·k + c] ≤ z[M·len + 1]`, below `nx`). Zeroing that tail
-            // here was 5% of a 60×80 F(6×6) layer (one `memset` per row).
-            // V[T·i + j] = Σ_c Bᵀ[j][c] z_i[M·k + c] for the run's tiles k.
+            // `z[step·k + c] ≤ z[step·(len − 1) + T − 1]`, below `nx`).
+            // Zeroing that tail here was 5% of a 60×80 F(6×6) layer (one
+            // `memset` per row).
+            // V[T·i + j] = Σ_c Bᵀ[j][c] z_i[step·k + c] for the run's tiles k.
             for i in 0..T {
                 let zi = z.add(i * zs);
-                if M == 4 {
+                if step == 8 {
+                    // Stride 2: tile k reads phases 0..8 at k and phase 0 at
+                    // k + 1.
+                    let mut cur = phases8(zi);
+                    let mut k = 0;
+                    while k < len {
+                        let mask = first(len - k);
+                        let next = phases8(zi.add(step * (k + 16)));
+                        let d: [Z; T] = std::array::from_fn(|c| {
+                            Z(if c < step {
+                                cur[c]
+                            } else {
+                                next_lane(cur[c - step], next[c - step])
+                            })
+                        });
+                        for (j, oj) in W::bt(d).iter().enumerate() {
+                            let dst = v.add(rows.at(i * T + j, panel) + l0 + k);
+                            _mm512_mask_storeu_ps(dst, mask, oj.0);
+                        }
+                        cur = next;
+                        k += 16;
+                    }
+                } else if M == 4 {
                     // Tile k reads phases 0..4 at k and phases 0, 1 at k + 1:
                     // two permutes per phase and 16 tiles.
                     let mut cur = phases(zi);
@@ -470,6 +552,7 @@ pub(super) unsafe fn weights<const T: usize, const M: usize, W: Points<T, M>>(
             5 => return weights_row::<T, M, W, 5>(g, up, stride, len),
             6 if T > 6 => return weights_row::<T, M, W, 6>(g, up, stride, len),
             7 if T > 7 => return weights_row::<T, M, W, 7>(g, up, stride, len),
+            8 if T > 8 => return weights_row::<T, M, W, 8>(g, up, stride, len),
             _ => {}
         }
     }

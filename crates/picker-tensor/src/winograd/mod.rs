@@ -1,9 +1,13 @@
-//! Winograd convolutions for stride-1 3×3 layers (Lavin & Gray 2016), in
-//! two tile sizes ([`Tile`]; transform matrices in `points`): F(4×4, 3×3)
-//! takes 36 multiplies per input/output channel pair for a 4×4 output tile
-//! instead of 144, F(6×6, 3×3) 64 for a 6×6 tile instead of 324.
+//! Winograd convolutions for 3×3 layers (Lavin & Gray 2016), in two tile
+//! sizes for stride 1 and one for stride 2 ([`Tile`]; transform matrices in
+//! `points`): F(4×4, 3×3) takes 36 multiplies per input/output channel pair
+//! for a 4×4 output tile instead of 144, F(6×6, 3×3) 64 for a 6×6 tile
+//! instead of 324, and the stride-2 tile 81 for a 4×4 tile instead of 144
+//! (per axis its polyphase split: F(4, 2) for the even taps on the even
+//! inputs, the middle tap on the odd ones; its input tiles are 9 wide and
+//! 8 apart, the output side is F(4×4)'s).
 //!
-//! With `d` a `T × T` input tile (`T = 6` or 8), `g` a 3×3 kernel:
+//! With `d` a `T × T` input tile (`T = 6`, 8 or 9), `g` a 3×3 kernel:
 //! `Y = Aᵀ [Σ_ci (G g Gᵀ) ⊙ (Bᵀ d B)] A`. The weights are transformed and
 //! packed once (or at each pass, lazy `U`), as `T²` `c_out × c_in` matrices
 //! `U[ξ]` in the micro-kernel's A-panel layout.
@@ -54,9 +58,9 @@ use crate::microkernel::{KernelFn, MicroKernel, NarrowKernelFn};
 use crate::pad::{padded_source, Fill};
 use crate::params::{
     WINO_BF16_KC, WINO_CO_PER_TASK, WINO_CO_PER_TASK_MAX, WINO_KC, WINO_LAZY_V_BYTES,
-    WINO_PANELS_PER_BLOCK, WINO_PANELS_PER_GROUP, WINO_ROW_BLOCK_PANELS,
+    WINO_PANELS_PER_BLOCK, WINO_PANELS_PER_GROUP, WINO_ROW_BLOCK_PANELS, WINO_S2_CO_PER_TASK_MAX,
 };
-use points::{Points, F4, F6};
+use points::{Points, F4, F6, S4};
 
 /// `N` disjoint `len`-long lanes of `out`, at `base + i·stride` (`stride ≥ len`).
 #[inline(always)]
@@ -146,20 +150,30 @@ pub(crate) enum Tile {
     F4,
     /// F(6×6, 3×3): 64 products per 36 outputs.
     F6,
+    /// F(4×4, 3×3) with stride 2 (polyphase): 81 products per 16 outputs.
+    S4,
 }
 
 impl Tile {
     /// Output pixels per tile side.
     pub(crate) fn outputs(self) -> usize {
         match self {
-            Tile::F4 => 4,
+            Tile::F4 | Tile::S4 => 4,
             Tile::F6 => 6,
+        }
+    }
+
+    /// The convolution's stride.
+    pub(crate) fn stride(self) -> usize {
+        match self {
+            Tile::F4 | Tile::F6 => 1,
+            Tile::S4 => 2,
         }
     }
 
     /// Points of the transformed tile (`U[ξ]`, `V[ξ]` per layer).
     pub(crate) fn points(self) -> usize {
-        let t = self.outputs() + 2;
+        let t = (self.outputs() - 1) * self.stride() + 3;
         t * t
     }
 
@@ -195,7 +209,8 @@ struct Geometry<'a> {
     w: usize,
     /// Tiles per row of tiles.
     tw: usize,
-    /// Source row of each padded row `0..4·th + 2` (`None`: zero).
+    /// Source row of each padded row `0..step·th + T − step` (`None`: zero;
+    /// `step = M · stride`).
     row_map: Vec<Option<usize>>,
     /// Padding on each side, and how it is filled.
     pad: usize,
@@ -315,14 +330,18 @@ fn input_channel_body<const T: usize, const M: usize, W: Points<T, M>>(
 ) {
     let (h, w, tw) = (g.h, g.w, g.tw);
     let plane = &g.x[ci * h * w..(ci + 1) * h * w];
-    // Padded row: tiles 0..tw need columns up to M·tw + 1; one more phase
-    // group keeps the k + 1 reads of the last tile inside.
-    let pw = M * tw + M;
+    // Tile k starts at padded column step·k (its input tile is T ≤ 2·step
+    // columns wide).
+    let step = M * W::STRIDE;
+    debug_assert!(T > step && T <= 2 * step);
+    // Padded row: tiles 0..tw need columns up to step·(tw − 1) + T − 1; one
+    // more phase group keeps the k + 1 reads of the last tile inside.
+    let pw = step * tw + step;
     let qlen = tw + 1;
     let d_len = T * T * nr;
-    scratch.resize(pw + M * qlen + d_len, 0.0);
+    scratch.resize(pw + step * qlen + d_len, 0.0);
     let (row, rest) = scratch.split_at_mut(pw);
-    let (q, t1buf) = rest.split_at_mut(M * qlen);
+    let (q, t1buf) = rest.split_at_mut(step * qlen);
     let mut segs = Vec::with_capacity(4);
     let mut p0 = t0;
     let mut panel = 0;
@@ -335,22 +354,19 @@ fn input_channel_body<const T: usize, const M: usize, W: Points<T, M>>(
         segments(p0, p1, tw, &mut segs);
         for &(l0, ty, tx0, len) in &segs {
             for r in 0..T {
-                g.padded_row(plane, g.row_map[M * ty + r], row);
-                // q_c[k] = row[M(tx0 + k) + c], k in 0..=len
-                {
-                    let mut qs = lanes_mut::<M>(q, 0, qlen, len + 1);
-                    let src = &row[M * tx0..M * (tx0 + len + 1)];
-                    for (k, c) in src.chunks_exact(M).enumerate() {
-                        for (qc, &x) in qs.iter_mut().zip(c) {
-                            qc[k] = x;
-                        }
+                g.padded_row(plane, g.row_map[step * ty + r], row);
+                // q_c[k] = row[step·(tx0 + k) + c], k in 0..=len
+                let src = &row[step * tx0..step * (tx0 + len + 1)];
+                for (k, cols) in src.chunks_exact(step).enumerate() {
+                    for (c, &x) in cols.iter().enumerate() {
+                        q[c * qlen + k] = x;
                     }
                 }
                 let s: [&[f32]; T] = std::array::from_fn(|c| {
-                    if c < M {
+                    if c < step {
                         &q[c * qlen..c * qlen + len]
                     } else {
-                        &q[(c - M) * qlen + 1..(c - M) * qlen + 1 + len]
+                        &q[(c - step) * qlen + 1..(c - step) * qlen + 1 + len]
                     }
                 });
                 bt_lanes::<T, M, W>(s, lanes_mut(t1buf, r * nr + l0, T * nr, len));
@@ -680,6 +696,7 @@ impl Winograd {
                 match tile {
                     Tile::F4 => w.pack_u::<6, 4, F4>(taps.as_slice(), buf.as_mut_slice()),
                     Tile::F6 => w.pack_u::<8, 6, F6>(taps.as_slice(), buf.as_mut_slice()),
+                    Tile::S4 => w.pack_u::<9, 4, S4>(taps.as_slice(), buf.as_mut_slice()),
                 }
             }
             w.u = UStore::Packed(buf);
@@ -1051,13 +1068,14 @@ impl Winograd {
         epi: &Epilogue<'_>,
         out: &mut [f32],
     ) {
-        let (oh, ow) = (h + 2 * pad - 2, w + 2 * pad - 2);
-        let tile = self
-            .tile
-            .unwrap_or_else(|| Tile::for_output(oh, ow, self.kernel.nr));
+        let tile = self.tile.unwrap_or_else(|| {
+            let (oh, ow) = (h + 2 * pad - 2, w + 2 * pad - 2);
+            Tile::for_output(oh, ow, self.kernel.nr)
+        });
         match tile {
             Tile::F4 => self.forward_tiles::<6, 4, F4>(x, h, w, pad, fill, epi, out),
             Tile::F6 => self.forward_tiles::<8, 6, F6>(x, h, w, pad, fill, epi, out),
+            Tile::S4 => self.forward_tiles::<9, 4, S4>(x, h, w, pad, fill, epi, out),
         }
     }
 
@@ -1075,12 +1093,15 @@ impl Winograd {
     ) {
         let points = T * T;
         let (bias, act, residual) = (epi.bias, epi.act, epi.residual);
-        let (oh, ow) = (h + 2 * pad - 2, w + 2 * pad - 2);
+        let s = W::STRIDE;
+        let (oh, ow) = ((h + 2 * pad - 3) / s + 1, (w + 2 * pad - 3) / s + 1);
         let (th, tw) = (oh.div_ceil(M), ow.div_ceil(M));
         let tiles = th * tw;
         let (mr, nr) = (self.kernel.mr, self.kernel.nr);
         let hp = h + 2 * pad;
-        let row_map = (0..M * th + 2)
+        // Tile row ty reads padded rows step·ty .. step·ty + T.
+        let step = M * s;
+        let row_map = (0..step * th + T - step)
             .map(|q| padded_source(q, pad, h, hp, fill))
             .collect();
         let g = Geometry {
@@ -1136,7 +1157,12 @@ impl Winograd {
             .div_ceil(rayon::current_num_threads().max(1))
             .clamp(
                 WINO_CO_PER_TASK.div_ceil(mr),
-                WINO_CO_PER_TASK_MAX.div_ceil(mr),
+                if W::STRIDE == 1 {
+                    WINO_CO_PER_TASK_MAX
+                } else {
+                    WINO_S2_CO_PER_TASK_MAX
+                }
+                .div_ceil(mr),
             );
         // AMX: whole tiles of 16 output channels per chunk.
         let chunk_panels = if self.amx {

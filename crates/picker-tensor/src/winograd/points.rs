@@ -10,6 +10,13 @@
 //!   fewer multiplications, for about twice F4's rounding error (measured on a
 //!   256-channel layer with outputs of standard deviation 1.4: max 5.6e-5 vs
 //!   3.5e-5 against f64).
+//! - [`S4`]: F(4×4, 3×3) with stride 2, 9×9 input tiles: per axis the
+//!   kernel's even taps `(g₀, g₂)` correlate the even inputs by F(4, 2)
+//!   (the points 0, ±1, 2, ∞) and its odd tap `g₁` the odd inputs one by
+//!   one, so the two phases' sums meet in the output transform: 9 points per
+//!   4 outputs, 81 products per 16 outputs instead of 144 (a direct stride-2
+//!   layer): the polyphase split of a strided convolution with each phase
+//!   by its own 1-D Winograd algorithm.
 
 /// The arithmetic the transforms need, for one lane type.
 pub(crate) trait Arith: Copy {
@@ -37,8 +44,11 @@ impl Arith for f32 {
 }
 
 /// One tile size: `T` points per axis of the transformed tile, `M` outputs
-/// per tile side (`T = M + 2` for a 3×3 kernel).
+/// per tile side; an input tile is `T` pixels wide and its successor starts
+/// `M · STRIDE` pixels on (`T = (M − 1) · STRIDE + 3` for a 3×3 kernel).
 pub(crate) trait Points<const T: usize, const M: usize> {
+    /// The convolution's stride.
+    const STRIDE: usize = 1;
     /// `Bᵀ d`: one axis of the input transform.
     fn bt<A: Arith>(d: [A; T]) -> [A; T];
     /// `Aᵀ m`: one axis of the output transform.
@@ -154,6 +164,66 @@ impl Points<8, 6> for F6 {
     }
 }
 
+/// F(4×4, 3×3) with stride 2. One axis: the input `d₀ … d₈`, the output
+/// `yᵢ = g₀ d₂ᵢ + g₁ d₂ᵢ₊₁ + g₂ d₂ᵢ₊₂`. Points 0–4 are F(4, 2) of the even
+/// inputs `eⱼ = d₂ⱼ` with the taps `(g₀, g₂)` (its `Bᵀ` rows scaled to
+/// integers, `G` scaled back), points 5–8 the odd inputs `d₁, d₃, d₅, d₇`
+/// times `g₁`.
+pub(crate) struct S4;
+
+impl Points<9, 4> for S4 {
+    const STRIDE: usize = 2;
+
+    /// `Bᵀ` of the even phase (5×5): `[2 −1 −2 1 0] [0 2 1 −1 0]
+    /// [0 −2 3 −1 0] [0 −1 0 1 0] [0 2 −1 −2 1]`; the odd phase passes.
+    #[inline(always)]
+    fn bt<A: Arith>(d: [A; 9]) -> [A; 9] {
+        let (e0, e1, e2, e3, e4) = (d[0], d[2], d[4], d[6], d[8]);
+        let t = e3.sub(e1);
+        [
+            e0.sub(e2).mul(2.0).add(t),
+            e1.mul(2.0).add(e2).sub(e3),
+            e2.mul(3.0).sub(e1.mul(2.0)).sub(e3),
+            t,
+            e1.sub(e3).mul(2.0).sub(e2).add(e4),
+            d[1],
+            d[3],
+            d[5],
+            d[7],
+        ]
+    }
+
+    /// `Aᵀ` of the even phase (4×5): `[1 1 1 1 0] [0 1 −1 2 0] [0 1 1 4 0]
+    /// [0 1 −1 8 1]`, plus the odd phase's point of each output.
+    #[inline(always)]
+    fn at<A: Arith>(m: [A; 9]) -> [A; 4] {
+        let (a, b) = (m[1].add(m[2]), m[1].sub(m[2]));
+        [
+            m[0].add(a).add(m[3]).add(m[5]),
+            b.add(m[3].mul(2.0)).add(m[6]),
+            a.add(m[3].mul(4.0)).add(m[7]),
+            b.add(m[3].mul(8.0)).add(m[4]).add(m[8]),
+        ]
+    }
+
+    /// `G` of the even phase (5×2, on `(x₀, x₂)`): `[½ 0] [½ ½] [⅙ −⅙]
+    /// [⅙ ⅓] [0 1]`; the odd phase's points are `x₁`.
+    #[inline(always)]
+    fn g<A: Arith>(x0: A, x1: A, x2: A) -> [A; 9] {
+        [
+            x0.mul(0.5),
+            x0.add(x2).mul(0.5),
+            x0.sub(x2).mul(1.0 / 6.0),
+            x0.add(x2.mul(2.0)).mul(1.0 / 6.0),
+            x2,
+            x1,
+            x1,
+            x1,
+            x1,
+        ]
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -168,8 +238,10 @@ mod tests {
             let g: [f32; 3] = std::array::from_fn(|_| rng.normal());
             let (u, v) = (W::g(g[0], g[1], g[2]), W::bt(d));
             let y = W::at(std::array::from_fn(|k| u[k] * v[k]));
+            assert_eq!(T, (M - 1) * W::STRIDE + 3, "tile width");
             for (i, &yi) in y.iter().enumerate() {
-                let exact: f64 = (0..3).map(|k| d[i + k] as f64 * g[k] as f64).sum();
+                let s = W::STRIDE * i;
+                let exact: f64 = (0..3).map(|k| d[s + k] as f64 * g[k] as f64).sum();
                 assert!(
                     (yi as f64 - exact).abs() < 1e-5 * (1.0 + exact.abs()),
                     "output {i}: {yi} vs {exact}"
@@ -186,5 +258,10 @@ mod tests {
     #[test]
     fn f6_points_correlate() {
         correlates::<8, 6, F6>();
+    }
+
+    #[test]
+    fn s4_points_correlate_with_stride_two() {
+        correlates::<9, 4, S4>();
     }
 }
