@@ -170,7 +170,7 @@ fn main() {
     time_it(&which, s.flops(h, w), || conv.forward(&x).expect("forward"));
 }
 
-/// TUNE_ALGO=gemm|direct|winograd|winograd-lazy|winograd6|winograd6-lazy|winograd-s2|winograd-s2-lazy|shifted|pixtile
+/// TUNE_ALGO=gemm|direct|winograd|winograd-lazy|winograd6|winograd6-lazy|winograd5|winograd5-lazy|winograd-auto|winograd-s2|winograd-s2-lazy|shifted|pixtile
 /// forces an algorithm.
 fn algo_from_env() -> ConvAlgorithm {
     match std::env::var("TUNE_ALGO").as_deref() {
@@ -180,6 +180,9 @@ fn algo_from_env() -> ConvAlgorithm {
         Ok("winograd-lazy") => ConvAlgorithm::WinogradLowMemory,
         Ok("winograd6") => ConvAlgorithm::Winograd6,
         Ok("winograd6-lazy") => ConvAlgorithm::Winograd6LowMemory,
+        Ok("winograd5") => ConvAlgorithm::Winograd5,
+        Ok("winograd5-lazy") => ConvAlgorithm::Winograd5LowMemory,
+        Ok("winograd-auto") => ConvAlgorithm::WinogradLowMemoryAutoTile,
         Ok("winograd-s2") => ConvAlgorithm::WinogradStride2,
         Ok("winograd-s2-lazy") => ConvAlgorithm::WinogradStride2LowMemory,
         Ok("shifted") => ConvAlgorithm::Shifted,

@@ -256,9 +256,9 @@ pub struct Conv2d {
 pub enum ConvAlgorithm {
     /// Chosen from the shape: the direct convolution for stride-1 layers
     /// with ≤ 4 outputs and kernels wider than 1; Winograd for 3×3 stride-1 layers with
-    /// ≥ 16 input and output channels, F(4×4, 3×3) (`PICKER_WINOGRAD_TILE=6`
-    /// takes F(6×6, 3×3) for f32; `=4` keeps F(4×4) where the low-memory
-    /// variant would choose per image; `PICKER_WINOGRAD_WEIGHTS=lazy` or
+    /// ≥ 16 input and output channels, F(4×4, 3×3) (`PICKER_WINOGRAD_TILE=5`
+    /// or `=6` takes F(5×5, 3×3) or F(6×6, 3×3) for f32; `=4` keeps F(4×4)
+    /// where the low-memory variant would choose per image; `PICKER_WINOGRAD_WEIGHTS=lazy` or
     /// [`crate::low_memory`] picks
     /// [`ConvAlgorithm::WinogradLowMemory`]; [`crate::precision`] bf16 the
     /// bf16 variants); on the AVX-512 family, the stride-2 Winograd
@@ -305,12 +305,20 @@ pub enum ConvAlgorithm {
     /// [`ConvAlgorithm::Winograd6`] keeping only the 3×3 weights, as
     /// [`ConvAlgorithm::WinogradLowMemory`] does.
     Winograd6LowMemory,
+    /// Winograd F(5×5, 3×3) (3×3 kernels, stride 1, any zero padding): 49
+    /// products per 25 outputs, for maps whose tiles fill its panels (a
+    /// 30×40 output is 48 tiles); its transformed weights packed once (5.4×
+    /// the memory of the 3×3 weights).
+    Winograd5,
+    /// [`ConvAlgorithm::Winograd5`] keeping only the 3×3 weights, as
+    /// [`ConvAlgorithm::WinogradLowMemory`] does.
+    Winograd5LowMemory,
     /// Winograd keeping only the 3×3 weights, with the tile chosen per
-    /// image: F(4×4, 3×3) where its tiles fit in a few panels (small maps),
-    /// else F(6×6, 3×3). What
-    /// [`ConvAlgorithm::AutoLowMemory`] takes for f32 3×3 layers (measured
-    /// on an Intel Xeon, 2 threads: IRN 4–7% and the EnvMap at 480×640 ~9%
-    /// faster than with F(4×4) alone).
+    /// image: F(4×4, 3×3) for maps of a few tiles, else F(5×5, 3×3) (see
+    /// `winograd::Tile::for_output`: on a 2-core Zen 4 it beat F(4×4) by
+    /// 12–18% on 15×20 and 30×40 maps and F(6×6) by 3–8% on 60×80 and
+    /// 120×160 ones). What [`ConvAlgorithm::AutoLowMemory`] takes for f32
+    /// 3×3 layers.
     WinogradLowMemoryAutoTile,
     /// Winograd F(4×4, 3×3) with its products in bfloat16 (AVX512_BF16
     /// `vdpbf16ps`; transformed weights and inputs rounded to bf16, sums in
@@ -346,13 +354,15 @@ pub enum ConvAlgorithm {
 
 impl ConvAlgorithm {
     /// Every algorithm that can be asked for explicitly.
-    pub const EXPLICIT: [ConvAlgorithm; 13] = [
+    pub const EXPLICIT: [ConvAlgorithm; 15] = [
         ConvAlgorithm::Gemm,
         ConvAlgorithm::Direct,
         ConvAlgorithm::Winograd,
         ConvAlgorithm::WinogradLowMemory,
         ConvAlgorithm::Winograd6,
         ConvAlgorithm::Winograd6LowMemory,
+        ConvAlgorithm::Winograd5,
+        ConvAlgorithm::Winograd5LowMemory,
         ConvAlgorithm::WinogradLowMemoryAutoTile,
         ConvAlgorithm::WinogradBf16,
         ConvAlgorithm::WinogradBf16LowMemory,
@@ -388,6 +398,8 @@ impl ConvAlgorithm {
             | ConvAlgorithm::WinogradLowMemory
             | ConvAlgorithm::Winograd6
             | ConvAlgorithm::Winograd6LowMemory
+            | ConvAlgorithm::Winograd5
+            | ConvAlgorithm::Winograd5LowMemory
             | ConvAlgorithm::WinogradLowMemoryAutoTile
             | ConvAlgorithm::WinogradBf16
             | ConvAlgorithm::WinogradBf16LowMemory => s.kh == 3 && s.kw == 3 && s.stride == 1,
@@ -417,9 +429,11 @@ impl ConvAlgorithm {
                     (crate::Precision::Bf16, true, _) => ConvAlgorithm::WinogradBf16LowMemory,
                     (crate::Precision::Bf16, false, _) => ConvAlgorithm::WinogradBf16,
                     (_, true, Ok("6")) => ConvAlgorithm::Winograd6LowMemory,
+                    (_, true, Ok("5")) => ConvAlgorithm::Winograd5LowMemory,
                     (_, true, Ok("4")) => ConvAlgorithm::WinogradLowMemory,
                     (_, true, _) => ConvAlgorithm::WinogradLowMemoryAutoTile,
                     (_, false, Ok("6")) => ConvAlgorithm::Winograd6,
+                    (_, false, Ok("5")) => ConvAlgorithm::Winograd5,
                     (_, false, _) => ConvAlgorithm::Winograd,
                 }
             }
@@ -680,6 +694,8 @@ impl Conv2d {
             | ConvAlgorithm::WinogradLowMemory
             | ConvAlgorithm::Winograd6
             | ConvAlgorithm::Winograd6LowMemory
+            | ConvAlgorithm::Winograd5
+            | ConvAlgorithm::Winograd5LowMemory
             | ConvAlgorithm::WinogradLowMemoryAutoTile
             | ConvAlgorithm::WinogradBf16
             | ConvAlgorithm::WinogradBf16LowMemory
@@ -695,6 +711,7 @@ impl Conv2d {
                         algo,
                         ConvAlgorithm::Winograd
                             | ConvAlgorithm::Winograd6
+                            | ConvAlgorithm::Winograd5
                             | ConvAlgorithm::WinogradBf16
                             | ConvAlgorithm::WinogradStride2
                     ),
@@ -702,6 +719,9 @@ impl Conv2d {
                     match algo {
                         ConvAlgorithm::Winograd6 | ConvAlgorithm::Winograd6LowMemory => {
                             Some(Tile::F6)
+                        }
+                        ConvAlgorithm::Winograd5 | ConvAlgorithm::Winograd5LowMemory => {
+                            Some(Tile::F5)
                         }
                         ConvAlgorithm::WinogradStride2
                         | ConvAlgorithm::WinogradStride2LowMemory => Some(Tile::S4),
@@ -783,6 +803,8 @@ impl Conv2d {
                 match (wino.is_bf16(), wino.is_packed(), wino.tile()) {
                     (false, true, Some(Tile::S4)) => ConvAlgorithm::WinogradStride2,
                     (false, false, Some(Tile::S4)) => ConvAlgorithm::WinogradStride2LowMemory,
+                    (false, true, Some(Tile::F5)) => ConvAlgorithm::Winograd5,
+                    (false, false, Some(Tile::F5)) => ConvAlgorithm::Winograd5LowMemory,
                     (false, true, Some(Tile::F6)) => ConvAlgorithm::Winograd6,
                     (false, false, Some(Tile::F6)) => ConvAlgorithm::Winograd6LowMemory,
                     (false, false, None) => ConvAlgorithm::WinogradLowMemoryAutoTile,

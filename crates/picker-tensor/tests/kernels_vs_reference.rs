@@ -44,6 +44,8 @@ fn tolerance(algo: ConvAlgorithm) -> Tolerance {
         | ConvAlgorithm::WinogradLowMemory
         | ConvAlgorithm::Winograd6
         | ConvAlgorithm::Winograd6LowMemory
+        | ConvAlgorithm::Winograd5
+        | ConvAlgorithm::Winograd5LowMemory
         | ConvAlgorithm::WinogradLowMemoryAutoTile
         | ConvAlgorithm::WinogradStride2
         | ConvAlgorithm::WinogradStride2LowMemory => Tolerance::WINOGRAD_F32,
@@ -189,6 +191,11 @@ fn named_conv_problems() -> Vec<ConvProblem> {
         tanh(conv(1, 16, 20, 17, 9, 3, 2, 2)),
         relu(conv(2, 3, 3, 16, 16, 3, 2, 1)),
         res(conv(1, 60, 80, 64, 128, 3, 2, 1)), // the EnvMap's first down conv at 1/2 scale
+        // F(5×5): the EnvMap's 30×40 blocks at 48 channels (48 tiles, one
+        // panel); rows of 17 tiles (the five-phase split past one group of
+        // 16, runs across panel ends) with a partial last tile.
+        res(conv(1, 32, 42, 48, 40, 3, 1, 0)),
+        relu(conv(1, 11, 86, 9, 7, 3, 1, 1)),
     ]
 }
 
@@ -1170,6 +1177,11 @@ fn winograd_lazy_weights_match_packed_bit_for_bit() {
             ConvAlgorithm::WinogradStride2,
             ConvAlgorithm::WinogradStride2LowMemory,
             2,
+        ),
+        (
+            ConvAlgorithm::Winograd5,
+            ConvAlgorithm::Winograd5LowMemory,
+            1,
         ),
     ];
     for isa in isas() {

@@ -101,22 +101,22 @@ struct PairTables {
 /// The tables that make result vector `r`, lane `e`, from source vector
 /// `v`, lane `l` (`source(r, e) = (v, l)`): pair `v / 2`, index
 /// `l + 16·(v mod 2)`.
-const fn pair_tables(join: bool) -> PairTables {
+const fn pair_tables(join: bool, m: usize) -> PairTables {
     let mut t = PairTables {
         idx: [[[0; 16]; 3]; 6],
         mask: [[0; 3]; 6],
     };
     let mut r = 0;
-    while r < 6 {
+    while r < m {
         let mut e = 0;
         while e < 16 {
             let (v, l) = if join {
-                // Pixel f = 16r + e is column f mod 6 of tile f / 6.
+                // Pixel f = 16r + e is column f mod m of tile f / m.
                 let f = 16 * r + e;
-                (f % 6, f / 6)
+                (f % m, f / m)
             } else {
-                // Phase r of tile e is float 6e + r of the 96.
-                let f = 6 * e + r;
+                // Phase r of tile e is float m·e + r of the 16·m.
+                let f = m * e + r;
                 (f / 16, f % 16)
             };
             t.idx[r][v / 2][e] = (l + 16 * (v % 2)) as i32;
@@ -130,11 +130,18 @@ const fn pair_tables(join: bool) -> PairTables {
 
 /// Phase split, 16 tiles of 6 columns (96 floats in six vectors): phase `c`,
 /// lane `k` is float `6k + c`.
-const F6_SPLIT: PairTables = pair_tables(false);
+const F6_SPLIT: PairTables = pair_tables(false, 6);
 
 /// Interleave, the inverse: pixel `f = 16s + e` of 16 tiles is column
 /// `f mod 6` (source vector `f mod 6`) of tile `f / 6`.
-const F6_JOIN: PairTables = pair_tables(true);
+const F6_JOIN: PairTables = pair_tables(true, 6);
+
+/// [`F6_SPLIT`] for 16 tiles of 5 columns (80 floats in five vectors; the
+/// third pair is the fifth vector twice).
+const F5_SPLIT: PairTables = pair_tables(false, 5);
+
+/// [`F6_JOIN`] for five columns.
+const F5_JOIN: PairTables = pair_tables(true, 5);
 
 /// Result vector `r` of `t` from the six vectors `z`: three two-source
 /// permutes blended by their masks.
@@ -154,6 +161,14 @@ unsafe fn pair_permute(t: &PairTables, r: usize, z: &[__m512; 6]) -> __m512 {
 unsafe fn phases6(p: *const f32) -> [__m512; 6] {
     let z: [__m512; 6] = std::array::from_fn(|v| _mm512_loadu_ps(p.add(16 * v)));
     std::array::from_fn(|c| pair_permute(&F6_SPLIT, c, &z))
+}
+
+/// The five column phases of 16 tiles: `q_c[t] = z[5t + c]` for the 80
+/// floats at `p` (only those are read).
+#[inline(always)]
+unsafe fn phases5(p: *const f32) -> [__m512; 5] {
+    let z: [__m512; 6] = std::array::from_fn(|v| _mm512_loadu_ps(p.add(16 * v.min(4))));
+    std::array::from_fn(|c| pair_permute(&F5_SPLIT, c, &z))
 }
 
 /// Index tables of the three stages of [`phases8`]: per stage, for output
@@ -305,6 +320,27 @@ pub(super) unsafe fn input<const T: usize, const M: usize, W: Points<T, M>>(
                     while k < len {
                         let mask = first(len - k);
                         let next = phases8(zi.add(step * (k + 16)));
+                        let d: [Z; T] = std::array::from_fn(|c| {
+                            Z(if c < step {
+                                cur[c]
+                            } else {
+                                next_lane(cur[c - step], next[c - step])
+                            })
+                        });
+                        for (j, oj) in W::bt(d).iter().enumerate() {
+                            let dst = v.add(rows.at(i * T + j, panel) + l0 + k);
+                            _mm512_mask_storeu_ps(dst, mask, oj.0);
+                        }
+                        cur = next;
+                        k += 16;
+                    }
+                } else if step == 5 {
+                    // F5: tile k reads phases 0..5 at k and phases 0, 1 at k + 1.
+                    let mut cur = phases5(zi);
+                    let mut k = 0;
+                    while k < len {
+                        let mask = first(len - k);
+                        let next = phases5(zi.add(step * (k + 16)));
                         let d: [Z; T] = std::array::from_fn(|c| {
                             Z(if c < step {
                                 cur[c]
@@ -473,12 +509,14 @@ pub(super) unsafe fn output<const T: usize, const M: usize, W: Points<T, M>>(
                     px[3] = _mm512_permutex2var_ps(b01, hi, b23);
                 } else {
                     // The row's 16 lanes past `len` (garbage, never stored)
-                    // lie inside `scratch` (its 16 spare floats).
+                    // lie inside `scratch` (its 16 spare floats). F5 has five
+                    // columns: its third pair is the fifth twice.
                     let ys: [__m512; 6] =
-                        std::array::from_fn(|j| _mm512_loadu_ps(yrow.add(j * nr)));
+                        std::array::from_fn(|j| _mm512_loadu_ps(yrow.add(j.min(M - 1) * nr)));
+                    let join = if M == 5 { &F5_JOIN } else { &F6_JOIN };
                     for (s, p) in px.iter_mut().enumerate() {
                         if M * k + 16 * s < n {
-                            *p = pair_permute(&F6_JOIN, s, &ys);
+                            *p = pair_permute(join, s, &ys);
                         }
                     }
                 }

@@ -1,13 +1,14 @@
-//! Winograd convolutions for 3×3 layers (Lavin & Gray 2016), in two tile
+//! Winograd convolutions for 3×3 layers (Lavin & Gray 2016), in three tile
 //! sizes for stride 1 and one for stride 2 ([`Tile`]; transform matrices in
 //! `points`): F(4×4, 3×3) takes 36 multiplies per input/output channel pair
-//! for a 4×4 output tile instead of 144, F(6×6, 3×3) 64 for a 6×6 tile
-//! instead of 324, and the stride-2 tile 81 for a 4×4 tile instead of 144
-//! (per axis its polyphase split: F(4, 2) for the even taps on the even
-//! inputs, the middle tap on the odd ones; its input tiles are 9 wide and
-//! 8 apart, the output side is F(4×4)'s).
+//! for a 4×4 output tile instead of 144, F(5×5, 3×3) 49 for a 5×5 tile
+//! instead of 225, F(6×6, 3×3) 64 for a 6×6 tile instead of 324, and the
+//! stride-2 tile 81 for a 4×4 tile instead of 144 (per axis its polyphase
+//! split: F(4, 2) for the even taps on the even inputs, the middle tap on
+//! the odd ones; its input tiles are 9 wide and 8 apart, the output side is
+//! F(4×4)'s).
 //!
-//! With `d` a `T × T` input tile (`T = 6`, 8 or 9), `g` a 3×3 kernel:
+//! With `d` a `T × T` input tile (`T = 6`, 7, 8 or 9), `g` a 3×3 kernel:
 //! `Y = Aᵀ [Σ_ci (G g Gᵀ) ⊙ (Bᵀ d B)] A`. The weights are transformed and
 //! packed once (or at each pass, lazy `U`), as `T²` `c_out × c_in` matrices
 //! `U[ξ]` in the micro-kernel's A-panel layout.
@@ -17,9 +18,11 @@
 //! products fall by 11% in micro-kernel samples, but its 8×8 output transform
 //! spills registers and its column phases take gathers, and its packed `U`
 //! (7.1× the 3×3 weights) streams from memory, so packed `U` stays F(4×4).
-//! With lazy `U` (every network's default) F(6×6) wins on maps too large for
-//! one block of F(4×4)'s panels: [`Tile::for_output`] chooses per image, and
-//! `PICKER_WINOGRAD_TILE=4|6` overrides ([`crate::ConvAlgorithm::Auto`]).
+//! With lazy `U` (every network's default) the tile is chosen per image
+//! ([`Tile::for_output`]): F(5×5) (since stop 60; its 7×7 transforms stay in
+//! registers, and a 30×40 map is exactly one panel of its tiles) but for maps
+//! of a few tiles; `PICKER_WINOGRAD_TILE=4|5|6` overrides
+//! ([`crate::ConvAlgorithm::Auto`]).
 //!
 //! A forward pass walks the output tiles in blocks of `NR`-wide panels
 //! ([`WINO_PANELS_PER_BLOCK`]), so that no transformed tensor ever leaves the
@@ -60,7 +63,7 @@ use crate::params::{
     WINO_BF16_KC, WINO_CO_PER_TASK, WINO_CO_PER_TASK_MAX, WINO_KC, WINO_LAZY_V_BYTES,
     WINO_PANELS_PER_BLOCK, WINO_PANELS_PER_GROUP, WINO_ROW_BLOCK_PANELS, WINO_S2_CO_PER_TASK_MAX,
 };
-use points::{Points, F4, F6, S4};
+use points::{Points, F4, F5, F6, S4};
 
 /// `N` disjoint `len`-long lanes of `out`, at `base + i·stride` (`stride ≥ len`).
 #[inline(always)]
@@ -148,6 +151,8 @@ pub(crate) struct Winograd {
 pub(crate) enum Tile {
     /// F(4×4, 3×3): 36 products per 16 outputs.
     F4,
+    /// F(5×5, 3×3): 49 products per 25 outputs.
+    F5,
     /// F(6×6, 3×3): 64 products per 36 outputs.
     F6,
     /// F(4×4, 3×3) with stride 2 (polyphase): 81 products per 16 outputs.
@@ -159,6 +164,7 @@ impl Tile {
     pub(crate) fn outputs(self) -> usize {
         match self {
             Tile::F4 | Tile::S4 => 4,
+            Tile::F5 => 5,
             Tile::F6 => 6,
         }
     }
@@ -166,7 +172,7 @@ impl Tile {
     /// The convolution's stride.
     pub(crate) fn stride(self) -> usize {
         match self {
-            Tile::F4 | Tile::F6 => 1,
+            Tile::F4 | Tile::F5 | Tile::F6 => 1,
             Tile::S4 => 2,
         }
     }
@@ -178,26 +184,29 @@ impl Tile {
     }
 
     /// The tile for an `oh × ow` output in panels of `nr` tiles, with lazy
-    /// `U`: F4 where its tiles fit in one block of [`WINO_ROW_BLOCK_PANELS`]
-    /// panels (F6's emptier panels and larger weight transform lose there:
-    /// the EnvMap's 30×40 blocks), or where F6 would not run fewer product
-    /// columns; else F6. (Re-measured after larger maps moved to row blocks
-    /// too, IRN 480×640 / 240×320 and EnvMap 480×640 with this rule, F4 and
-    /// F6 forced: 5565 / 5802 / 5574 ms, 1480 / 1584 / 1491 ms, 100.9 /
-    /// 108.5 / 99.6 ms.)
+    /// `U`: F(5×5) unless F(4×4) runs fewer product lanes (tiles in vectors
+    /// of 16, times points: maps of at most a few tiles).
     ///
-    /// Measured on an Intel Xeon with AMX, 2 threads, interleaved
-    /// `picker bench` (PICKER_WINOGRAD_TILE=4 / 6), in ms: EnvMap 240×320
-    /// (30×40 blocks) 21.3, 22.7 with F4 vs 22.9, 23.4 with F6; IRN 240×320
-    /// (60×80) 1455, 1471 vs 1358, 1412; EnvMap 480×640 (60×80) 92.9, 88.5
-    /// vs 82.3, 81.4; IRN 480×640 (120×160) 5487, 5282 vs 5279, 5091.
-    pub(crate) fn for_output(oh: usize, ow: usize, nr: usize) -> Tile {
-        let panels = |t: Tile| (oh.div_ceil(t.outputs()) * ow.div_ceil(t.outputs())).div_ceil(nr);
-        let columns = |t: Tile| panels(t) * t.points();
-        if panels(Tile::F4) <= WINO_ROW_BLOCK_PANELS || columns(Tile::F6) >= columns(Tile::F4) {
+    /// F(5×5) measured against the earlier choice (F4 where its tiles fit in
+    /// one block of [`WINO_ROW_BLOCK_PANELS`] panels, else F6), 2-core Zen 4,
+    /// 2 threads, lazy `U`, five interleaved rounds of `tune` (256 channels,
+    /// medians in ms): 30×40 output (the EnvMap's blocks; 48 F5 tiles fill
+    /// one panel) 1.92–1.96 against F4's 2.33–2.53 and F6's 2.74–2.89;
+    /// 60×80 (IRN/MSN blocks at 240×320) 7.8–9.6 against F6's 8.4–10.7;
+    /// 120×160 31.4–33.1 against 32.6–34.0; 15×20 0.93 against F4's
+    /// 1.05–1.08. `PICKER_WINOGRAD_TILE=4|6` still forces a tile.
+    ///
+    /// (The rule before, F4/F6 only, measured on an Intel Xeon with AMX:
+    /// EnvMap 240×320 21.3, 22.7 ms with F4 vs 22.9, 23.4 with F6; IRN
+    /// 240×320 1455, 1471 vs 1358, 1412; EnvMap 480×640 92.9, 88.5 vs
+    /// 82.3, 81.4; IRN 480×640 5487, 5282 vs 5279, 5091.)
+    pub(crate) fn for_output(oh: usize, ow: usize) -> Tile {
+        let tiles = |t: Tile| oh.div_ceil(t.outputs()) * ow.div_ceil(t.outputs());
+        let lanes = |t: Tile| tiles(t).next_multiple_of(16) * t.points();
+        if lanes(Tile::F4) < lanes(Tile::F5) {
             Tile::F4
         } else {
-            Tile::F6
+            Tile::F5
         }
     }
 }
@@ -695,6 +704,7 @@ impl Winograd {
             if let UStore::Lazy(taps) = &w.u {
                 match tile {
                     Tile::F4 => w.pack_u::<6, 4, F4>(taps.as_slice(), buf.as_mut_slice()),
+                    Tile::F5 => w.pack_u::<7, 5, F5>(taps.as_slice(), buf.as_mut_slice()),
                     Tile::F6 => w.pack_u::<8, 6, F6>(taps.as_slice(), buf.as_mut_slice()),
                     Tile::S4 => w.pack_u::<9, 4, S4>(taps.as_slice(), buf.as_mut_slice()),
                 }
@@ -1070,10 +1080,11 @@ impl Winograd {
     ) {
         let tile = self.tile.unwrap_or_else(|| {
             let (oh, ow) = (h + 2 * pad - 2, w + 2 * pad - 2);
-            Tile::for_output(oh, ow, self.kernel.nr)
+            Tile::for_output(oh, ow)
         });
         match tile {
             Tile::F4 => self.forward_tiles::<6, 4, F4>(x, h, w, pad, fill, epi, out),
+            Tile::F5 => self.forward_tiles::<7, 5, F5>(x, h, w, pad, fill, epi, out),
             Tile::F6 => self.forward_tiles::<8, 6, F6>(x, h, w, pad, fill, epi, out),
             Tile::S4 => self.forward_tiles::<9, 4, S4>(x, h, w, pad, fill, epi, out),
         }
@@ -1474,11 +1485,15 @@ mod tests {
     /// 43200 columns).
     #[test]
     fn tile_choice_per_image() {
-        assert_eq!(Tile::for_output(30, 40, 48), Tile::F4);
-        assert_eq!(Tile::for_output(4, 4, 48), Tile::F4);
-        assert_eq!(Tile::for_output(8, 8, 48), Tile::F4);
-        assert_eq!(Tile::for_output(60, 80, 48), Tile::F6);
-        assert_eq!(Tile::for_output(120, 160, 48), Tile::F6);
+        // 48 F5 tiles fill one panel: 2352 product lanes against F4's 2880.
+        assert_eq!(Tile::for_output(30, 40), Tile::F5);
+        assert_eq!(Tile::for_output(15, 20), Tile::F5);
+        assert_eq!(Tile::for_output(60, 80), Tile::F5);
+        assert_eq!(Tile::for_output(120, 160), Tile::F5);
+        // A few tiles: F4's 16 lanes of 36 points against F5's of 49.
+        assert_eq!(Tile::for_output(4, 4), Tile::F4);
+        assert_eq!(Tile::for_output(8, 8), Tile::F4);
+        assert_eq!(Tile::for_output(8, 10), Tile::F4);
     }
 
     #[test]
@@ -1490,5 +1505,7 @@ mod tests {
         }
         avx512_weights_match::<6, 4, F4>();
         avx512_weights_match::<8, 6, F6>();
+        avx512_weights_match::<7, 5, F5>();
+        avx512_weights_match::<9, 4, S4>();
     }
 }

@@ -4,6 +4,10 @@
 //! same order.
 //!
 //! - [`F4`]: F(4×4, 3×3), 6×6 input tiles, the points 0, ±1, ±2, ∞.
+//! - [`F5`]: F(5×5, 3×3), 7×7 input tiles, the points 0, ±1, ±2, ½, ∞: 49
+//!   products per 25 outputs, for maps whose tiles fill whole panels in it
+//!   (30×40: 48 tiles, one panel of 48, where F(4×4) takes 80 and F(6×6) 35
+//!   of 48 lanes); its rounding error lies between F4's and F6's.
 //! - [`F6`]: F(6×6, 3×3), 8×8 input tiles, the points 0, ±1, ±2, ±½, ∞
 //!   (Lavin & Gray 2016; the points Barabasz et al. 2018 found the most
 //!   accurate in f32). 64 products per 36 outputs instead of 36 per 16: 21%
@@ -96,6 +100,87 @@ impl Points<6, 4> for F4 {
             c.add(b.mul(1.0 / 12.0)),
             c.sub(b.mul(1.0 / 12.0)),
             x2,
+        ]
+    }
+}
+
+/// F(5×5, 3×3).
+pub(crate) struct F5;
+
+impl Points<7, 5> for F5 {
+    /// `Bᵀ` (7×7), each row of `V⁻ᵀ` for the points 0, ±1, ±2, ½, ∞ scaled
+    /// to integers (`G` scaled back): `[4 −8 −5 10 1 −2 0]`,
+    /// `[0 −4 4 9 −1 −2 0]`, `[0 −4 12 −7 −3 2 0]`, `[0 2 −3 −4 3 2 0]`,
+    /// `[0 2 −5 0 5 −2 0]`, `[0 4 0 −5 0 1 0]`, `[0 −4 8 5 −10 −1 2]`.
+    #[inline(always)]
+    fn bt<A: Arith>(d: [A; 7]) -> [A; 7] {
+        [
+            d[0].mul(4.0)
+                .sub(d[1].mul(8.0))
+                .sub(d[2].mul(5.0))
+                .add(d[3].mul(10.0))
+                .add(d[4])
+                .sub(d[5].mul(2.0)),
+            d[2].sub(d[1])
+                .mul(4.0)
+                .add(d[3].mul(9.0))
+                .sub(d[4])
+                .sub(d[5].mul(2.0)),
+            d[2].mul(12.0)
+                .sub(d[1].mul(4.0))
+                .sub(d[3].mul(7.0))
+                .sub(d[4].mul(3.0))
+                .add(d[5].mul(2.0)),
+            d[1].add(d[5])
+                .mul(2.0)
+                .sub(d[2].mul(3.0))
+                .sub(d[3].mul(4.0))
+                .add(d[4].mul(3.0)),
+            d[1].sub(d[5]).mul(2.0).add(d[4].sub(d[2]).mul(5.0)),
+            d[1].mul(4.0).sub(d[3].mul(5.0)).add(d[5]),
+            d[2].mul(8.0)
+                .sub(d[1].mul(4.0))
+                .add(d[3].mul(5.0))
+                .sub(d[4].mul(10.0))
+                .sub(d[5])
+                .add(d[6].mul(2.0)),
+        ]
+    }
+
+    /// `Aᵀ` (5×7) has the rows `[1 1 1 1 1 1 0]` and
+    /// `[0 1 (−1)ⁱ 2ⁱ (−2)ⁱ 2⁻ⁱ δᵢ₄]` for `i = 1..5`.
+    #[inline(always)]
+    fn at<A: Arith>(m: [A; 7]) -> [A; 5] {
+        let (a, b) = (m[1].add(m[2]), m[1].sub(m[2]));
+        let (c, d) = (m[3].add(m[4]), m[3].sub(m[4]));
+        [
+            m[0].add(a).add(c).add(m[5]),
+            b.add(d.mul(2.0)).add(m[5].mul(0.5)),
+            a.add(c.mul(4.0)).add(m[5].mul(0.25)),
+            b.add(d.mul(8.0)).add(m[5].mul(0.125)),
+            a.add(c.mul(16.0)).add(m[5].mul(0.0625)).add(m[6]),
+        ]
+    }
+
+    /// `G` (7×3) has the rows `[¼ 0 0] [⅙ ⅙ ⅙] [1/18 −1/18 1/18]
+    /// [1/72 1/36 1/18] [1/120 −1/60 1/30] [32/45 16/45 8/45] [0 0 ½]`.
+    #[inline(always)]
+    fn g<A: Arith>(x0: A, x1: A, x2: A) -> [A; 7] {
+        let p = x0.add(x2);
+        [
+            x0.mul(0.25),
+            p.add(x1).mul(1.0 / 6.0),
+            p.sub(x1).mul(1.0 / 18.0),
+            x0.mul(1.0 / 72.0)
+                .add(x1.mul(1.0 / 36.0))
+                .add(x2.mul(1.0 / 18.0)),
+            x0.mul(1.0 / 120.0)
+                .sub(x1.mul(1.0 / 60.0))
+                .add(x2.mul(1.0 / 30.0)),
+            x0.mul(32.0 / 45.0)
+                .add(x1.mul(16.0 / 45.0))
+                .add(x2.mul(8.0 / 45.0)),
+            x2.mul(0.5),
         ]
     }
 }
@@ -253,6 +338,11 @@ mod tests {
     #[test]
     fn f4_points_correlate() {
         correlates::<6, 4, F4>();
+    }
+
+    #[test]
+    fn f5_points_correlate() {
+        correlates::<7, 5, F5>();
     }
 
     #[test]
