@@ -237,6 +237,56 @@ unsafe fn next_lane(a: __m512, b: __m512) -> __m512 {
     ))
 }
 
+/// The `S` column phases of 16 tiles `S` floats apart at `p` (`S` = 4, 5,
+/// 6 or 8: [`phases`], [`phases5`], [`phases6`], [`phases8`]).
+#[inline(always)]
+unsafe fn split<const S: usize>(p: *const f32) -> [__m512; S] {
+    let mut q = [_mm512_setzero_ps(); S];
+    match S {
+        4 => q.copy_from_slice(&phases(p)),
+        5 => q.copy_from_slice(&phases5(p)),
+        6 => q.copy_from_slice(&phases6(p)),
+        8 => q.copy_from_slice(&phases8(p)),
+        _ => unreachable!("no phase split for {S} columns"),
+    }
+    q
+}
+
+/// The column pass of one transformed row `z` (see [`input`]) over a run of
+/// `len` tiles `S` columns apart: `Bᵀ` of each tile's `T` columns, the tiles
+/// in the lanes, point `j` of tiles `k..k + 16` stored at `v[at(j) + k..]`
+/// (masked to the run).
+///
+/// # Safety
+/// As [`input`]: `z` readable for `S · 16` floats past the run's last group
+/// of 16 tiles, `v[at(j)..]` writable for the run's lanes.
+#[inline(always)]
+unsafe fn column_pass<const T: usize, const M: usize, W: Points<T, M>, const S: usize>(
+    z: *const f32,
+    len: usize,
+    v: *mut f32,
+    at: impl Fn(usize) -> usize,
+) {
+    let mut cur = split::<S>(z);
+    let mut k = 0;
+    while k < len {
+        let mask = first(len - k);
+        let next = split::<S>(z.add(S * (k + 16)));
+        let d: [Z; T] = std::array::from_fn(|c| {
+            Z(if c < S {
+                cur[c]
+            } else {
+                next_lane(cur[c - S], next[c - S])
+            })
+        });
+        for (j, oj) in W::bt(d).iter().enumerate() {
+            _mm512_mask_storeu_ps(v.add(at(j) + k), mask, oj.0);
+        }
+        cur = next;
+        k += 16;
+    }
+}
+
 /// Input transform of channel `ci` over the tiles `[t0, t1)`; see
 /// `super::input_channel_body` for the contract.
 ///
@@ -312,93 +362,15 @@ pub(super) unsafe fn input<const T: usize, const M: usize, W: Points<T, M>>(
             // V[T·i + j] = Σ_c Bᵀ[j][c] z_i[step·k + c] for the run's tiles k.
             for i in 0..T {
                 let zi = z.add(i * zs);
-                if step == 8 {
-                    // Stride 2: tile k reads phases 0..8 at k and phase 0 at
-                    // k + 1.
-                    let mut cur = phases8(zi);
-                    let mut k = 0;
-                    while k < len {
-                        let mask = first(len - k);
-                        let next = phases8(zi.add(step * (k + 16)));
-                        let d: [Z; T] = std::array::from_fn(|c| {
-                            Z(if c < step {
-                                cur[c]
-                            } else {
-                                next_lane(cur[c - step], next[c - step])
-                            })
-                        });
-                        for (j, oj) in W::bt(d).iter().enumerate() {
-                            let dst = v.add(rows.at(i * T + j, panel) + l0 + k);
-                            _mm512_mask_storeu_ps(dst, mask, oj.0);
-                        }
-                        cur = next;
-                        k += 16;
-                    }
-                } else if step == 5 {
-                    // F5: tile k reads phases 0..5 at k and phases 0, 1 at k + 1.
-                    let mut cur = phases5(zi);
-                    let mut k = 0;
-                    while k < len {
-                        let mask = first(len - k);
-                        let next = phases5(zi.add(step * (k + 16)));
-                        let d: [Z; T] = std::array::from_fn(|c| {
-                            Z(if c < step {
-                                cur[c]
-                            } else {
-                                next_lane(cur[c - step], next[c - step])
-                            })
-                        });
-                        for (j, oj) in W::bt(d).iter().enumerate() {
-                            let dst = v.add(rows.at(i * T + j, panel) + l0 + k);
-                            _mm512_mask_storeu_ps(dst, mask, oj.0);
-                        }
-                        cur = next;
-                        k += 16;
-                    }
-                } else if M == 4 {
-                    // Tile k reads phases 0..4 at k and phases 0, 1 at k + 1:
-                    // two permutes per phase and 16 tiles.
-                    let mut cur = phases(zi);
-                    let mut k = 0;
-                    while k < len {
-                        let mask = first(len - k);
-                        let next = phases(zi.add(M * (k + 16)));
-                        let d: [Z; T] = std::array::from_fn(|c| {
-                            Z(if c < M {
-                                cur[c]
-                            } else {
-                                next_lane(cur[c - M], next[c - M])
-                            })
-                        });
-                        for (j, oj) in W::bt(d).iter().enumerate() {
-                            let dst = v.add(rows.at(i * T + j, panel) + l0 + k);
-                            _mm512_mask_storeu_ps(dst, mask, oj.0);
-                        }
-                        cur = next;
-                        k += 16;
-                    }
-                } else {
-                    // The same with six phases: tile k reads phases 0..6 at
-                    // k and phases 0, 1 at k + 1.
-                    let mut cur = phases6(zi);
-                    let mut k = 0;
-                    while k < len {
-                        let mask = first(len - k);
-                        let next = phases6(zi.add(M * (k + 16)));
-                        let d: [Z; T] = std::array::from_fn(|c| {
-                            Z(if c < M {
-                                cur[c]
-                            } else {
-                                next_lane(cur[c - M], next[c - M])
-                            })
-                        });
-                        for (j, oj) in W::bt(d).iter().enumerate() {
-                            let dst = v.add(rows.at(i * T + j, panel) + l0 + k);
-                            _mm512_mask_storeu_ps(dst, mask, oj.0);
-                        }
-                        cur = next;
-                        k += 16;
-                    }
+                // Tile k reads phases 0..step at k and the first T − step
+                // (one or two) at k + 1.
+                let at = |j: usize| rows.at(i * T + j, panel) + l0;
+                match step {
+                    4 => column_pass::<T, M, W, 4>(zi, len, v, at),
+                    5 => column_pass::<T, M, W, 5>(zi, len, v, at),
+                    6 => column_pass::<T, M, W, 6>(zi, len, v, at),
+                    8 => column_pass::<T, M, W, 8>(zi, len, v, at),
+                    _ => unreachable!("no phase split for a step of {step}"),
                 }
             }
         }
