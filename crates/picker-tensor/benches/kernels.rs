@@ -52,7 +52,8 @@ fn bench(c: &mut Criterion) {
         let wt = rng.normal_vec(s.weight_len(), 0.05);
         let bias = vec![0.1; s.c_out];
         // The default algorithm, and for the residual-block shapes the
-        // low-memory Winograd, both F(6×6) ones, the bf16 one (where the CPU
+        // low-memory Winograd, the F(6×6) and F(5×5) ones, the per-image
+        // tile (the networks' choice), the bf16 one (where the CPU
         // has it) and the plain packed GEMM beside it; for the 3×3 stride-2
         // shapes both stride-2 Winograd variants and the pixel tiles (the
         // ones Auto does not take run too).
@@ -69,6 +70,9 @@ fn bench(c: &mut Criterion) {
                 ConvAlgorithm::WinogradLowMemory,
                 ConvAlgorithm::Winograd6,
                 ConvAlgorithm::Winograd6LowMemory,
+                ConvAlgorithm::Winograd5,
+                ConvAlgorithm::Winograd5LowMemory,
+                ConvAlgorithm::WinogradLowMemoryAutoTile,
                 ConvAlgorithm::WinogradBf16,
                 ConvAlgorithm::Gemm,
             ]);
