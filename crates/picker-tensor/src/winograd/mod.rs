@@ -194,7 +194,7 @@ impl Tile {
     /// one panel) 1.92–1.96 against F4's 2.33–2.53 and F6's 2.74–2.89;
     /// 60×80 (IRN/MSN blocks at 240×320) 7.8–9.6 against F6's 8.4–10.7;
     /// 120×160 31.4–33.1 against 32.6–34.0; 15×20 0.93 against F4's
-    /// 1.05–1.08. `PICKER_WINOGRAD_TILE=4|6` still forces a tile.
+    /// 1.05–1.08. `PICKER_WINOGRAD_TILE=4|5|6` still forces a tile.
     ///
     /// (The rule before, F4/F6 only, measured on an Intel Xeon with AMX:
     /// EnvMap 240×320 21.3, 22.7 ms with F4 vs 22.9, 23.4 with F6; IRN
