@@ -389,25 +389,41 @@ impl ConvAlgorithm {
             && (self != ConvAlgorithm::PixelTiles || isa == Isa::Avx512)
     }
 
+    /// True for the Winograd algorithms (any tile, stride, weights or
+    /// precision): their rounding differs from a direct sum's
+    /// ([`crate::Tolerance::WINOGRAD_F32`], [`crate::Tolerance::WINOGRAD_BF16`]).
+    pub fn is_winograd(self) -> bool {
+        matches!(
+            self,
+            ConvAlgorithm::Winograd
+                | ConvAlgorithm::WinogradLowMemory
+                | ConvAlgorithm::Winograd6
+                | ConvAlgorithm::Winograd6LowMemory
+                | ConvAlgorithm::Winograd5
+                | ConvAlgorithm::Winograd5LowMemory
+                | ConvAlgorithm::WinogradLowMemoryAutoTile
+                | ConvAlgorithm::WinogradBf16
+                | ConvAlgorithm::WinogradBf16LowMemory
+                | ConvAlgorithm::WinogradStride2
+                | ConvAlgorithm::WinogradStride2LowMemory
+        )
+    }
+
     /// True when the algorithm can run a layer of this shape.
     pub fn applies(self, s: &ConvSpec) -> bool {
         match self {
             ConvAlgorithm::Auto | ConvAlgorithm::AutoLowMemory | ConvAlgorithm::Gemm => true,
             ConvAlgorithm::Direct => s.stride == 1 && s.c_out <= direct::MAX_CO,
-            ConvAlgorithm::Winograd
-            | ConvAlgorithm::WinogradLowMemory
-            | ConvAlgorithm::Winograd6
-            | ConvAlgorithm::Winograd6LowMemory
-            | ConvAlgorithm::Winograd5
-            | ConvAlgorithm::Winograd5LowMemory
-            | ConvAlgorithm::WinogradLowMemoryAutoTile
-            | ConvAlgorithm::WinogradBf16
-            | ConvAlgorithm::WinogradBf16LowMemory => s.kh == 3 && s.kw == 3 && s.stride == 1,
             ConvAlgorithm::WinogradStride2 | ConvAlgorithm::WinogradStride2LowMemory => {
                 s.kh == 3 && s.kw == 3 && s.stride == 2
             }
             ConvAlgorithm::Shifted => true,
             ConvAlgorithm::PixelTiles => s.stride <= pixtile::MAX_STRIDE,
+            // The stride-1 Winograd variants.
+            a => {
+                debug_assert!(a.is_winograd());
+                s.kh == 3 && s.kw == 3 && s.stride == 1
+            }
         }
     }
 

@@ -40,16 +40,8 @@ fn algorithms(isa: Isa, spec: &ConvSpec) -> Vec<ConvAlgorithm> {
 /// The tolerance of an algorithm against the f64 reference.
 fn tolerance(algo: ConvAlgorithm) -> Tolerance {
     match algo {
-        ConvAlgorithm::Winograd
-        | ConvAlgorithm::WinogradLowMemory
-        | ConvAlgorithm::Winograd6
-        | ConvAlgorithm::Winograd6LowMemory
-        | ConvAlgorithm::Winograd5
-        | ConvAlgorithm::Winograd5LowMemory
-        | ConvAlgorithm::WinogradLowMemoryAutoTile
-        | ConvAlgorithm::WinogradStride2
-        | ConvAlgorithm::WinogradStride2LowMemory => Tolerance::WINOGRAD_F32,
         a if a.is_bf16() => Tolerance::WINOGRAD_BF16,
+        a if a.is_winograd() => Tolerance::WINOGRAD_F32,
         _ => Tolerance::KERNEL_F32,
     }
 }
