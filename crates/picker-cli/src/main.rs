@@ -49,7 +49,9 @@ struct Cli {
     /// Arithmetic of the networks' 3×3 stride-1 layers (the residual blocks): `f32`
     /// (default) or `bf16` (AVX512_BF16 dot products, or AMX tiles where the CPU has
     /// them: measured 1.3–1.6× faster networks on AMD Zen 4/5 and ~1.7× on an Intel
-    /// Xeon with AMX, but slower than f32 on Intel CPUs with AVX512_BF16 and no AMX;
+    /// Xeon with AMX against the f32 of before its F(5×5) tile, 1.1–1.25× for the MSN and
+    /// no faster for the EnvMap since, on Zen 4; slower than f32 on Intel CPUs with
+    /// AVX512_BF16 and no AMX;
     /// outputs within ~6e-2 of f32 on the tanh scale; needs a CPU with AVX512_BF16).
     /// Default: `PICKER_PRECISION`, else f32.
     #[arg(long, global = true, value_name = "f32|bf16", value_parser = parse_precision)]
