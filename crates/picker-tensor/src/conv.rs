@@ -706,17 +706,7 @@ impl Conv2d {
                 isa,
                 weight: direct::pack_weights(weight, spec.c_out, spec.c_in, spec.kh * spec.kw),
             },
-            algo @ (ConvAlgorithm::Winograd
-            | ConvAlgorithm::WinogradLowMemory
-            | ConvAlgorithm::Winograd6
-            | ConvAlgorithm::Winograd6LowMemory
-            | ConvAlgorithm::Winograd5
-            | ConvAlgorithm::Winograd5LowMemory
-            | ConvAlgorithm::WinogradLowMemoryAutoTile
-            | ConvAlgorithm::WinogradBf16
-            | ConvAlgorithm::WinogradBf16LowMemory
-            | ConvAlgorithm::WinogradStride2
-            | ConvAlgorithm::WinogradStride2LowMemory) => ConvPath::Winograd {
+            algo if algo.is_winograd() => ConvPath::Winograd {
                 isa,
                 wino: Winograd::new(
                     kernel,
