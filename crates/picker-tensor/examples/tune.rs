@@ -1,6 +1,6 @@
 //! Times one layer shape of the thesis networks at 240×320, for quick tuning
 //! without criterion: `cargo run --release -p picker-tensor --example tune -- res`
-//! (`TUNE_RUNS` sets the number of timed runs, default 49; `res`, `resmany`, `envres`, `envresmany`, `shape` (with `TUNE_SHAPE`), `decout`, `encin`, `down0`, `down1`, `envin`, `envdown0`, `envdown1`, `up0`, `up1`, `head` / `envhead` (the input conv and `down0` fused in bands), `dectail` (`up1` and `decout` fused in bands), `dectail-unfused`; `RAYON_NUM_THREADS`, `PICKER_ISA` apply).
+//! (`TUNE_RUNS` sets the number of timed runs, default 49; `res`, `resmany`, `envres`, `envresmany`, `shape` (with `TUNE_SHAPE`), `decout`, `encin`, `down0`, `down1`, `envin`, `envdown0`, `envdown1`, `up0`, `up1`, `head` / `envhead` (the input conv and `down0` fused in bands; `head-unfused` / `envhead-unfused` one after the other), `dectail` (`up1` and `decout` fused in bands), `dectail-unfused`; `RAYON_NUM_THREADS`, `PICKER_ISA` apply).
 
 use picker_tensor::{
     Activation, Conv2d, ConvAlgorithm, ConvSpec, ConvTranspose2d, ConvTransposeSpec, Isa, Rng,
@@ -62,6 +62,39 @@ fn main() {
         return time_it(&format!("{which} (per layer)"), s.flops(h, w), || {
             i = (i + 1) % convs.len();
             convs[i].forward(&x).expect("forward")
+        });
+    }
+    if let Some(base) = which
+        .strip_suffix("-unfused")
+        .filter(|b| *b == "head" || *b == "envhead")
+    {
+        // As `head` / `envhead`, the two layers one after the other.
+        let (h, w) = (240, 320);
+        let first = ConvSpec::square(3, 64, 7, if base == "head" { 1 } else { 2 }, 0);
+        let down = ConvSpec::square(64, 128, 3, 2, 1);
+        let firstl = Conv2d::new(
+            first,
+            &rng.normal_vec(first.weight_len(), 0.05),
+            None,
+            Activation::Relu,
+        )
+        .expect("layer");
+        let downl = Conv2d::with_algorithm(
+            Isa::best(),
+            algo_from_env(),
+            down,
+            &rng.normal_vec(down.weight_len(), 0.05),
+            None,
+            Activation::Relu,
+        )
+        .expect("layer");
+        let x = rng.tensor([1, 3, h, w]);
+        let (h1, w1) = first.out_hw(h + 6, w + 6).expect("shape");
+        let flops = first.flops(h + 6, w + 6) + down.flops(h1, w1);
+        return time_it(&which, flops, || {
+            downl
+                .forward(&firstl.forward_reflect(&x, 3, None).expect("forward"))
+                .expect("forward")
         });
     }
     if which == "head" || which == "envhead" {
