@@ -64,45 +64,14 @@ fn main() {
             convs[i].forward(&x).expect("forward")
         });
     }
-    if let Some(base) = which
-        .strip_suffix("-unfused")
-        .filter(|b| *b == "head" || *b == "envhead")
-    {
-        // As `head` / `envhead`, the two layers one after the other.
+    let head = which.strip_suffix("-unfused").unwrap_or(&which);
+    if head == "head" || head == "envhead" {
+        // An encoder's first two layers fused in bands (`reflect_then`), or
+        // one after the other (`-unfused`): the 7×7 input conv (stride 1, or
+        // 2 in the EnvMap) with reflection padding 3, then the first down
+        // conv (TUNE_ALGO picks its algorithm).
         let (h, w) = (240, 320);
-        let first = ConvSpec::square(3, 64, 7, if base == "head" { 1 } else { 2 }, 0);
-        let down = ConvSpec::square(64, 128, 3, 2, 1);
-        let firstl = Conv2d::new(
-            first,
-            &rng.normal_vec(first.weight_len(), 0.05),
-            None,
-            Activation::Relu,
-        )
-        .expect("layer");
-        let downl = Conv2d::with_algorithm(
-            Isa::best(),
-            algo_from_env(),
-            down,
-            &rng.normal_vec(down.weight_len(), 0.05),
-            None,
-            Activation::Relu,
-        )
-        .expect("layer");
-        let x = rng.tensor([1, 3, h, w]);
-        let (h1, w1) = first.out_hw(h + 6, w + 6).expect("shape");
-        let flops = first.flops(h + 6, w + 6) + down.flops(h1, w1);
-        return time_it(&which, flops, || {
-            downl
-                .forward(&firstl.forward_reflect(&x, 3, None).expect("forward"))
-                .expect("forward")
-        });
-    }
-    if which == "head" || which == "envhead" {
-        // An encoder's first two layers fused in bands (`reflect_then`):
-        // the 7×7 input conv (stride 1, or 2 in the EnvMap) with reflection
-        // padding 3, then the first down conv (TUNE_ALGO picks its algorithm).
-        let (h, w) = (240, 320);
-        let first = ConvSpec::square(3, 64, 7, if which == "head" { 1 } else { 2 }, 0);
+        let first = ConvSpec::square(3, 64, 7, if head == "head" { 1 } else { 2 }, 0);
         let down = ConvSpec::square(64, 128, 3, 2, 1);
         let firstl = Conv2d::new(
             first,
@@ -124,6 +93,13 @@ fn main() {
         let x = rng.tensor([1, 3, h, w]);
         let (h1, w1) = first.out_hw(h + 6, w + 6).expect("shape");
         let flops = first.flops(h + 6, w + 6) + down.flops(h1, w1);
+        if head != which {
+            return time_it(&which, flops, || {
+                downl
+                    .forward(&firstl.forward_reflect(&x, 3, None).expect("forward"))
+                    .expect("forward")
+            });
+        }
         return time_it(&which, flops, || {
             firstl.reflect_then(&x, 3, &downl).expect("forward")
         });
