@@ -276,13 +276,7 @@ unsafe fn column_pass<const T: usize, const M: usize, W: Points<T, M>, const S: 
     while k < len {
         let mask = first(len - k);
         let next = split::<S>(z.add(S * (k + 16)));
-        let d: [Z; T] = std::array::from_fn(|c| {
-            Z(if c < S {
-                cur[c]
-            } else {
-                next_lane(cur[c - S], next[c - S])
-            })
-        });
+        let d = tile_columns::<T, S>(&cur, &next);
         for (j, oj) in W::bt(d).iter().enumerate() {
             _mm512_mask_storeu_ps(v.add(at(j) + k), mask, oj.0);
         }
@@ -291,24 +285,38 @@ unsafe fn column_pass<const T: usize, const M: usize, W: Points<T, M>, const S: 
     }
 }
 
-/// The `T` columns of the first 16 tiles of a run at `z` (tile `k`'s column
-/// `c` in lane `k`), as [`column_pass`] takes them. (A function, not a
-/// closure: closures do not inherit the caller's target features.)
+/// The `T` columns of 16 tiles `S` apart (tile `k`'s column `c` in lane
+/// `k`) from the `S` column phases of those tiles (`cur`) and of the next
+/// 16 (`next`): tile `k` reads phases `0..S` at `k` and the first `T − S`
+/// at `k + 1`.
+///
+/// # Safety
+/// Only called from AVX-512F functions.
+#[inline(always)]
+unsafe fn tile_columns<const T: usize, const S: usize>(
+    cur: &[__m512; S],
+    next: &[__m512; S],
+) -> [Z; T] {
+    let mut d = [Z(_mm512_setzero_ps()); T];
+    for (c, dc) in d.iter_mut().enumerate() {
+        *dc = Z(if c < S {
+            cur[c]
+        } else {
+            next_lane(cur[c - S], next[c - S])
+        });
+    }
+    d
+}
+
+/// The `T` columns of the first 16 tiles of a run at `z`, as [`column_pass`]
+/// takes them. (A function, not a closure: closures do not inherit the
+/// caller's target features.)
 ///
 /// # Safety
 /// As [`column_pass`]; only called from AVX-512F functions.
 #[inline(always)]
-unsafe fn first_tiles<const T: usize, const S: usize>(z: *const f32) -> [__m512; T] {
-    let (cur, next) = (split::<S>(z), split::<S>(z.add(S * 16)));
-    let mut d = [_mm512_setzero_ps(); T];
-    for (c, dc) in d.iter_mut().enumerate() {
-        *dc = if c < S {
-            cur[c]
-        } else {
-            next_lane(cur[c - S], next[c - S])
-        };
-    }
-    d
+unsafe fn first_tiles<const T: usize, const S: usize>(z: *const f32) -> [Z; T] {
+    tile_columns::<T, S>(&split::<S>(z), &split::<S>(z.add(S * 16)))
 }
 
 /// [`column_pass`] for two runs of `la` and `lb` tiles (`la + lb ≤ 16`)
@@ -338,7 +346,7 @@ unsafe fn column_pass_pair<const T: usize, const M: usize, W: Points<T, M>, cons
     let upper = !first(la);
     let mut d = [Z(_mm512_setzero_ps()); T];
     for (c, dc) in d.iter_mut().enumerate() {
-        *dc = Z(_mm512_mask_permutexvar_ps(a[c], upper, idx, b[c]));
+        *dc = Z(_mm512_mask_permutexvar_ps(a[c].0, upper, idx, b[c].0));
     }
     let mask = first(la + lb);
     for (j, oj) in W::bt(d).iter().enumerate() {
