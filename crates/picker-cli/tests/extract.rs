@@ -1876,40 +1876,17 @@ fn shading_sigma_smooths_only_an_estimated_albedo() {
     }
 }
 
-/// A 320×240 photo of straight edges (ten half-planes at seeded angles,
-/// each a step of light) seen through a barrel lens of coefficient
-/// `lambda` (`picker_extract::lens`), 4 × 4 samples a pixel, written as an
-/// 8-bit PNG to `path`.
+/// A 320×240 photo of straight edges (`picker_extract::lens::straight_edges_photo`,
+/// ten edges, seed 7) seen through a barrel lens of coefficient `lambda`,
+/// written as an 8-bit grey PNG to `path`.
 fn straight_edges_through(lambda: f32, path: &Path) {
-    use glam::Vec2;
+    use picker_extract::lens::{straight_edges_photo, Lens};
     let (w, h) = (320usize, 240usize);
-    let lens = picker_extract::lens::Lens::new(lambda, w, h);
-    let mut rng = picker_tensor::Rng::new(7);
-    let edges: Vec<(Vec2, f32)> = (0..10)
-        .map(|_| {
-            let a = rng.uniform(0.0, std::f32::consts::PI);
-            let n = Vec2::new(a.cos(), a.sin());
-            let p = Vec2::new(
-                rng.uniform(0.1, 0.9) * w as f32,
-                rng.uniform(0.1, 0.9) * h as f32,
-            );
-            (n, n.dot(p))
-        })
-        .collect();
-    let mut img = image::RgbImage::new(w as u32, h as u32);
-    for (x, y, px) in img.enumerate_pixels_mut() {
-        let mut acc = 0.0;
-        for k in 0..16 {
-            let p = Vec2::new(
-                x as f32 + (k % 4) as f32 / 4.0 + 0.125,
-                y as f32 + (k / 4) as f32 / 4.0 + 0.125,
-            );
-            let u = lens.undistort(p);
-            acc += 0.15 + edges.iter().filter(|&&(n, d)| n.dot(u) > d).count() as f32 * 0.07;
-        }
-        let v = (acc / 16.0 * 255.0).round() as u8;
-        *px = image::Rgb([v, v, v]);
-    }
+    let luma = straight_edges_photo(&Lens::new(lambda, w, h), w, h, 10, 7);
+    let img = image::RgbImage::from_fn(w as u32, h as u32, |x, y| {
+        let v = (luma[y as usize * w + x as usize] * 255.0).round() as u8;
+        image::Rgb([v, v, v])
+    });
     img.save(path).unwrap();
 }
 

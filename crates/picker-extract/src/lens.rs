@@ -483,61 +483,65 @@ pub fn estimate(small: &SmallLuma) -> (Lens, LensEstimate) {
     }
 }
 
+/// A `w × h` test photo for the lens estimate: `lines` straight edges
+/// (half-planes through seeded points at seeded angles, each adding
+/// `0.7 / lines` of light to a floor of 0.15, so luma lies in [0.15, 0.85])
+/// seen through `lens`, each pixel the mean of 4 × 4 samples. The same
+/// `seed` gives the same picture. Used by this module's tests and the CLI's.
+pub fn straight_edges_photo(lens: &Lens, w: usize, h: usize, lines: usize, seed: u64) -> Vec<f32> {
+    photo_through(w, h, lens, &straight_edges_scene(w, h, lines, seed))
+}
+
+/// A `w × h` luma image whose pinhole picture is `scene(x, y)` (pinhole
+/// pixels), seen through `lens`: each pixel is the mean of 4 × 4 samples,
+/// each sample's point undistorted before `scene` reads it.
+fn photo_through(w: usize, h: usize, lens: &Lens, scene: &dyn Fn(f32, f32) -> f32) -> Vec<f32> {
+    (0..w * h)
+        .map(|i| {
+            let (x, y) = ((i % w) as f32, (i / w) as f32);
+            let mut acc = 0.0;
+            for k in 0..16 {
+                let p = Vec2::new(
+                    x + (k % 4) as f32 / 4.0 + 0.125,
+                    y + (k / 4) as f32 / 4.0 + 0.125,
+                );
+                let u = lens.undistort(p);
+                acc += scene(u.x, u.y);
+            }
+            acc / 16.0
+        })
+        .collect()
+}
+
+/// The pinhole picture of [`straight_edges_photo`]: `lines` half-planes
+/// through seeded points at seeded angles, each adding a step of light.
+fn straight_edges_scene(w: usize, h: usize, lines: usize, seed: u64) -> impl Fn(f32, f32) -> f32 {
+    let mut rng = picker_tensor::Rng::new(seed);
+    let edges: Vec<(Vec2, f32)> = (0..lines)
+        .map(|_| {
+            let a = rng.uniform(0.0, std::f32::consts::PI);
+            let n = Vec2::new(a.cos(), a.sin());
+            let p = Vec2::new(
+                rng.uniform(0.1, 0.9) * w as f32,
+                rng.uniform(0.1, 0.9) * h as f32,
+            );
+            (n, n.dot(p))
+        })
+        .collect();
+    let step = 0.7 / lines.max(1) as f32;
+    move |x, y| {
+        let p = Vec2::new(x, y);
+        0.15 + edges
+            .iter()
+            .map(|&(n, d)| if n.dot(p) > d { step } else { 0.0 })
+            .sum::<f32>()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use picker_tensor::Rng;
-
-    /// A `w × h` luma image whose pinhole picture is `scene(x, y)` (pinhole
-    /// pixels), seen through `lens`: each pixel is the mean of 4 × 4
-    /// samples, each sample's point undistorted before `scene` reads it.
-    fn photo(w: usize, h: usize, lens: &Lens, scene: &dyn Fn(f32, f32) -> f32) -> Vec<f32> {
-        (0..w * h)
-            .map(|i| {
-                let (x, y) = ((i % w) as f32, (i / w) as f32);
-                let mut acc = 0.0;
-                for k in 0..16 {
-                    let p = Vec2::new(
-                        x + (k % 4) as f32 / 4.0 + 0.125,
-                        y + (k / 4) as f32 / 4.0 + 0.125,
-                    );
-                    let u = lens.undistort(p);
-                    acc += scene(u.x, u.y);
-                }
-                acc / 16.0
-            })
-            .collect()
-    }
-
-    /// Straight edges of a room-like picture: `lines` half-planes through
-    /// random points at random angles, each adding a step of light.
-    fn straight_edges(w: usize, h: usize, lines: usize, seed: u64) -> impl Fn(f32, f32) -> f32 {
-        let mut rng = Rng::new(seed);
-        let edges: Vec<(Vec2, f32)> = (0..lines)
-            .map(|_| {
-                let a = rng.uniform(0.0, std::f32::consts::PI);
-                let n = Vec2::new(a.cos(), a.sin());
-                let p = Vec2::new(
-                    rng.uniform(0.1, 0.9) * w as f32,
-                    rng.uniform(0.1, 0.9) * h as f32,
-                );
-                (n, n.dot(p))
-            })
-            .collect();
-        move |x, y| {
-            let p = Vec2::new(x, y);
-            0.15 + edges
-                .iter()
-                .map(|&(n, d)| {
-                    if n.dot(p) > d {
-                        0.7 / lines as f32
-                    } else {
-                        0.0
-                    }
-                })
-                .sum::<f32>()
-        }
-    }
 
     fn estimate_of(w: usize, h: usize, luma: &[f32]) -> (Lens, LensEstimate) {
         estimate(&SmallLuma::new(luma, w, h))
@@ -587,8 +591,7 @@ mod tests {
     fn barrel_distortion_of_straight_edges_is_found() {
         let (w, h) = (320, 240);
         for (seed, truth) in [(1u64, -0.15f32), (2, -0.08), (3, -0.3), (4, -0.06)] {
-            let scene = straight_edges(w, h, 10, seed);
-            let luma = photo(w, h, &Lens::new(truth, w, h), &scene);
+            let luma = straight_edges_photo(&Lens::new(truth, w, h), w, h, 10, seed);
             let (lens, est) = estimate_of(w, h, &luma);
             assert_eq!(est.source, "lines", "seed {seed}: {est:?}");
             assert!(
@@ -604,8 +607,7 @@ mod tests {
     fn straight_edges_through_a_pinhole_give_none() {
         let (w, h) = (320, 240);
         for seed in 1..=4u64 {
-            let scene = straight_edges(w, h, 10, seed);
-            let luma = photo(w, h, &Lens::pinhole(w, h), &scene);
+            let luma = straight_edges_photo(&Lens::pinhole(w, h), w, h, 10, seed);
             let (lens, est) = estimate_of(w, h, &luma);
             assert!(lens.is_pinhole(), "seed {seed}: {est:?}");
             assert_eq!(est.source, "none");
@@ -619,8 +621,7 @@ mod tests {
     fn pincushion_and_weak_barrels_are_not_estimated() {
         let (w, h) = (320, 240);
         for truth in [0.15f32, -0.035] {
-            let scene = straight_edges(w, h, 10, 5);
-            let luma = photo(w, h, &Lens::new(truth, w, h), &scene);
+            let luma = straight_edges_photo(&Lens::new(truth, w, h), w, h, 10, 5);
             let (lens, est) = estimate_of(w, h, &luma);
             // The regions see it, the estimate does not take it.
             assert!(
@@ -650,7 +651,7 @@ mod tests {
                     .filter(|(c, r)| (Vec2::new(x, y) - *c).length() < *r)
                     .count() as f32
         };
-        let luma = photo(w, h, &Lens::pinhole(w, h), &scene);
+        let luma = photo_through(w, h, &Lens::pinhole(w, h), &scene);
         let (lens, est) = estimate_of(w, h, &luma);
         assert!(lens.is_pinhole(), "{est:?}");
         // No edges at all; a photo smaller than a segment.
@@ -666,8 +667,7 @@ mod tests {
         // (not through the lens): the frame's straight edges must not vote
         // for a pinhole.
         let (w, h) = (320, 240);
-        let scene = straight_edges(w, h, 10, 1);
-        let mut luma = photo(w, h, &Lens::new(-0.15, w, h), &scene);
+        let mut luma = straight_edges_photo(&Lens::new(-0.15, w, h), w, h, 10, 1);
         for (i, v) in luma.iter_mut().enumerate() {
             let (x, y) = (i % w, i / w);
             if x < 3 || y < 3 || x + 3 >= w || y + 3 >= h {
@@ -683,10 +683,10 @@ mod tests {
         // The same scene at 320×240 and at 1600×1200 (downsampled by 2 to
         // the segments' 800): λ is in half-diagonals, so the same.
         let truth = -0.15;
-        let scene_small = straight_edges(320, 240, 10, 2);
-        let small = photo(320, 240, &Lens::new(truth, 320, 240), &scene_small);
+        let scene_small = straight_edges_scene(320, 240, 10, 2);
+        let small = photo_through(320, 240, &Lens::new(truth, 320, 240), &scene_small);
         let (a, _) = estimate_of(320, 240, &small);
-        let big = photo(1600, 1200, &Lens::new(truth, 1600, 1200), &|x, y| {
+        let big = photo_through(1600, 1200, &Lens::new(truth, 1600, 1200), &|x, y| {
             scene_small(x / 5.0, y / 5.0)
         });
         let (b, est) = estimate_of(1600, 1200, &big);
