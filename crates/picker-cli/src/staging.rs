@@ -20,6 +20,11 @@ use anyhow::{bail, Context, Result};
 /// Prefix of a staging folder's name; the process id follows.
 const PREFIX: &str = ".picker-partial-";
 
+/// Held while [`Staging::begin`] makes the folders, and by the interrupt
+/// handler before it removes them, so an interrupt never removes the staging
+/// folder before it is made and lets it be made after.
+static MAKING: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 /// `picker extract`'s file moved into place last.
 pub const SUMMARY: &str = "summary.json";
 
@@ -45,10 +50,37 @@ impl Staging {
             bail!("{}: --out exists and is not a folder", out.display());
         }
         let created_out = !out.exists();
+        let dir = out.join(format!("{PREFIX}{}", std::process::id()));
+        if on_signal {
+            // Installed before the folders are made, so that no interrupt
+            // can find the staging folder without the handler that removes
+            // it (removing what does not exist yet is a no-op). Installing
+            // fails only when a handler exists already (a second run in one
+            // process, as in tests): then an interrupt just stops.
+            let (d, o) = (dir.clone(), out.to_path_buf());
+            let _ = ctrlc::set_handler(move || {
+                // Not while `begin` makes the folders (it holds the lock).
+                let _making = MAKING.lock();
+                // The run goes on writing meanwhile: a file made while the
+                // folder is being removed can make one removal fail.
+                for _ in 0..200 {
+                    let _ = std::fs::remove_dir_all(&d);
+                    if !d.exists() {
+                        break;
+                    }
+                    std::thread::sleep(std::time::Duration::from_millis(5));
+                }
+                if created_out {
+                    let _ = std::fs::remove_dir(&o);
+                }
+                eprintln!("\ninterrupted: no result written");
+                std::process::exit(130);
+            });
+        }
+        let _making = MAKING.lock();
         std::fs::create_dir_all(out)
             .with_context(|| format!("creating output folder {}", out.display()))?;
         remove_stale(out);
-        let dir = out.join(format!("{PREFIX}{}", std::process::id()));
         if dir.exists() {
             std::fs::remove_dir_all(&dir)
                 .with_context(|| format!("{}: removing an old staging folder", dir.display()))?;
@@ -58,19 +90,6 @@ impl Staging {
                 let _ = std::fs::remove_dir(out);
             }
             return Err(e).with_context(|| format!("{}: creating a staging folder", dir.display()));
-        }
-        if on_signal {
-            let (d, o) = (dir.clone(), out.to_path_buf());
-            // Installing fails only when a handler exists already (a second
-            // run in one process, as in tests): then an interrupt just stops.
-            let _ = ctrlc::set_handler(move || {
-                let _ = std::fs::remove_dir_all(&d);
-                if created_out {
-                    let _ = std::fs::remove_dir(&o);
-                }
-                eprintln!("\ninterrupted: no result written");
-                std::process::exit(130);
-            });
         }
         Ok(Staging {
             out: out.to_path_buf(),
