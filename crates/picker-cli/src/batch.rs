@@ -1042,7 +1042,7 @@ pub fn run(a: Args) -> Result<ExitCode> {
                 );
             } else {
                 for d in in_flight.lock().map(|s| s.clone()).unwrap_or_default() {
-                    let _ = std::fs::remove_dir_all(d);
+                    crate::staging::remove_while_written(&d);
                 }
                 eprintln!("\nstopped; run the same command again to resume");
                 std::process::exit(130);

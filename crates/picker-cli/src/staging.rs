@@ -25,6 +25,19 @@ const PREFIX: &str = ".picker-partial-";
 /// folder before it is made and lets it be made after.
 static MAKING: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
+/// Removes the folder `dir` that other threads may still be writing into
+/// (an interrupt handler's cleanup): a file made while it is being removed
+/// can make one removal fail, so it is retried for up to a second.
+pub fn remove_while_written(dir: &Path) {
+    for _ in 0..200 {
+        let _ = std::fs::remove_dir_all(dir);
+        if !dir.exists() {
+            return;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+}
+
 /// `picker extract`'s file moved into place last.
 pub const SUMMARY: &str = "summary.json";
 
@@ -61,15 +74,7 @@ impl Staging {
             let _ = ctrlc::set_handler(move || {
                 // Not while `begin` makes the folders (it holds the lock).
                 let _making = MAKING.lock();
-                // The run goes on writing meanwhile: a file made while the
-                // folder is being removed can make one removal fail.
-                for _ in 0..200 {
-                    let _ = std::fs::remove_dir_all(&d);
-                    if !d.exists() {
-                        break;
-                    }
-                    std::thread::sleep(std::time::Duration::from_millis(5));
-                }
+                remove_while_written(&d);
                 if created_out {
                     let _ = std::fs::remove_dir(&o);
                 }
