@@ -1042,7 +1042,10 @@ impl Fit {
             confidence,
             size,
         };
+        let t0 = std::time::Instant::now();
         let mut samples = samples(&src, block);
+        let nsamp = samples.len();
+        let t1 = t0.elapsed();
         // A centred fold's second place for every sample. Where the shift is
         // half the square (or none) along each axis and a whole number of
         // texels, moving twice is the identity and the texture comes out
@@ -1056,7 +1059,9 @@ impl Fit {
         if let (Some(by), None) = (shift, by_sums) {
             samples = with_shifted_copies(samples, by);
         }
+        let tc = t0.elapsed();
         let members = band_members(&samples, size, coords.wrap);
+        let t2 = t0.elapsed();
         let shift = by_sums.map(|by| [by[0] * size as f32, by[1] * size as f32]);
         let sym = |(sum, wsum, seen): (Vec<Vec3>, Vec<f32>, Vec<f32>)| match shift {
             Some(by) => (
@@ -1082,6 +1087,7 @@ impl Fit {
             true,
         ));
         let mean = texel_means(&sum, &wsum);
+        let t3 = t0.elapsed();
         // Robust pass: Cauchy weights on the distance to the first-pass texel mean,
         // scale = 2 × the median deviation (at least 0.02).
         // (The median found in parallel without collecting the deviations:
@@ -1098,6 +1104,7 @@ impl Fit {
             None => 1.0,
             Some(m) => (2.0 * m[0]).max(0.02),
         };
+        let t4 = t0.elapsed();
         let (sum, wsum, _) = sym(splat(
             &samples,
             &members,
@@ -1109,6 +1116,9 @@ impl Fit {
             false,
         ));
         let tex = texel_means(&sum, &wsum);
+        if std::env::var_os("TRACE_RP").is_some() {
+            eprintln!("fit size {size} block {block} px {} samples {nsamp}->{} samples {:?} copies {:?} members {:?} splat1 {:?} median {:?} splat2 {:?}", mask.iter().filter(|&&m| m).count(), samples.len(), t1, tc-t1, t2-tc, t3-t2, t4-t3, t0.elapsed()-t4);
+        }
         Fit {
             samples,
             members,
@@ -1148,6 +1158,7 @@ impl Fit {
         // page faults again: 12 bytes per picked pixel).
         let mut residual = vec![Vec3::ZERO; if rounds > 0 { samples.len() } else { 0 }];
         for _ in 0..rounds {
+            let tq = std::time::Instant::now();
             let t: &[Vec3] = &self.tex;
             residual
                 .par_iter_mut()
@@ -1155,6 +1166,10 @@ impl Fit {
                 .for_each(|(r, s)| {
                     *r = predict(s, t, size, wrap).map_or(Vec3::ZERO, |p| s.colour - p)
                 });
+            if std::env::var_os("TRACE_RP").is_some() {
+                eprintln!("  round: predict {:?}", tq.elapsed());
+            }
+            let tp = std::time::Instant::now();
             let (rsum, _, _) = splat(
                 samples,
                 &self.members,
@@ -1165,6 +1180,9 @@ impl Fit {
                 Some(&residual),
                 false,
             );
+            if std::env::var_os("TRACE_RP").is_some() {
+                eprintln!("  round: predict+splat {:?}", tp.elapsed());
+            }
             let rsum = match self.shift {
                 Some(by) => plus_shifted(&rsum, size, by),
                 None => rsum,

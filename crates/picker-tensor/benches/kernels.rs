@@ -55,13 +55,15 @@ fn bench(c: &mut Criterion) {
         // low-memory Winograd, the F(6×6) and F(5×5) ones, the per-image
         // tile (the networks' choice), the bf16 one (where the CPU
         // has it) and the plain packed GEMM beside it; for the 3×3 stride-2
-        // shapes both stride-2 Winograd variants and the pixel tiles (the
+        // shapes the stride-2 Winograd variants (both tiles) and the pixel tiles (the
         // ones Auto does not take run too).
         let mut algos = vec![ConvAlgorithm::Auto];
         if s.kh == 3 && s.stride == 2 {
             algos.extend([
                 ConvAlgorithm::WinogradStride2,
                 ConvAlgorithm::WinogradStride2LowMemory,
+                ConvAlgorithm::Winograd5Stride2,
+                ConvAlgorithm::Winograd5Stride2LowMemory,
                 ConvAlgorithm::PixelTiles,
             ]);
         }

@@ -194,6 +194,8 @@ fn algo_from_env() -> ConvAlgorithm {
         Ok("winograd-auto") => ConvAlgorithm::WinogradLowMemoryAutoTile,
         Ok("winograd-s2") => ConvAlgorithm::WinogradStride2,
         Ok("winograd-s2-lazy") => ConvAlgorithm::WinogradStride2LowMemory,
+        Ok("winograd5-s2") => ConvAlgorithm::Winograd5Stride2,
+        Ok("winograd5-s2-lazy") => ConvAlgorithm::Winograd5Stride2LowMemory,
         Ok("shifted") => ConvAlgorithm::Shifted,
         Ok("pixtile") => ConvAlgorithm::PixelTiles,
         _ => ConvAlgorithm::Auto,

@@ -262,7 +262,9 @@ pub enum ConvAlgorithm {
     /// [`crate::low_memory`] picks
     /// [`ConvAlgorithm::WinogradLowMemory`]; [`crate::precision`] bf16 the
     /// bf16 variants); on the AVX-512 family, the stride-2 Winograd
-    /// ([`ConvAlgorithm::WinogradStride2`], its weights made per pass with
+    /// ([`ConvAlgorithm::Winograd5Stride2`] with ≥ 128 input channels, else
+    /// [`ConvAlgorithm::WinogradStride2`]; `PICKER_WINOGRAD_S2_TILE=4|5`
+    /// forces a tile; the weights made per pass with
     /// `PICKER_WINOGRAD_WEIGHTS=lazy` or [`crate::low_memory`]; in f32 at
     /// either precision) for 3×3 stride-2 layers with ≥ 16 input channels
     /// and at least as many outputs (the encoders' down convs: 13–24% faster
@@ -339,6 +341,19 @@ pub enum ConvAlgorithm {
     /// [`ConvAlgorithm::WinogradStride2`] keeping only the 3×3 weights, as
     /// [`ConvAlgorithm::WinogradLowMemory`] does.
     WinogradStride2LowMemory,
+    /// The stride-2 Winograd with 5×5 output tiles (any zero padding): per
+    /// axis F(5, 2) on the even inputs with the even taps and the odd inputs
+    /// times the middle tap, 121 products per 5×5 output tile (4.84 per
+    /// output against [`ConvAlgorithm::WinogradStride2`]'s 5.06), and whole
+    /// panels of 48 tiles on the EnvMap's 30×40 and 60×80 outputs (48 and
+    /// 192 tiles, against 80 and 300 of 4×4); its transformed weights
+    /// packed once (13.4× the memory of the 3×3 weights).
+    /// [`ConvAlgorithm::Auto`] takes it on AVX-512 for layers with at least
+    /// 128 input channels.
+    Winograd5Stride2,
+    /// [`ConvAlgorithm::Winograd5Stride2`] keeping only the 3×3 weights, as
+    /// [`ConvAlgorithm::WinogradLowMemory`] does.
+    Winograd5Stride2LowMemory,
     /// Packed-A GEMM that reads the B rows in place from a padded copy of
     /// the input (any kernel; stride `s > 1` through the `s × s` phase planes
     /// of the input): no im2col packing.
@@ -354,7 +369,7 @@ pub enum ConvAlgorithm {
 
 impl ConvAlgorithm {
     /// Every algorithm that can be asked for explicitly.
-    pub const EXPLICIT: [ConvAlgorithm; 15] = [
+    pub const EXPLICIT: [ConvAlgorithm; 17] = [
         ConvAlgorithm::Gemm,
         ConvAlgorithm::Direct,
         ConvAlgorithm::Winograd,
@@ -368,6 +383,8 @@ impl ConvAlgorithm {
         ConvAlgorithm::WinogradBf16LowMemory,
         ConvAlgorithm::WinogradStride2,
         ConvAlgorithm::WinogradStride2LowMemory,
+        ConvAlgorithm::Winograd5Stride2,
+        ConvAlgorithm::Winograd5Stride2LowMemory,
         ConvAlgorithm::Shifted,
         ConvAlgorithm::PixelTiles,
     ];
@@ -406,6 +423,8 @@ impl ConvAlgorithm {
                 | ConvAlgorithm::WinogradBf16LowMemory
                 | ConvAlgorithm::WinogradStride2
                 | ConvAlgorithm::WinogradStride2LowMemory
+                | ConvAlgorithm::Winograd5Stride2
+                | ConvAlgorithm::Winograd5Stride2LowMemory
         )
     }
 
@@ -414,9 +433,10 @@ impl ConvAlgorithm {
         match self {
             ConvAlgorithm::Auto | ConvAlgorithm::AutoLowMemory | ConvAlgorithm::Gemm => true,
             ConvAlgorithm::Direct => s.stride == 1 && s.c_out <= direct::MAX_CO,
-            ConvAlgorithm::WinogradStride2 | ConvAlgorithm::WinogradStride2LowMemory => {
-                s.kh == 3 && s.kw == 3 && s.stride == 2
-            }
+            ConvAlgorithm::WinogradStride2
+            | ConvAlgorithm::WinogradStride2LowMemory
+            | ConvAlgorithm::Winograd5Stride2
+            | ConvAlgorithm::Winograd5Stride2LowMemory => s.kh == 3 && s.kw == 3 && s.stride == 2,
             ConvAlgorithm::Shifted => true,
             ConvAlgorithm::PixelTiles => s.stride <= pixtile::MAX_STRIDE,
             // The stride-1 Winograd variants.
@@ -463,16 +483,23 @@ impl ConvAlgorithm {
                 // Small packed weights stay packed even when low on memory: the
                 // encoders' first down conv runs in bands (`reflect_then`),
                 // each of which would make them again.
-                let packed_bytes = Tile::S4.points() * s.c_in * s.c_out * 4;
-                if crate::low_memory()
+                let five = match std::env::var("PICKER_WINOGRAD_S2_TILE").as_deref() {
+                    Ok("4") => false,
+                    Ok("5") => true,
+                    _ => s.c_in >= WINO_S5_MIN_C_IN,
+                };
+                let tile = if five { Tile::S5 } else { Tile::S4 };
+                let packed_bytes = tile.points() * s.c_in * s.c_out * 4;
+                let lazy = crate::low_memory()
                     || weights.as_deref() == Ok("lazy")
                     || (self == ConvAlgorithm::AutoLowMemory
                         && weights.as_deref() != Ok("packed")
-                        && packed_bytes > WINO_S2_PACKED_MAX_BYTES)
-                {
-                    ConvAlgorithm::WinogradStride2LowMemory
-                } else {
-                    ConvAlgorithm::WinogradStride2
+                        && packed_bytes > WINO_S2_PACKED_MAX_BYTES);
+                match (five, lazy) {
+                    (true, true) => ConvAlgorithm::Winograd5Stride2LowMemory,
+                    (true, false) => ConvAlgorithm::Winograd5Stride2,
+                    (false, true) => ConvAlgorithm::WinogradStride2LowMemory,
+                    (false, false) => ConvAlgorithm::WinogradStride2,
                 }
             }
             _ if auto
@@ -720,6 +747,7 @@ impl Conv2d {
                             | ConvAlgorithm::Winograd5
                             | ConvAlgorithm::WinogradBf16
                             | ConvAlgorithm::WinogradStride2
+                            | ConvAlgorithm::Winograd5Stride2
                     ),
                     algo.is_bf16(),
                     match algo {
@@ -731,6 +759,8 @@ impl Conv2d {
                         }
                         ConvAlgorithm::WinogradStride2
                         | ConvAlgorithm::WinogradStride2LowMemory => Some(Tile::S4),
+                        ConvAlgorithm::Winograd5Stride2
+                        | ConvAlgorithm::Winograd5Stride2LowMemory => Some(Tile::S5),
                         ConvAlgorithm::WinogradLowMemoryAutoTile => None,
                         _ => Some(Tile::F4),
                     },
@@ -809,6 +839,8 @@ impl Conv2d {
                 match (wino.is_bf16(), wino.is_packed(), wino.tile()) {
                     (false, true, Some(Tile::S4)) => ConvAlgorithm::WinogradStride2,
                     (false, false, Some(Tile::S4)) => ConvAlgorithm::WinogradStride2LowMemory,
+                    (false, true, Some(Tile::S5)) => ConvAlgorithm::Winograd5Stride2,
+                    (false, false, Some(Tile::S5)) => ConvAlgorithm::Winograd5Stride2LowMemory,
                     (false, true, Some(Tile::F5)) => ConvAlgorithm::Winograd5,
                     (false, false, Some(Tile::F5)) => ConvAlgorithm::Winograd5LowMemory,
                     (false, true, Some(Tile::F6)) => ConvAlgorithm::Winograd6,
@@ -860,6 +892,7 @@ impl Conv2d {
             // the EnvMap's, whose three bands left one thread idle a third
             // of the time).
             ConvPath::Winograd { wino, .. } if wino.tile() == Some(Tile::S4) => THEN_CONV_S2_BAND,
+            ConvPath::Winograd { wino, .. } if wino.tile() == Some(Tile::S5) => THEN_CONV_S5_BAND,
             _ => (per_band / row_bytes.max(1) / next.spec.stride.max(1)).max(THEN_CONV_MIN_BAND),
         };
         self.reflect_then_bands(x, pad, next, band)
@@ -1679,9 +1712,28 @@ const THEN_CONV_MIN_BAND: usize = 8;
 /// against 24.6–25.1 made per band); larger ones are made per pass.
 const WINO_S2_PACKED_MAX_BYTES: usize = 4 << 20;
 
+/// Fewest input channels of a 3×3 stride-2 layer that [`ConvAlgorithm::Auto`]
+/// runs with 5×5 Winograd tiles ([`ConvAlgorithm::Winograd5Stride2`]); fewer
+/// take 4×4 ones. The encoders' second down conv (128 → 256) runs alone,
+/// where 5×5 tiles fill whole panels on the EnvMap's 30×40 and 60×80
+/// outputs (2-core Zen 4, one thread, `picker bench --net envmap --profile`:
+/// `down.1` 4.96–5.09 ms against 5.94–6.04); the first one (64 → 128) runs
+/// in bands of 15 output rows after the input conv (`reflect_then`), each
+/// computing one row more than it keeps, so a band is four rows of 5×5
+/// tiles, 64 tiles in two panels, where 4×4 tiles fit it exactly (the
+/// EnvMap's head, one thread: 13.0–14.3 ms against 12.3–12.5; alone, 5×5
+/// tiles are faster there too: `tune envdown0` 6.3–6.9 against 7.0–8.3).
+/// `PICKER_WINOGRAD_S2_TILE=4` or `=5` takes one tile for every layer.
+const WINO_S5_MIN_C_IN: usize = 128;
+
 /// Rows of `next`'s output per band in [`Conv2d::reflect_then`] when `next`
 /// is a stride-2 Winograd layer (four rows of its tiles).
 const THEN_CONV_S2_BAND: usize = 16;
+
+/// [`THEN_CONV_S2_BAND`] for the 5×5 tiles: three rows of them (a 60×80
+/// output, the EnvMap's `down.0`, is then 16 tiles a row: one panel of 48
+/// per band).
+const THEN_CONV_S5_BAND: usize = 15;
 
 /// Where [`ConvTranspose2d::rows_into`] writes: channel stride `cs`, row
 /// stride `rs`, first column `col0`.

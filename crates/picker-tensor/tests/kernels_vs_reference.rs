@@ -183,6 +183,14 @@ fn named_conv_problems() -> Vec<ConvProblem> {
         tanh(conv(1, 16, 20, 17, 9, 3, 2, 2)),
         relu(conv(2, 3, 3, 16, 16, 3, 2, 1)),
         res(conv(1, 60, 80, 64, 128, 3, 2, 1)), // the EnvMap's first down conv at 1/2 scale
+        // Stride-2 Winograd with 5×5 tiles (ten-phase split): rows of 18
+        // tiles (two groups of 16, runs across panel ends); the EnvMap's
+        // `down.1` at 32→48 channels (a 30×40 output: rows of 8 tiles, two
+        // runs to a vector, 48 tiles in one panel); rows of 8 with a partial
+        // last tile on both axes.
+        relu(conv(1, 9, 171, 6, 8, 3, 2, 1)),
+        res(conv(1, 60, 80, 32, 48, 3, 2, 1)),
+        relu(conv(1, 27, 73, 5, 9, 3, 2, 1)),
         // F(5×5): the EnvMap's 30×40 blocks at 48 channels (48 tiles, one
         // panel); rows of 17 tiles (the five-phase split past one group of
         // 16, runs across panel ends) with a partial last tile.
@@ -282,24 +290,27 @@ fn auto_algorithm_choice() {
             let lazy = weights.as_deref() == Ok("lazy")
                 || std::env::var("PICKER_MEMORY").as_deref() == Ok("low")
                 || (auto == ConvAlgorithm::AutoLowMemory && weights.as_deref() != Ok("packed"));
-            let s2 = if lazy {
-                ConvAlgorithm::WinogradStride2LowMemory
-            } else {
-                ConvAlgorithm::WinogradStride2
+            // 5×5 output tiles unless PICKER_WINOGRAD_S2_TILE=4.
+            let four = std::env::var("PICKER_WINOGRAD_S2_TILE").as_deref() == Ok("4");
+            let s2 = match (four, lazy) {
+                (false, true) => ConvAlgorithm::Winograd5Stride2LowMemory,
+                (false, false) => ConvAlgorithm::Winograd5Stride2,
+                (true, true) => ConvAlgorithm::WinogradStride2LowMemory,
+                (true, false) => ConvAlgorithm::WinogradStride2,
             };
             (s2, ConvAlgorithm::PixelTiles)
         } else {
             (ConvAlgorithm::Shifted, ConvAlgorithm::Shifted)
         };
         assert_eq!(pick(ConvSpec::square(128, 256, 3, 2, 1)), s2);
-        // Small transformed weights (2.7 MB) stay packed unless asked.
-        let small_s2 = if s2 == ConvAlgorithm::WinogradStride2LowMemory
-            && std::env::var_os("PICKER_WINOGRAD_WEIGHTS").is_none()
-            && std::env::var_os("PICKER_MEMORY").is_none()
-        {
-            ConvAlgorithm::WinogradStride2
-        } else {
-            s2
+        // Small transformed weights (2.7 MB, 4.0 MB with 5×5 tiles) stay
+        // packed unless asked.
+        let unasked = std::env::var_os("PICKER_WINOGRAD_WEIGHTS").is_none()
+            && std::env::var_os("PICKER_MEMORY").is_none();
+        let small_s2 = match s2 {
+            ConvAlgorithm::WinogradStride2LowMemory if unasked => ConvAlgorithm::WinogradStride2,
+            ConvAlgorithm::Winograd5Stride2LowMemory if unasked => ConvAlgorithm::Winograd5Stride2,
+            _ => s2,
         };
         assert_eq!(pick(ConvSpec::square(64, 128, 3, 2, 1)), small_s2);
         assert_eq!(pick(ConvSpec::square(16, 16, 3, 2, 1)), small_s2);
@@ -646,7 +657,10 @@ fn reflect_conv_then_conv_in_bands() {
             // same bits with the default bands whatever the threads.
             let winograd = matches!(
                 second.algorithm(),
-                ConvAlgorithm::WinogradStride2 | ConvAlgorithm::WinogradStride2LowMemory
+                ConvAlgorithm::WinogradStride2
+                    | ConvAlgorithm::WinogradStride2LowMemory
+                    | ConvAlgorithm::Winograd5Stride2
+                    | ConvAlgorithm::Winograd5Stride2LowMemory
             );
             winograd_cases += usize::from(winograd);
             let tol = winograd.then(|| tolerance(second.algorithm()));
@@ -1172,6 +1186,11 @@ fn winograd_lazy_weights_match_packed_bit_for_bit() {
         (
             ConvAlgorithm::WinogradStride2,
             ConvAlgorithm::WinogradStride2LowMemory,
+            2,
+        ),
+        (
+            ConvAlgorithm::Winograd5Stride2,
+            ConvAlgorithm::Winograd5Stride2LowMemory,
             2,
         ),
         (

@@ -41,12 +41,14 @@ fn precision_switch_picks_the_bf16_winograd() {
     // take the f32 stride-2 Winograd.)
     let lazy = std::env::var("PICKER_WINOGRAD_WEIGHTS").as_deref() == Ok("lazy")
         || std::env::var("PICKER_MEMORY").as_deref() == Ok("low");
+    let four = std::env::var("PICKER_WINOGRAD_S2_TILE").as_deref() == Ok("4");
     assert_eq!(
         build(strided, &mut rng),
-        if lazy {
-            ConvAlgorithm::WinogradStride2LowMemory
-        } else {
-            ConvAlgorithm::WinogradStride2
+        match (four, lazy) {
+            (false, true) => ConvAlgorithm::Winograd5Stride2LowMemory,
+            (false, false) => ConvAlgorithm::Winograd5Stride2,
+            (true, true) => ConvAlgorithm::WinogradStride2LowMemory,
+            (true, false) => ConvAlgorithm::WinogradStride2,
         }
     );
     set_precision(Precision::F32).unwrap();

@@ -11,7 +11,9 @@
 //! reflected row, padding columns are computed from their source column),
 //! giving `T` rows `z_i`; for 16 tiles at once, the `T` columns of each tile
 //! (`z_i[M·k + c]`) are taken from `z_i` (F4: its four column phases by
-//! `vpermt2ps`; F6: its six phases by three `vpermt2ps` each), and `Bᵀ` along the columns writes
+//! `vpermt2ps`; F6: its six phases by three `vpermt2ps` each; the stride-2
+//! tiles' eight phases by three stages of swaps, their ten by an even/odd
+//! split and then five phases of each), and `Bᵀ` along the columns writes
 //! `V[T·i + j]`. On maps of at most 8 tiles a row (the EnvMap's 30×40
 //! blocks in F(5×5)) two runs share one vector: the second run's tiles are
 //! moved up behind the first's (`vpermps`) before the column pass, so each
@@ -232,6 +234,38 @@ unsafe fn phases8(p: *const f32) -> [__m512; 8] {
     z
 }
 
+/// The ten column phases of 16 tiles: `q_c[t] = z[10t + c]` for the 160
+/// floats at `p` (S5's tiles, 10 columns apart): the even and odd floats
+/// first (one two-source permute per output vector each: 80 floats of each
+/// parity, tile `t`'s at `5t..5t + 5`), then each parity's five phases by
+/// [`phases5`]; phase `2j` is the even floats' phase `j`, `2j + 1` the odd
+/// ones'.
+#[inline(always)]
+unsafe fn phases10(p: *const f32) -> [__m512; 10] {
+    let even = _mm512_setr_epi32(0, 2, 4, 6, 8, 10, 12, 14, 16, 18, 20, 22, 24, 26, 28, 30);
+    let odd = _mm512_setr_epi32(1, 3, 5, 7, 9, 11, 13, 15, 17, 19, 21, 23, 25, 27, 29, 31);
+    // Each parity's five vectors, the fifth twice (`F5_SPLIT`'s third pair).
+    // (Loops, not closures: a closure does not inherit the target features,
+    // and the intrinsics it calls were left as calls.)
+    let mut e = [_mm512_setzero_ps(); 6];
+    let mut o = [_mm512_setzero_ps(); 6];
+    for k in 0..6 {
+        let j = k.min(4);
+        let (a, b) = (
+            _mm512_loadu_ps(p.add(32 * j)),
+            _mm512_loadu_ps(p.add(32 * j + 16)),
+        );
+        e[k] = _mm512_permutex2var_ps(a, even, b);
+        o[k] = _mm512_permutex2var_ps(a, odd, b);
+    }
+    let mut q = [_mm512_setzero_ps(); 10];
+    for c in 0..5 {
+        q[2 * c] = pair_permute(&F5_SPLIT, c, &e);
+        q[2 * c + 1] = pair_permute(&F5_SPLIT, c, &o);
+    }
+    q
+}
+
 /// Lanes `1..16` of `a` followed by lane 0 of `b`.
 #[inline(always)]
 unsafe fn next_lane(a: __m512, b: __m512) -> __m512 {
@@ -242,7 +276,8 @@ unsafe fn next_lane(a: __m512, b: __m512) -> __m512 {
 }
 
 /// The `S` column phases of 16 tiles `S` floats apart at `p` (`S` = 4, 5,
-/// 6 or 8: [`phases`], [`phases5`], [`phases6`], [`phases8`]).
+/// 6, 8 or 10: [`phases`], [`phases5`], [`phases6`], [`phases8`],
+/// [`phases10`]).
 #[inline(always)]
 unsafe fn split<const S: usize>(p: *const f32) -> [__m512; S] {
     let mut q = [_mm512_setzero_ps(); S];
@@ -251,6 +286,7 @@ unsafe fn split<const S: usize>(p: *const f32) -> [__m512; S] {
         5 => q.copy_from_slice(&phases5(p)),
         6 => q.copy_from_slice(&phases6(p)),
         8 => q.copy_from_slice(&phases8(p)),
+        10 => q.copy_from_slice(&phases10(p)),
         _ => unreachable!("no phase split for {S} columns"),
     }
     q
@@ -453,6 +489,7 @@ pub(super) unsafe fn input<const T: usize, const M: usize, W: Points<T, M>>(
                         5 => column_pass_pair::<T, M, W, 5>(zi, len, zb, lb, v, at),
                         6 => column_pass_pair::<T, M, W, 6>(zi, len, zb, lb, v, at),
                         8 => column_pass_pair::<T, M, W, 8>(zi, len, zb, lb, v, at),
+                        10 => column_pass_pair::<T, M, W, 10>(zi, len, zb, lb, v, at),
                         _ => unreachable!("no phase split for a step of {step}"),
                     }
                     continue;
@@ -462,6 +499,7 @@ pub(super) unsafe fn input<const T: usize, const M: usize, W: Points<T, M>>(
                     5 => column_pass::<T, M, W, 5>(zi, len, v, at),
                     6 => column_pass::<T, M, W, 6>(zi, len, v, at),
                     8 => column_pass::<T, M, W, 8>(zi, len, v, at),
+                    10 => column_pass::<T, M, W, 10>(zi, len, v, at),
                     _ => unreachable!("no phase split for a step of {step}"),
                 }
             }
@@ -656,6 +694,8 @@ pub(super) unsafe fn weights<const T: usize, const M: usize, W: Points<T, M>>(
             6 if T > 6 => return weights_row::<T, M, W, 6>(g, up, stride, len),
             7 if T > 7 => return weights_row::<T, M, W, 7>(g, up, stride, len),
             8 if T > 8 => return weights_row::<T, M, W, 8>(g, up, stride, len),
+            9 if T > 9 => return weights_row::<T, M, W, 9>(g, up, stride, len),
+            10 if T > 10 => return weights_row::<T, M, W, 10>(g, up, stride, len),
             _ => {}
         }
     }

@@ -1,14 +1,15 @@
 //! Winograd convolutions for 3×3 layers (Lavin & Gray 2016), in three tile
-//! sizes for stride 1 and one for stride 2 ([`Tile`]; transform matrices in
+//! sizes for stride 1 and two for stride 2 ([`Tile`]; transform matrices in
 //! `points`): F(4×4, 3×3) takes 36 multiplies per input/output channel pair
 //! for a 4×4 output tile instead of 144, F(5×5, 3×3) 49 for a 5×5 tile
 //! instead of 225, F(6×6, 3×3) 64 for a 6×6 tile instead of 324, and the
-//! stride-2 tile 81 for a 4×4 tile instead of 144 (per axis its polyphase
-//! split: F(4, 2) for the even taps on the even inputs, the middle tap on
-//! the odd ones; its input tiles are 9 wide and 8 apart, the output side is
-//! F(4×4)'s).
+//! stride-2 tiles 81 for a 4×4 tile instead of 144 and 121 for a 5×5 tile
+//! instead of 225 (per axis their polyphase split: F(4, 2) or F(5, 2) for
+//! the even taps on the even inputs, the middle tap on the odd ones; input
+//! tiles 9 wide and 8 apart, or 11 wide and 10 apart; the output side is
+//! F(4×4)'s or F(5×5)'s).
 //!
-//! With `d` a `T × T` input tile (`T = 6`, 7, 8 or 9), `g` a 3×3 kernel:
+//! With `d` a `T × T` input tile (`T = 6`, 7, 8, 9 or 11), `g` a 3×3 kernel:
 //! `Y = Aᵀ [Σ_ci (G g Gᵀ) ⊙ (Bᵀ d B)] A`. The weights are transformed and
 //! packed once (or at each pass, lazy `U`), as `T²` `c_out × c_in` matrices
 //! `U[ξ]` in the micro-kernel's A-panel layout.
@@ -63,7 +64,7 @@ use crate::params::{
     WINO_BF16_KC, WINO_CO_PER_TASK, WINO_CO_PER_TASK_MAX, WINO_KC, WINO_LAZY_V_BYTES,
     WINO_PANELS_PER_BLOCK, WINO_PANELS_PER_GROUP, WINO_ROW_BLOCK_PANELS, WINO_S2_CO_PER_TASK_MAX,
 };
-use points::{Points, F4, F5, F6, S4};
+use points::{Points, F4, F5, F6, S4, S5};
 
 /// `N` disjoint `len`-long lanes of `out`, at `base + i·stride` (`stride ≥ len`).
 #[inline(always)]
@@ -157,6 +158,8 @@ pub(crate) enum Tile {
     F6,
     /// F(4×4, 3×3) with stride 2 (polyphase): 81 products per 16 outputs.
     S4,
+    /// F(5×5, 3×3) with stride 2 (polyphase): 121 products per 25 outputs.
+    S5,
 }
 
 impl Tile {
@@ -164,7 +167,7 @@ impl Tile {
     pub(crate) fn outputs(self) -> usize {
         match self {
             Tile::F4 | Tile::S4 => 4,
-            Tile::F5 => 5,
+            Tile::F5 | Tile::S5 => 5,
             Tile::F6 => 6,
         }
     }
@@ -173,7 +176,7 @@ impl Tile {
     pub(crate) fn stride(self) -> usize {
         match self {
             Tile::F4 | Tile::F5 | Tile::F6 => 1,
-            Tile::S4 => 2,
+            Tile::S4 | Tile::S5 => 2,
         }
     }
 
@@ -707,6 +710,7 @@ impl Winograd {
                     Tile::F5 => w.pack_u::<7, 5, F5>(taps.as_slice(), buf.as_mut_slice()),
                     Tile::F6 => w.pack_u::<8, 6, F6>(taps.as_slice(), buf.as_mut_slice()),
                     Tile::S4 => w.pack_u::<9, 4, S4>(taps.as_slice(), buf.as_mut_slice()),
+                    Tile::S5 => w.pack_u::<11, 5, S5>(taps.as_slice(), buf.as_mut_slice()),
                 }
             }
             w.u = UStore::Packed(buf);
@@ -1087,6 +1091,7 @@ impl Winograd {
             Tile::F5 => self.forward_tiles::<7, 5, F5>(x, h, w, pad, fill, epi, out),
             Tile::F6 => self.forward_tiles::<8, 6, F6>(x, h, w, pad, fill, epi, out),
             Tile::S4 => self.forward_tiles::<9, 4, S4>(x, h, w, pad, fill, epi, out),
+            Tile::S5 => self.forward_tiles::<11, 5, S5>(x, h, w, pad, fill, epi, out),
         }
     }
 
@@ -1507,5 +1512,6 @@ mod tests {
         avx512_weights_match::<8, 6, F6>();
         avx512_weights_match::<7, 5, F5>();
         avx512_weights_match::<9, 4, S4>();
+        avx512_weights_match::<11, 5, S5>();
     }
 }

@@ -1,4 +1,4 @@
-//! The transform matrices of the two Winograd tile sizes, written once for
+//! The transform matrices of the Winograd tile sizes, written once for
 //! every kind of lane ([`Arith`]: one `f32`, or a vector of them), so the
 //! generic transforms and the intrinsics ones do the same operations in the
 //! same order.
@@ -21,6 +21,12 @@
 //!   4 outputs, 81 products per 16 outputs instead of 144 (a direct stride-2
 //!   layer): the polyphase split of a strided convolution with each phase
 //!   by its own 1-D Winograd algorithm.
+//! - [`S5`]: F(5×5, 3×3) with stride 2, 11×11 input tiles: per axis F(5, 2)
+//!   on the even inputs (the points 0, ±1, ±2, ∞: F4's `Bᵀ` up to row
+//!   signs) and the odd inputs times `g₁`: 11 points per 5 outputs, 121
+//!   products per 25 outputs (4.84 per output against S4's 5.06), for maps
+//!   whose tiles fill whole panels in it (a 30×40 output is 48 tiles, one
+//!   panel of 48, where S4 takes 80 in two).
 
 /// The arithmetic the transforms need, for one lane type.
 pub(crate) trait Arith: Copy {
@@ -309,6 +315,77 @@ impl Points<9, 4> for S4 {
     }
 }
 
+/// F(5×5, 3×3) with stride 2. One axis: the input `d₀ … d₁₀`, the output
+/// `yᵢ = g₀ d₂ᵢ + g₁ d₂ᵢ₊₁ + g₂ d₂ᵢ₊₂`. Points 0–5 are F(5, 2) of the even
+/// inputs `eⱼ = d₂ⱼ` with the taps `(g₀, g₂)` (its `Bᵀ` rows scaled to
+/// integers, `G` scaled back), points 6–10 the odd inputs `d₁, d₃, … d₉`
+/// times `g₁`.
+pub(crate) struct S5;
+
+impl Points<11, 5> for S5 {
+    const STRIDE: usize = 2;
+
+    /// `Bᵀ` of the even phase (6×6): `[4 0 −5 0 1 0] [0 4 4 −1 −1 0]
+    /// [0 −4 4 1 −1 0] [0 −2 −1 2 1 0] [0 2 −1 −2 1 0] [0 4 0 −5 0 1]`; the
+    /// odd phase passes.
+    #[inline(always)]
+    fn bt<A: Arith>(d: [A; 11]) -> [A; 11] {
+        let (e0, e1, e2, e3, e4, e5) = (d[0], d[2], d[4], d[6], d[8], d[10]);
+        let (p, q) = (e2.mul(4.0).sub(e4), e1.mul(4.0).sub(e3));
+        let (r, t) = (e4.sub(e2), e3.sub(e1).mul(2.0));
+        [
+            e0.mul(4.0).sub(e2.mul(5.0)).add(e4),
+            p.add(q),
+            p.sub(q),
+            r.add(t),
+            r.sub(t),
+            e1.mul(4.0).sub(e3.mul(5.0)).add(e5),
+            d[1],
+            d[3],
+            d[5],
+            d[7],
+            d[9],
+        ]
+    }
+
+    /// `Aᵀ` of the even phase (5×6): `[1 1 1 1 1 0]` and
+    /// `[0 1 (−1)ⁱ 2ⁱ (−2)ⁱ δᵢ₄]` for `i = 1..5`, plus the odd phase's point
+    /// of each output.
+    #[inline(always)]
+    fn at<A: Arith>(m: [A; 11]) -> [A; 5] {
+        let (a, b) = (m[1].add(m[2]), m[1].sub(m[2]));
+        let (c, d) = (m[3].add(m[4]), m[3].sub(m[4]));
+        [
+            m[0].add(a).add(c).add(m[6]),
+            b.add(d.mul(2.0)).add(m[7]),
+            a.add(c.mul(4.0)).add(m[8]),
+            b.add(d.mul(8.0)).add(m[9]),
+            a.add(c.mul(16.0)).add(m[5]).add(m[10]),
+        ]
+    }
+
+    /// `G` of the even phase (6×2, on `(x₀, x₂)`): `[¼ 0] [⅙ ⅙] [⅙ −⅙]
+    /// [1/24 1/12] [1/24 −1/12] [0 1]`; the odd phase's points are `x₁`.
+    #[inline(always)]
+    fn g<A: Arith>(x0: A, x1: A, x2: A) -> [A; 11] {
+        let (s, t) = (x0.add(x2), x0.sub(x2));
+        let (c, e) = (x0.mul(1.0 / 24.0), x2.mul(1.0 / 12.0));
+        [
+            x0.mul(0.25),
+            s.mul(1.0 / 6.0),
+            t.mul(1.0 / 6.0),
+            c.add(e),
+            c.sub(e),
+            x2,
+            x1,
+            x1,
+            x1,
+            x1,
+            x1,
+        ]
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -353,5 +430,10 @@ mod tests {
     #[test]
     fn s4_points_correlate_with_stride_two() {
         correlates::<9, 4, S4>();
+    }
+
+    #[test]
+    fn s5_points_correlate_with_stride_two() {
+        correlates::<11, 5, S5>();
     }
 }
