@@ -672,7 +672,7 @@ pub fn fold_coords(coords: &Coords, fold: &Fold) -> Coords {
 /// The fraction of `t` in tiles of `side`: `frac(t / side)`; NaN stays NaN.
 fn frac_of(t: f32, side: f32) -> f32 {
     let x = t / side;
-    x - x.floor()
+    x - crate::reproject::floor_f32(x)
 }
 
 /// `coords` wrapped by a tile of sides `tile` (fractions of the square):
@@ -789,7 +789,7 @@ fn fold_spread(
     let bf = b as f32;
     let bin = |t: f32, inv: f32| {
         let x = t * inv;
-        (((x - x.floor()) * bf) as usize).min(b - 1)
+        (((x - crate::reproject::floor_f32(x)) * bf) as usize).min(b - 1)
     };
     let (su, sv) = (1.0 / tile[0], 1.0 / tile[1]);
     let [sa, sb] = shear;

@@ -70,7 +70,7 @@ impl Coords {
     fn delta(&self, a: f32, b: f32) -> f32 {
         let d = b - a;
         if self.wrap {
-            d - d.round()
+            d - round_f32(d)
         } else {
             d
         }
@@ -594,15 +594,23 @@ struct Picked<'a> {
     size: usize,
 }
 
+/// [`samples_with_room`] without the room (the tests' shorthand).
+#[cfg(test)]
+fn samples(src: &Picked<'_>, block: usize) -> Vec<Sample> {
+    samples_with_room(src, block, false)
+}
+
 /// The picked pixels with a positive confidence and finite coordinates and
 /// colour ([`kept`]), in pixel order, with their footprint and weight;
 /// with `block > 1`, by `block × block` pixel blocks in row-major order,
 /// each merged into one sample where it is coherent ([`block_samples`]).
+/// With `room`, the vector has room for as many more (the shifted copies of
+/// [`with_shifted_copies`]): it is allocated once, at its final capacity.
 ///
 /// Rows in parallel: the samples of each row are counted first, then written
 /// straight into their place (the same samples in the same order as the plain
 /// filter over the pixels, `tests::parallel_samples_match_reference`).
-fn samples(src: &Picked<'_>, block: usize) -> Vec<Sample> {
+fn samples_with_room(src: &Picked<'_>, block: usize, room: bool) -> Vec<Sample> {
     let w = src.coords.width.max(1);
     if block > 1 {
         // Rows of blocks in parallel (a few samples per block: collected
@@ -616,7 +624,7 @@ fn samples(src: &Picked<'_>, block: usize) -> Vec<Sample> {
             })
             .collect();
         let counts: Vec<usize> = rows.iter().map(Vec::len).collect();
-        return filled_in_parts(&counts, |r, part| {
+        return filled_in_parts(&counts, room, |r, part| {
             for (slot, s) in part.iter_mut().zip(&rows[r]) {
                 slot.write(*s);
             }
@@ -628,7 +636,7 @@ fn samples(src: &Picked<'_>, block: usize) -> Vec<Sample> {
         .into_par_iter()
         .map(|y| (y * w..(y + 1) * w).filter(|&i| keep(i).is_some()).count())
         .collect();
-    filled_in_parts(&counts, |y, part| {
+    filled_in_parts(&counts, room, |y, part| {
         let mut n = 0;
         for (i, c) in (y * w..(y + 1) * w).filter_map(|i| keep(i).map(|c| (i, c))) {
             part[n].write(splat_sample(
@@ -647,7 +655,8 @@ fn samples(src: &Picked<'_>, block: usize) -> Vec<Sample> {
 
 /// A vector of `counts.iter().sum()` samples made of consecutive parts, part
 /// `r` (`counts[r]` long) written by `write(r, part)`, which returns how many
-/// of the part's slots it wrote; the parts in parallel.
+/// of the part's slots it wrote; the parts in parallel. With `room`, its
+/// capacity is twice its length.
 ///
 /// Written in place without first filling the vector: at 12 MP a filled
 /// `vec![Sample::default(); n]` (~140 MB, one thread, every page faulted
@@ -658,10 +667,11 @@ fn samples(src: &Picked<'_>, block: usize) -> Vec<Sample> {
 /// When a part writes more or fewer slots than its count.
 fn filled_in_parts(
     counts: &[usize],
+    room: bool,
     write: impl Fn(usize, &mut [std::mem::MaybeUninit<Sample>]) -> usize + Sync,
 ) -> Vec<Sample> {
     let total: usize = counts.iter().sum();
-    let mut out: Vec<Sample> = Vec::with_capacity(total);
+    let mut out: Vec<Sample> = Vec::with_capacity(if room { 2 * total } else { total });
     let mut parts = Vec::with_capacity(counts.len());
     let mut rest = &mut out.spare_capacity_mut()[..total];
     for &k in counts {
@@ -773,6 +783,44 @@ fn floor_i64(x: f32) -> i64 {
         t.saturating_sub(1)
     } else {
         t
+    }
+}
+
+/// `x.floor()` without a call to `floorf` (see [`floor_i64`]): the same
+/// value for every `f32`, the sign of zero, NaN and infinities included
+/// (`tests::integer_floor_and_ceil`).
+#[inline]
+pub(crate) fn floor_f32(x: f32) -> f32 {
+    // Below 2²³ in magnitude `x` truncates exactly into an i32; above, every
+    // f32 is an integer (and NaN fails the test).
+    if x.abs() < 8_388_608.0 {
+        let t = (x as i32) as f32;
+        let f = if t > x { t - 1.0 } else { t };
+        // floor(−0.0) is −0.0; every other result already has x's sign.
+        f.copysign(x)
+    } else {
+        x
+    }
+}
+
+/// `x.round()` (half away from zero) without a call to `roundf`: the same
+/// value for every `f32` (see [`floor_f32`]).
+#[inline]
+pub(crate) fn round_f32(x: f32) -> f32 {
+    if x.abs() < 8_388_608.0 {
+        let t = (x as i32) as f32;
+        // The fraction, exactly.
+        let r = x - t;
+        let y = if r >= 0.5 {
+            t + 1.0
+        } else if r <= -0.5 {
+            t - 1.0
+        } else {
+            t
+        };
+        y.copysign(x)
+    } else {
+        x
     }
 }
 
@@ -1042,26 +1090,22 @@ impl Fit {
             confidence,
             size,
         };
-        let t0 = std::time::Instant::now();
-        let mut samples = samples(&src, block);
-        let nsamp = samples.len();
-        let t1 = t0.elapsed();
+        let by_sums = shift.filter(|by| {
+            by.iter()
+                .all(|&b| (b * size as f32).fract() == 0.0 && (2.0 * b).fract() == 0.0)
+        });
+        let copies = shift.is_some() && by_sums.is_none();
+        let mut samples = samples_with_room(&src, block, copies);
         // A centred fold's second place for every sample. Where the shift is
         // half the square (or none) along each axis and a whole number of
         // texels, moving twice is the identity and the texture comes out
         // symmetric, so each splat's sums plus the same sums moved
         // ([`plus_shifted`]) are those of the copies: robust weights and
         // back-projection residuals alike. Otherwise the copies are made.
-        let by_sums = shift.filter(|by| {
-            by.iter()
-                .all(|&b| (b * size as f32).fract() == 0.0 && (2.0 * b).fract() == 0.0)
-        });
         if let (Some(by), None) = (shift, by_sums) {
             samples = with_shifted_copies(samples, by);
         }
-        let tc = t0.elapsed();
         let members = band_members(&samples, size, coords.wrap);
-        let t2 = t0.elapsed();
         let shift = by_sums.map(|by| [by[0] * size as f32, by[1] * size as f32]);
         let sym = |(sum, wsum, seen): (Vec<Vec3>, Vec<f32>, Vec<f32>)| match shift {
             Some(by) => (
@@ -1087,7 +1131,6 @@ impl Fit {
             true,
         ));
         let mean = texel_means(&sum, &wsum);
-        let t3 = t0.elapsed();
         // Robust pass: Cauchy weights on the distance to the first-pass texel mean,
         // scale = 2 × the median deviation (at least 0.02).
         // (The median found in parallel without collecting the deviations:
@@ -1104,7 +1147,6 @@ impl Fit {
             None => 1.0,
             Some(m) => (2.0 * m[0]).max(0.02),
         };
-        let t4 = t0.elapsed();
         let (sum, wsum, _) = sym(splat(
             &samples,
             &members,
@@ -1116,9 +1158,6 @@ impl Fit {
             false,
         ));
         let tex = texel_means(&sum, &wsum);
-        if std::env::var_os("TRACE_RP").is_some() {
-            eprintln!("fit size {size} block {block} px {} samples {nsamp}->{} samples {:?} copies {:?} members {:?} splat1 {:?} median {:?} splat2 {:?}", mask.iter().filter(|&&m| m).count(), samples.len(), t1, tc-t1, t2-tc, t3-t2, t4-t3, t0.elapsed()-t4);
-        }
         Fit {
             samples,
             members,
@@ -1158,7 +1197,6 @@ impl Fit {
         // page faults again: 12 bytes per picked pixel).
         let mut residual = vec![Vec3::ZERO; if rounds > 0 { samples.len() } else { 0 }];
         for _ in 0..rounds {
-            let tq = std::time::Instant::now();
             let t: &[Vec3] = &self.tex;
             residual
                 .par_iter_mut()
@@ -1166,10 +1204,6 @@ impl Fit {
                 .for_each(|(r, s)| {
                     *r = predict(s, t, size, wrap).map_or(Vec3::ZERO, |p| s.colour - p)
                 });
-            if std::env::var_os("TRACE_RP").is_some() {
-                eprintln!("  round: predict {:?}", tq.elapsed());
-            }
-            let tp = std::time::Instant::now();
             let (rsum, _, _) = splat(
                 samples,
                 &self.members,
@@ -1180,9 +1214,6 @@ impl Fit {
                 Some(&residual),
                 false,
             );
-            if std::env::var_os("TRACE_RP").is_some() {
-                eprintln!("  round: predict+splat {:?}", tp.elapsed());
-            }
             let rsum = match self.shift {
                 Some(by) => plus_shifted(&rsum, size, by),
                 None => rsum,
@@ -1260,11 +1291,14 @@ pub fn reproject_centred(
 
 /// `samples` followed by a copy of each moved by `by` (units of the square)
 /// and wrapped into `[0, 1)`; their footprints, relative to their centres,
-/// are unchanged.
+/// are unchanged. The copies are written in parallel, into the vector's
+/// spare room when it has it ([`samples_with_room`]: at 12 MP, 4 million
+/// samples, pushing them one by one after growing the vector took 80–100
+/// ms).
 fn with_shifted_copies(mut samples: Vec<Sample>, by: [f32; 2]) -> Vec<Sample> {
     let wrap = |t: f32, d: f32| {
         let x = t + d;
-        let x = x - x.floor();
+        let x = x - floor_f32(x);
         // `x − floor(x)` of a value just below an integer rounds to 1.
         if x >= 1.0 {
             0.0
@@ -1273,17 +1307,37 @@ fn with_shifted_copies(mut samples: Vec<Sample>, by: [f32; 2]) -> Vec<Sample> {
         }
     };
     let n = samples.len();
-    samples.reserve(n);
-    for k in 0..n {
-        let s = samples[k];
-        samples.push(Sample {
-            u: wrap(s.u, by[0]),
-            v: wrap(s.v, by[1]),
-            ..s
+    samples.reserve_exact(n);
+    let base = samples.as_mut_ptr();
+    // SAFETY: the first `n` slots are initialised and only read here; the
+    // next `n` lie within the capacity (reserved above), are only written
+    // here, and do not overlap the first `n`. The vector is not touched
+    // through `samples` until `set_len`.
+    let (orig, spare) = unsafe {
+        (
+            std::slice::from_raw_parts(base.cast_const(), n),
+            std::slice::from_raw_parts_mut(base.add(n).cast::<std::mem::MaybeUninit<Sample>>(), n),
+        )
+    };
+    spare
+        .par_chunks_mut(COPY_CHUNK)
+        .zip(orig.par_chunks(COPY_CHUNK))
+        .for_each(|(dst, src)| {
+            for (d, s) in dst.iter_mut().zip(src) {
+                d.write(Sample {
+                    u: wrap(s.u, by[0]),
+                    v: wrap(s.v, by[1]),
+                    ..*s
+                });
+            }
         });
-    }
+    // SAFETY: every one of the `n` copies was written above.
+    unsafe { samples.set_len(2 * n) };
     samples
 }
+
+/// Samples per parallel chunk of [`with_shifted_copies`].
+const COPY_CHUNK: usize = 1 << 14;
 
 /// A `size × size` square of per-texel sums `a` (wrapping) plus the same
 /// sums moved by `by` texels: what the sums would be if every sample were
@@ -2560,7 +2614,7 @@ mod tests {
     #[test]
     fn filled_in_parts_writes_every_part_in_order() {
         let counts = [3usize, 0, 5, 1];
-        let v = filled_in_parts(&counts, |r, part| {
+        let v = filled_in_parts(&counts, true, |r, part| {
             for (k, slot) in part.iter_mut().enumerate() {
                 slot.write(Sample {
                     u: r as f32,
@@ -2582,7 +2636,7 @@ mod tests {
     #[test]
     #[should_panic(expected = "not every counted sample written")]
     fn filled_in_parts_refuses_a_short_part() {
-        filled_in_parts(&[2, 2], |r, part| {
+        filled_in_parts(&[2, 2], false, |r, part| {
             let n = if r == 1 { 1 } else { part.len() };
             for slot in &mut part[..n] {
                 slot.write(Sample::default());
@@ -2885,10 +2939,28 @@ mod tests {
             -1e20,
             8388608.5,
             -8388607.5,
+            8388607.5,
+            -8388608.0,
+            8388608.0,
+            4194303.5,
+            -4194304.5,
+            0.49999997,
+            -0.49999997,
+            f32::MIN_POSITIVE / 2.0,
             f32::MIN_POSITIVE,
         ]);
         for x in values {
             assert_eq!(floor_i64(x), x.floor() as i64, "floor {x}");
+            assert_eq!(floor_f32(x).to_bits(), x.floor().to_bits(), "floor {x}");
+            assert_eq!(round_f32(x).to_bits(), x.round().to_bits(), "round {x}");
+        }
+        // Every 61st bit pattern (both signs, every exponent): the same
+        // values, and NaN for NaN (whose payload the library may quieten).
+        let same = |a: f32, b: f32| a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan());
+        for bits in (0..=u32::MAX).step_by(61) {
+            let x = f32::from_bits(bits);
+            assert!(same(floor_f32(x), x.floor()), "floor {x} ({bits:#x})");
+            assert!(same(round_f32(x), x.round()), "round {x} ({bits:#x})");
             assert_eq!(ceil_i64(x), x.ceil() as i64, "ceil {x}");
         }
         for n in [1i64, 2, 7, 1024] {
