@@ -290,30 +290,39 @@ fn auto_algorithm_choice() {
             let lazy = weights.as_deref() == Ok("lazy")
                 || std::env::var("PICKER_MEMORY").as_deref() == Ok("low")
                 || (auto == ConvAlgorithm::AutoLowMemory && weights.as_deref() != Ok("packed"));
-            // 5×5 output tiles unless PICKER_WINOGRAD_S2_TILE=4.
-            let four = std::env::var("PICKER_WINOGRAD_S2_TILE").as_deref() == Ok("4");
-            let s2 = match (four, lazy) {
-                (false, true) => ConvAlgorithm::Winograd5Stride2LowMemory,
-                (false, false) => ConvAlgorithm::Winograd5Stride2,
-                (true, true) => ConvAlgorithm::WinogradStride2LowMemory,
-                (true, false) => ConvAlgorithm::WinogradStride2,
+            // 5×5 output tiles from 128 input channels, unless
+            // PICKER_WINOGRAD_S2_TILE=4 or =5 forces a tile.
+            let forced = std::env::var("PICKER_WINOGRAD_S2_TILE");
+            let tile = |c_in: usize, lazy: bool| {
+                let five = match forced.as_deref() {
+                    Ok("4") => false,
+                    Ok("5") => true,
+                    _ => c_in >= 128,
+                };
+                match (five, lazy) {
+                    (true, true) => ConvAlgorithm::Winograd5Stride2LowMemory,
+                    (true, false) => ConvAlgorithm::Winograd5Stride2,
+                    (false, true) => ConvAlgorithm::WinogradStride2LowMemory,
+                    (false, false) => ConvAlgorithm::WinogradStride2,
+                }
             };
-            (s2, ConvAlgorithm::PixelTiles)
+            // Small transformed weights (2.7 MB with 4×4 tiles) stay packed
+            // unless asked.
+            let unasked = std::env::var_os("PICKER_WINOGRAD_WEIGHTS").is_none()
+                && std::env::var_os("PICKER_MEMORY").is_none();
+            let small_lazy = lazy && !(unasked && auto == ConvAlgorithm::AutoLowMemory);
+            (
+                (tile(128, lazy), tile(64, small_lazy), tile(16, small_lazy)),
+                ConvAlgorithm::PixelTiles,
+            )
         } else {
-            (ConvAlgorithm::Shifted, ConvAlgorithm::Shifted)
+            let s = ConvAlgorithm::Shifted;
+            ((s, s, s), s)
         };
+        let (s2, small_s2, tiny_s2) = s2;
         assert_eq!(pick(ConvSpec::square(128, 256, 3, 2, 1)), s2);
-        // Small transformed weights (2.7 MB, 4.0 MB with 5×5 tiles) stay
-        // packed unless asked.
-        let unasked = std::env::var_os("PICKER_WINOGRAD_WEIGHTS").is_none()
-            && std::env::var_os("PICKER_MEMORY").is_none();
-        let small_s2 = match s2 {
-            ConvAlgorithm::WinogradStride2LowMemory if unasked => ConvAlgorithm::WinogradStride2,
-            ConvAlgorithm::Winograd5Stride2LowMemory if unasked => ConvAlgorithm::Winograd5Stride2,
-            _ => s2,
-        };
         assert_eq!(pick(ConvSpec::square(64, 128, 3, 2, 1)), small_s2);
-        assert_eq!(pick(ConvSpec::square(16, 16, 3, 2, 1)), small_s2);
+        assert_eq!(pick(ConvSpec::square(16, 16, 3, 2, 1)), tiny_s2);
         assert_eq!(pick(ConvSpec::square(8, 128, 3, 2, 1)), strided);
         assert_eq!(pick(ConvSpec::square(256, 128, 3, 2, 1)), strided);
         assert_eq!(pick(ConvSpec::square(64, 128, 5, 2, 1)), strided);
