@@ -179,7 +179,7 @@ fn main() {
     time_it(&which, s.flops(h, w), || conv.forward(&x).expect("forward"));
 }
 
-/// TUNE_ALGO=gemm|direct|winograd|winograd-lazy|winograd6|winograd6-lazy|winograd5|winograd5-lazy|winograd-auto|winograd-s2|winograd-s2-lazy|shifted|pixtile
+/// TUNE_ALGO=gemm|direct|winograd|winograd-lazy|winograd6|winograd6-lazy|winograd5|winograd5-lazy|winograd-auto|winograd-s2|winograd-s2-lazy|winograd5-s2|winograd5-s2-lazy|shifted|pixtile
 /// forces an algorithm.
 fn algo_from_env() -> ConvAlgorithm {
     match std::env::var("TUNE_ALGO").as_deref() {
