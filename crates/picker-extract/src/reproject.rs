@@ -1090,18 +1090,19 @@ impl Fit {
             confidence,
             size,
         };
+        // A centred fold's second place for every sample. Where the shift is
+        // half the square (or none) along each axis and a whole number of
+        // texels, moving twice is the identity and the texture comes out
+        // symmetric, so each splat's sums plus the same sums moved
+        // ([`plus_shifted`]) are those of the copies: robust weights and
+        // back-projection residuals alike. Otherwise the copies are made
+        // (in room the samples are made with).
         let by_sums = shift.filter(|by| {
             by.iter()
                 .all(|&b| (b * size as f32).fract() == 0.0 && (2.0 * b).fract() == 0.0)
         });
         let copies = shift.is_some() && by_sums.is_none();
         let mut samples = samples_with_room(&src, block, copies);
-        // A centred fold's second place for every sample. Where the shift is
-        // half the square (or none) along each axis and a whole number of
-        // texels, moving twice is the identity and the texture comes out
-        // symmetric, so each splat's sums plus the same sums moved
-        // ([`plus_shifted`]) are those of the copies: robust weights and
-        // back-projection residuals alike. Otherwise the copies are made.
         if let (Some(by), None) = (shift, by_sums) {
             samples = with_shifted_copies(samples, by);
         }

@@ -891,8 +891,11 @@ impl Conv2d {
             // 240×320 head, 5.5–6.6 against 5.9–8.6 with 20-row bands for
             // the EnvMap's, whose three bands left one thread idle a third
             // of the time).
-            ConvPath::Winograd { wino, .. } if wino.tile() == Some(Tile::S4) => THEN_CONV_S2_BAND,
-            ConvPath::Winograd { wino, .. } if wino.tile() == Some(Tile::S5) => THEN_CONV_S5_BAND,
+            // (5×5 tiles, which `Auto` does not take here, get the same
+            // bands: their 16 computed rows are four rows of 5×5 tiles.)
+            ConvPath::Winograd { wino, .. } if matches!(wino.tile(), Some(Tile::S4 | Tile::S5)) => {
+                THEN_CONV_S2_BAND
+            }
             _ => (per_band / row_bytes.max(1) / next.spec.stride.max(1)).max(THEN_CONV_MIN_BAND),
         };
         self.reflect_then_bands(x, pad, next, band)
@@ -1729,11 +1732,6 @@ const WINO_S5_MIN_C_IN: usize = 128;
 /// Rows of `next`'s output per band in [`Conv2d::reflect_then`] when `next`
 /// is a stride-2 Winograd layer (four rows of its tiles).
 const THEN_CONV_S2_BAND: usize = 16;
-
-/// [`THEN_CONV_S2_BAND`] for the 5×5 tiles: three rows of them (a 60×80
-/// output, the EnvMap's `down.0`, is then 16 tiles a row: one panel of 48
-/// per band).
-const THEN_CONV_S5_BAND: usize = 15;
 
 /// Where [`ConvTranspose2d::rows_into`] writes: channel stride `cs`, row
 /// stride `rs`, first column `col0`.

@@ -238,8 +238,8 @@ unsafe fn phases8(p: *const f32) -> [__m512; 8] {
 /// floats at `p` (S5's tiles, 10 columns apart): the even and odd floats
 /// first (one two-source permute per output vector each: 80 floats of each
 /// parity, tile `t`'s at `5t..5t + 5`), then each parity's five phases by
-/// [`phases5`]; phase `2j` is the even floats' phase `j`, `2j + 1` the odd
-/// ones'.
+/// the permutes of [`phases5`]; phase `2j` is the even floats' phase `j`,
+/// `2j + 1` the odd ones'.
 #[inline(always)]
 unsafe fn phases10(p: *const f32) -> [__m512; 10] {
     let even = _mm512_setr_epi32(0, 2, 4, 6, 8, 10, 12, 14, 16, 18, 20, 22, 24, 26, 28, 30);
