@@ -726,7 +726,8 @@ fn axis_weights(src: usize, dst: usize, wrap: bool) -> Vec<Vec<(usize, f32)>> {
     axis_weights_at(src, dst, wrap, 0.0)
 }
 
-/// [`axis_weights`] for the output grid moved by `offset` output texels
+/// Per output index, the source taps `(index, weight)` (weights sum to 1),
+/// for the output grid moved by `offset` output texels
 /// (source indices wrap with `wrap`, else clamp to the edge). Offset 0 gives
 /// the same taps in the same order as no offset.
 fn axis_weights_at(src: usize, dst: usize, wrap: bool, offset: f64) -> Vec<Vec<(usize, f32)>> {

@@ -445,7 +445,7 @@ fn kept(
 /// texel wide, each block merged only where its coordinates are coherent.
 pub const MAX_MERGE_BLOCK: usize = 8;
 
-/// The side `f` of the pixel blocks that [`samples`] merges: 1 (no merging)
+/// The side `f` of the pixel blocks that [`samples_with_room`] merges: 1 (no merging)
 /// unless twice the median picked pixel's side in texels is at most one
 /// texel; then the largest power of two up to [`MAX_MERGE_BLOCK`] with `f`
 /// times the [`MERGE_QUANTILE`] pixel's side at most one texel (a block that
@@ -583,7 +583,7 @@ fn block_row(src: &Picked<'_>, f: usize, by: usize, out: &mut Vec<Sample>) {
     }
 }
 
-/// The inputs of [`samples`]: the pixels' coordinates, the mask, the de-lit
+/// The inputs of [`samples_with_room`]: the pixels' coordinates, the mask, the de-lit
 /// colours and confidences, and the texture size.
 #[derive(Clone, Copy)]
 struct Picked<'a> {

@@ -367,8 +367,8 @@ impl Ctx<'_> {
     /// [`Ctx::dist`] for patches whose top-left texels are at padded offsets
     /// `a` and `b` ([`Ctx::pad_offset`]).
     ///
-    /// Dispatches to a row-length specialised copy of [`Ctx::dist_reference`]
-    /// for the usual patch × channel sizes (same operations in the same
+    /// Dispatches to a row-length specialised copy of `Ctx::dist_reference`
+    /// (the tests' plain loop) for the usual patch × channel sizes (same operations in the same
     /// order, so the same bits; `tests::fast_distance_matches_reference`).
     #[inline(always)]
     fn dist_at(&self, pad: &[f32], a: usize, b: usize, bound: f32) -> f32 {

@@ -118,7 +118,7 @@ impl Tiles {
     }
 
     /// `C[16 × 48] (+)= A · B` over `nkk · 32` bf16 of depth: `a` is `nkk`
-    /// packed A tiles ([`pack_a`]), `b` the first of `16 · nkk` rows of 48
+    /// packed A tiles ([`pack_a_panel`]), `b` the first of `16 · nkk` rows of 48
     /// pair words, `ldb` words apart, and `c` 16 rows of 48 floats, `ldc`
     /// floats apart (read first when `accumulate`).
     ///
