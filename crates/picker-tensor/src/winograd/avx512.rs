@@ -249,15 +249,15 @@ unsafe fn phases10(p: *const f32) -> [__m512; 10] {
     // and the intrinsics it calls were left as calls.)
     let mut e = [_mm512_setzero_ps(); 6];
     let mut o = [_mm512_setzero_ps(); 6];
-    for k in 0..6 {
-        let j = k.min(4);
+    for k in 0..5 {
         let (a, b) = (
-            _mm512_loadu_ps(p.add(32 * j)),
-            _mm512_loadu_ps(p.add(32 * j + 16)),
+            _mm512_loadu_ps(p.add(32 * k)),
+            _mm512_loadu_ps(p.add(32 * k + 16)),
         );
         e[k] = _mm512_permutex2var_ps(a, even, b);
         o[k] = _mm512_permutex2var_ps(a, odd, b);
     }
+    (e[5], o[5]) = (e[4], o[4]);
     let mut q = [_mm512_setzero_ps(); 10];
     for c in 0..5 {
         q[2 * c] = pair_permute(&F5_SPLIT, c, &e);
