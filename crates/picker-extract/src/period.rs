@@ -659,7 +659,10 @@ pub fn fold_coords(coords: &Coords, fold: &Fold) -> Coords {
     if a == 0.0 && b == 0.0 {
         return wrap_by_tile(coords, fold.tile);
     }
-    let (uv, (tu, tv)) = (coords.u.iter().zip(&coords.v), (fold.tile[0], fold.tile[1]));
+    let (uv, (tu, tv)) = (
+        coords.u.par_iter().zip(&coords.v),
+        (fold.tile[0], fold.tile[1]),
+    );
     Coords {
         width: coords.width,
         height: coords.height,
@@ -677,12 +680,16 @@ fn frac_of(t: f32, side: f32) -> f32 {
 
 /// `coords` wrapped by a tile of sides `tile` (fractions of the square):
 /// `u' = frac(u / tile_u)`, `v' = frac(v / tile_v)`, wrapping; NaN stays NaN.
+///
+/// In parallel (as [`fold_coords`]): at 12 MP the two maps, each writing
+/// a fresh 48 MB vector, took ~70 ms on one thread, most of it the first
+/// touch of the vectors' pages.
 fn wrap_by_tile(coords: &Coords, tile: [f32; 2]) -> Coords {
     Coords {
         width: coords.width,
         height: coords.height,
-        u: coords.u.iter().map(|&u| frac_of(u, tile[0])).collect(),
-        v: coords.v.iter().map(|&v| frac_of(v, tile[1])).collect(),
+        u: coords.u.par_iter().map(|&u| frac_of(u, tile[0])).collect(),
+        v: coords.v.par_iter().map(|&v| frac_of(v, tile[1])).collect(),
         wrap: true,
     }
 }
