@@ -266,18 +266,81 @@ impl Reprojected {
     }
 }
 
-/// One picked pixel to splat.
+/// One picked pixel (or merged pixel block) to splat: 32 bytes, its
+/// footprint kept apart in [`Samples::fps`] and referred to by index.
+///
+/// Most samples share one footprint, the one-texel tent (merged blocks, and
+/// pixels finer than a texel: 87% of the 4 million samples of a 12-MP
+/// photo's fold), and the shifted copies of a centred fold share their
+/// original's; the splats and back-projection rounds read every sample
+/// several times, and with the 28-byte footprint inline (56 bytes a sample)
+/// the reprojection of that photo took ~20% longer per extra 24 bytes.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 struct Sample {
     u: f32,
     v: f32,
     colour: Vec3,
     weight: f32,
-    /// Where the sample's tent reaches in the texture.
-    fp: Footprint,
+    /// Where the sample's tent reaches in the texture: its index in
+    /// [`Samples::fps`] (0: [`Footprint::UNIT`]).
+    fp: u32,
     /// Photo pixels this sample stands for (1, or more for a merged block:
     /// [`merge_block`]); its observation weight counts each of them.
     count: f32,
+}
+
+const _: () = assert!(std::mem::size_of::<Sample>() == 32);
+
+/// Samples with the footprints they refer to.
+#[derive(Clone, Debug, Default, PartialEq)]
+struct Samples {
+    list: Vec<Sample>,
+    /// The footprints, [`Footprint::UNIT`] first.
+    fps: Vec<Footprint>,
+}
+
+impl Samples {
+    /// The footprint of `s` (one of `self.list`).
+    #[inline]
+    fn fp(&self, s: &Sample) -> &Footprint {
+        &self.fps[s.fp as usize]
+    }
+
+    /// Samples each given with its own footprint (the tests' way to make
+    /// them; [`RowSamples::push`] shares the unit one).
+    #[cfg(test)]
+    fn from_inline(items: impl IntoIterator<Item = (Sample, Footprint)>) -> Self {
+        let mut row = RowSamples::default();
+        for (s, fp) in items {
+            row.push(s, fp);
+        }
+        Samples {
+            list: row.list,
+            fps: std::iter::once(Footprint::UNIT).chain(row.fps).collect(),
+        }
+    }
+}
+
+/// One row's samples as they are made: `list[k].fp` is 0 for
+/// [`Footprint::UNIT`], else `j + 1` for `fps[j]` (the row's own; made
+/// global when the rows are put together, [`samples_with_room`]).
+#[derive(Default)]
+struct RowSamples {
+    list: Vec<Sample>,
+    fps: Vec<Footprint>,
+}
+
+impl RowSamples {
+    /// Appends `s` with footprint `fp` (its `fp` field is set here).
+    fn push(&mut self, s: Sample, fp: Footprint) {
+        let r = if fp.is_unit() {
+            0
+        } else {
+            self.fps.push(fp);
+            u32::try_from(self.fps.len()).expect("fewer than 2³² footprints")
+        };
+        self.list.push(Sample { fp: r, ..s });
+    }
 }
 
 /// Where a sample's tent reaches in the texture: the pixel's tent (one pixel
@@ -306,6 +369,28 @@ struct Footprint {
 }
 
 impl Footprint {
+    /// The one-texel tent, [`Footprint::isotropic`]`(1)`.
+    const UNIT: Footprint = Footprint {
+        inv: [1.0, 0.0, 0.0, 1.0],
+        ext: [1.0, 1.0],
+        area: 1.0,
+    };
+
+    /// Whether this is [`Footprint::UNIT`], bit for bit.
+    fn is_unit(&self) -> bool {
+        let bits = |f: &Footprint| {
+            let mut b = [0u32; 7];
+            for (o, x) in b
+                .iter_mut()
+                .zip(f.inv.iter().chain(&f.ext).chain([&f.area]))
+            {
+                *o = x.to_bits();
+            }
+            b
+        };
+        bits(self) == bits(&Footprint::UNIT)
+    }
+
     /// The square tent of radius `r` texels (`r > 0`).
     fn isotropic(r: f32) -> Self {
         Footprint {
@@ -506,7 +591,7 @@ fn block_samples(
     f: usize,
     (x0, y0): (usize, usize),
     px: &mut Vec<(usize, Vec3)>,
-    out: &mut Vec<Sample>,
+    out: &mut RowSamples,
 ) {
     let Picked {
         coords,
@@ -555,28 +640,30 @@ fn block_samples(
             v: cv / cw,
             colour: cc / cw,
             weight: cw,
-            fp: Footprint::isotropic(1.0),
+            fp: 0,
             count: k as f32,
         })
     });
     match merged.flatten() {
-        Some(s) => out.push(s),
+        Some(s) => out.push(s, Footprint::UNIT),
         None if f >= 4 && k >= 2 => {
             let g = f / 2;
             for (dx, dy) in [(0, 0), (g, 0), (0, g), (g, g)] {
                 block_samples(src, g, (x0 + dx, y0 + dy), px, out);
             }
         }
-        None => out.extend(
-            px.iter()
-                .map(|&(i, c)| splat_sample(coords, mask, confidence, size, i, c)),
-        ),
+        None => {
+            for &(i, c) in px.iter() {
+                let (s, fp) = splat_sample(coords, mask, confidence, size, i, c);
+                out.push(s, fp);
+            }
+        }
     }
 }
 
 /// The samples of block row `by` ([`block_samples`] of each block, left to
 /// right), appended to `out`.
-fn block_row(src: &Picked<'_>, f: usize, by: usize, out: &mut Vec<Sample>) {
+fn block_row(src: &Picked<'_>, f: usize, by: usize, out: &mut RowSamples) {
     let mut px = Vec::with_capacity(f * f);
     for bx in 0..src.coords.width.div_ceil(f) {
         block_samples(src, f, (bx * f, by * f), &mut px, out);
@@ -596,7 +683,7 @@ struct Picked<'a> {
 
 /// [`samples_with_room`] without the room (the tests' shorthand).
 #[cfg(test)]
-fn samples(src: &Picked<'_>, block: usize) -> Vec<Sample> {
+fn samples(src: &Picked<'_>, block: usize) -> Samples {
     samples_with_room(src, block, false)
 }
 
@@ -607,53 +694,73 @@ fn samples(src: &Picked<'_>, block: usize) -> Vec<Sample> {
 /// With `room`, the vector has room for as many more (the shifted copies of
 /// [`with_shifted_copies`]): it is allocated once, at its final capacity.
 ///
-/// Rows in parallel: the samples of each row are counted first, then written
-/// straight into their place (the same samples in the same order as the plain
-/// filter over the pixels, `tests::parallel_samples_match_reference`).
-fn samples_with_room(src: &Picked<'_>, block: usize, room: bool) -> Vec<Sample> {
+/// Rows in parallel: the samples of each row are made into the row's own
+/// vectors, then copied into their place in parallel (the same samples and
+/// footprints in the same order as the plain filter over the pixels,
+/// `tests::parallel_samples_match_reference`).
+fn samples_with_room(src: &Picked<'_>, block: usize, room: bool) -> Samples {
     let w = src.coords.width.max(1);
-    if block > 1 {
-        // Rows of blocks in parallel (a few samples per block: collected
-        // per row, then copied into place in order).
-        let rows: Vec<Vec<Sample>> = (0..src.coords.height.div_ceil(block))
-            .into_par_iter()
-            .map(|by| {
-                let mut out = Vec::new();
-                block_row(src, block, by, &mut out);
-                out
-            })
-            .collect();
-        let counts: Vec<usize> = rows.iter().map(Vec::len).collect();
-        return filled_in_parts(&counts, room, |r, part| {
-            for (slot, s) in part.iter_mut().zip(&rows[r]) {
-                slot.write(*s);
-            }
-            rows[r].len()
-        });
-    }
-    let keep = |i: usize| kept(src.coords, src.mask, src.colour, src.confidence, i);
-    let counts: Vec<usize> = (0..src.coords.height)
+    // Rows (of blocks, or of pixels) in parallel, each made into its own
+    // vectors, then copied into place in order with their footprint
+    // indices made global.
+    let rows: Vec<RowSamples> = (0..src.coords.height.div_ceil(block.max(1)))
         .into_par_iter()
-        .map(|y| (y * w..(y + 1) * w).filter(|&i| keep(i).is_some()).count())
+        .map(|r| {
+            let mut out = RowSamples::default();
+            if block > 1 {
+                block_row(src, block, r, &mut out);
+            } else {
+                pixel_row(src, r * w..(r + 1) * w, &mut out);
+            }
+            out
+        })
         .collect();
-    filled_in_parts(&counts, room, |y, part| {
-        let mut n = 0;
-        for (i, c) in (y * w..(y + 1) * w).filter_map(|i| keep(i).map(|c| (i, c))) {
-            part[n].write(splat_sample(
-                src.coords,
-                src.mask,
-                src.confidence,
-                src.size,
-                i,
-                c,
-            ));
-            n += 1;
+    // Row `r`'s footprint `j + 1` is `fps[first[r] + j + 1]` (`fps[0]` is the unit one).
+    let mut first = Vec::with_capacity(rows.len());
+    let mut total = 0usize;
+    for r in &rows {
+        first.push(u32::try_from(total).expect("fewer than 2³² footprints"));
+        total += r.fps.len();
+    }
+    u32::try_from(total + 1).expect("fewer than 2³² footprints");
+    let counts: Vec<usize> = rows.iter().map(|r| r.list.len()).collect();
+    let list = filled_in_parts(&counts, room, |r, part| {
+        for (slot, s) in part.iter_mut().zip(&rows[r].list) {
+            let fp = if s.fp == 0 { 0 } else { s.fp + first[r] };
+            slot.write(Sample { fp, ..*s });
         }
-        n
-    })
+        rows[r].list.len()
+    });
+    // The unit footprint, then each row's.
+    let fp_counts: Vec<usize> = std::iter::once(1)
+        .chain(rows.iter().map(|r| r.fps.len()))
+        .collect();
+    let fps = filled_in_parts(&fp_counts, false, |r, part| {
+        let src: &[Footprint] = if r == 0 {
+            std::slice::from_ref(&Footprint::UNIT)
+        } else {
+            &rows[r - 1].fps
+        };
+        for (slot, f) in part.iter_mut().zip(src) {
+            slot.write(*f);
+        }
+        src.len()
+    });
+    Samples { list, fps }
 }
 
-/// A vector of `counts.iter().sum()` samples made of consecutive parts, part
+/// The samples of the pixels `range` (one row), in order ([`kept`],
+/// [`splat_sample`]), appended to `out`.
+fn pixel_row(src: &Picked<'_>, range: std::ops::Range<usize>, out: &mut RowSamples) {
+    for i in range {
+        if let Some(c) = kept(src.coords, src.mask, src.colour, src.confidence, i) {
+            let (s, fp) = splat_sample(src.coords, src.mask, src.confidence, src.size, i, c);
+            out.push(s, fp);
+        }
+    }
+}
+
+/// A vector of `counts.iter().sum()` values made of consecutive parts, part
 /// `r` (`counts[r]` long) written by `write(r, part)`, which returns how many
 /// of the part's slots it wrote; the parts in parallel. With `room`, its
 /// capacity is twice its length.
@@ -665,13 +772,13 @@ fn samples_with_room(src: &Picked<'_>, block: usize, room: bool) -> Vec<Sample> 
 ///
 /// # Panics
 /// When a part writes more or fewer slots than its count.
-fn filled_in_parts(
+fn filled_in_parts<T: Copy + Send + Sync>(
     counts: &[usize],
     room: bool,
-    write: impl Fn(usize, &mut [std::mem::MaybeUninit<Sample>]) -> usize + Sync,
-) -> Vec<Sample> {
+    write: impl Fn(usize, &mut [std::mem::MaybeUninit<T>]) -> usize + Sync,
+) -> Vec<T> {
     let total: usize = counts.iter().sum();
-    let mut out: Vec<Sample> = Vec::with_capacity(if room { 2 * total } else { total });
+    let mut out: Vec<T> = Vec::with_capacity(if room { 2 * total } else { total });
     let mut parts = Vec::with_capacity(counts.len());
     let mut rest = &mut out.spare_capacity_mut()[..total];
     for &k in counts {
@@ -690,7 +797,7 @@ fn filled_in_parts(
     });
     // SAFETY: the first `total` slots were split into the parts, and every
     // part wrote each of its slots (asserted above; a panic there never
-    // reaches this line). `Sample` is `Copy`, so nothing needs dropping.
+    // reaches this line). `T` is `Copy`, so nothing needs dropping.
     unsafe { out.set_len(total) };
     out
 }
@@ -717,54 +824,51 @@ fn splat_sample(
     size: usize,
     i: usize,
     c: Vec3,
-) -> Sample {
+) -> (Sample, Footprint) {
     let s = size as f32;
     let fp = coords
         .jacobian(mask, i)
         .map_or(Footprint::isotropic(1.0), |(jx, jy)| {
             Footprint::from_jacobian([jx[0] * s, jx[1] * s], [jy[0] * s, jy[1] * s])
         });
-    Sample {
+    let sample = Sample {
         u: coords.u[i],
         v: coords.v[i],
         colour: c,
         weight: confidence[i] / (fp.area * fp.area),
-        fp,
+        fp: 0,
         count: 1.0,
-    }
+    };
+    (sample, fp)
 }
 
 /// The plain implementation of [`samples`] (a filter over the pixels, or
 /// over the blocks one after the other).
 #[cfg(test)]
-fn samples_reference(src: &Picked<'_>, block: usize) -> Vec<Sample> {
+fn samples_reference(src: &Picked<'_>, block: usize) -> Samples {
+    let mut all = RowSamples::default();
     if block > 1 {
-        let mut out = Vec::new();
         for by in 0..src.coords.height.div_ceil(block) {
-            block_row(src, block, by, &mut out);
+            block_row(src, block, by, &mut all);
         }
-        return out;
-    }
-    (0..src.mask.len())
-        .filter_map(|i| {
+    } else {
+        for i in 0..src.mask.len() {
             if !src.mask[i] || src.confidence[i] <= 0.0 {
-                return None;
+                continue;
             }
             let (u, v) = (src.coords.u[i], src.coords.v[i]);
             let c = src.colour.rgb(i);
             if !u.is_finite() || !v.is_finite() || !c.is_finite() {
-                return None;
+                continue;
             }
-            Some(splat_sample(
-                src.coords,
-                src.mask,
-                src.confidence,
-                src.size,
-                i,
-                c,
-            ))
-        })
-        .collect()
+            let (s, fp) = splat_sample(src.coords, src.mask, src.confidence, src.size, i, c);
+            all.push(s, fp);
+        }
+    }
+    Samples {
+        list: all.list,
+        fps: std::iter::once(Footprint::UNIT).chain(all.fps).collect(),
+    }
 }
 
 /// The rows of texture band `k` (`SPLAT_BAND_ROWS` rows each).
@@ -852,9 +956,9 @@ fn wrap_i64(v: i64, n: i64) -> i64 {
 
 /// The texture rows a sample's tent covers (before wrapping).
 #[inline]
-fn sample_rows(s: &Sample, size: usize) -> (i64, i64) {
+fn sample_rows(s: &Sample, fp: &Footprint, size: usize) -> (i64, i64) {
     let py = s.v * size as f32 - 0.5;
-    let e = s.fp.ext[1];
+    let e = fp.ext[1];
     (ceil_i64(py - e), floor_i64(py + e))
 }
 
@@ -863,10 +967,11 @@ fn sample_rows(s: &Sample, size: usize) -> (i64, i64) {
 ///
 /// Chunks of samples in parallel, each chunk's lists then concatenated per
 /// band in chunk order: the lists of the plain sequential pass.
-fn band_members(samples: &[Sample], size: usize, wrap: bool) -> Vec<Vec<u32>> {
+fn band_members(samples: &Samples, size: usize, wrap: bool) -> Vec<Vec<u32>> {
     let bands = size.div_ceil(SPLAT_BAND_ROWS);
     let n = size as i64;
     let chunks: Vec<Vec<Vec<u32>>> = samples
+        .list
         .par_chunks(MEMBER_CHUNK)
         .enumerate()
         .map(|(c, chunk)| {
@@ -874,7 +979,7 @@ fn band_members(samples: &[Sample], size: usize, wrap: bool) -> Vec<Vec<u32>> {
             let mut seen = vec![usize::MAX; bands];
             for (j, s) in chunk.iter().enumerate() {
                 let k = c * MEMBER_CHUNK + j;
-                let (y0, y1) = sample_rows(s, size);
+                let (y0, y1) = sample_rows(s, samples.fp(s), size);
                 for ty in y0..=y1 {
                     let yy = if wrap { wrap_i64(ty, n) } else { ty };
                     if yy < 0 || yy >= n {
@@ -917,7 +1022,7 @@ fn band_members(samples: &[Sample], size: usize, wrap: bool) -> Vec<Vec<u32>> {
 /// the same order as `splat_reference` (same bits, whatever the threads).
 #[allow(clippy::too_many_arguments)]
 fn splat(
-    samples: &[Sample],
+    samples: &Samples,
     members: &[Vec<u32>],
     size: usize,
     wrap: bool,
@@ -953,11 +1058,11 @@ fn splat(
                 ((b + 1) * SPLAT_BAND_ROWS).min(size) as i64,
             );
             for &k in idx {
-                let s = &samples[k as usize];
+                let s = &samples.list[k as usize];
                 let value = values.map_or(s.colour, |v| v[k as usize]);
                 let px = s.u * size as f32 - 0.5;
                 let py = s.v * size as f32 - 0.5;
-                let fp = &s.fp;
+                let fp = samples.fp(s);
                 let per_area = s.count / fp.area;
                 let (x0, x1) = (ceil_i64(px - fp.ext[0]), floor_i64(px + fp.ext[0]));
                 let (y0, y1) = (ceil_i64(py - fp.ext[1]), floor_i64(py + fp.ext[1]));
@@ -1012,14 +1117,13 @@ pub const BACK_PROJECTIONS: usize = 2;
 /// The fraction of the back-projected residual each round adds.
 pub const BACK_PROJECTION_STEP: f32 = 0.5;
 
-/// Sample `s` as the texture `tex` predicts it: the tent-weighted mean of the
+/// Sample `s` (footprint `fp`) as the texture `tex` predicts it: the tent-weighted mean of the
 /// texels under its footprint (the splat's kernel, without the confidence and
 /// robust weights); `None` when no texel lies under it.
-fn predict(s: &Sample, tex: &[Vec3], size: usize, wrap: bool) -> Option<Vec3> {
+fn predict(s: &Sample, fp: &Footprint, tex: &[Vec3], size: usize, wrap: bool) -> Option<Vec3> {
     let n = size as i64;
     let px = s.u * size as f32 - 0.5;
     let py = s.v * size as f32 - 0.5;
-    let fp = &s.fp;
     let (x0, x1) = (ceil_i64(px - fp.ext[0]), floor_i64(px + fp.ext[0]));
     let (y0, y1) = (ceil_i64(py - fp.ext[1]), floor_i64(py + fp.ext[1]));
     let (mut acc, mut wsum) = (Vec3::ZERO, 0.0f32);
@@ -1052,7 +1156,7 @@ fn texel_means(sum: &[Vec3], wsum: &[f32]) -> Vec<Vec3> {
 
 /// The robust splat of one set of picked pixels, ready for back-projection.
 struct Fit {
-    samples: Vec<Sample>,
+    samples: Samples,
     members: Vec<Vec<u32>>,
     size: usize,
     wrap: bool,
@@ -1104,7 +1208,7 @@ impl Fit {
         let copies = shift.is_some() && by_sums.is_none();
         let mut samples = samples_with_room(&src, block, copies);
         if let (Some(by), None) = (shift, by_sums) {
-            samples = with_shifted_copies(samples, by);
+            samples.list = with_shifted_copies(std::mem::take(&mut samples.list), by);
         }
         let members = band_members(&samples, size, coords.wrap);
         let shift = by_sums.map(|by| [by[0] * size as f32, by[1] * size as f32]);
@@ -1138,16 +1242,16 @@ impl Fit {
         // `select::kth_smallest`.)
         let n = size as i64;
         let dev = |k: usize| {
-            let s = &samples[k];
+            let s = &samples.list[k];
             let px = wrap_i64((s.u * size as f32) as i64, n) as usize;
             let py = wrap_i64((s.v * size as f32) as i64, n) as usize;
             Some((s.colour - mean[py * size + px]).length())
         };
-        let scale = match crate::select::kth_smallest(samples.len(), dev, |len| Some(vec![len / 2]))
-        {
-            None => 1.0,
-            Some(m) => (2.0 * m[0]).max(0.02),
-        };
+        let scale =
+            match crate::select::kth_smallest(samples.list.len(), dev, |len| Some(vec![len / 2])) {
+                None => 1.0,
+                Some(m) => (2.0 * m[0]).max(0.02),
+            };
         let (sum, wsum, _) = sym(splat(
             &samples,
             &members,
@@ -1201,13 +1305,15 @@ impl Fit {
         let mut residual: Vec<Vec3> = Vec::new();
         for round in 0..rounds {
             let t: &[Vec3] = &self.tex;
-            let r = |s: &Sample| predict(s, t, size, wrap).map_or(Vec3::ZERO, |p| s.colour - p);
+            let r = |s: &Sample| {
+                predict(s, samples.fp(s), t, size, wrap).map_or(Vec3::ZERO, |p| s.colour - p)
+            };
             if round == 0 {
-                residual = samples.par_iter().map(r).collect();
+                residual = samples.list.par_iter().map(r).collect();
             } else {
                 residual
                     .par_iter_mut()
-                    .zip(samples.par_iter())
+                    .zip(samples.list.par_iter())
                     .for_each(|(o, s)| *o = r(s));
             }
             let (rsum, _, _) = splat(
@@ -1669,7 +1775,7 @@ pub fn consistency(
 /// The plain, sequential splat (the reference of [`splat`]).
 #[cfg(test)]
 fn splat_reference(
-    samples: &[Sample],
+    samples: &Samples,
     size: usize,
     wrap: bool,
     reference: Option<&[Vec3]>,
@@ -1680,11 +1786,12 @@ fn splat_reference(
     let mut wsum = vec![0.0f32; size * size];
     let mut seen = vec![0.0f32; size * size];
     let n = size as i64;
-    for (k, s) in samples.iter().enumerate() {
+    for (k, s) in samples.list.iter().enumerate() {
+        let fp = samples.fp(s);
         let value = values.map_or(s.colour, |v| v[k]);
         let px = s.u * size as f32 - 0.5;
         let py = s.v * size as f32 - 0.5;
-        let [ex, ey] = s.fp.ext;
+        let [ex, ey] = fp.ext;
         let (x0, x1) = ((px - ex).ceil() as i64, (px + ex).floor() as i64);
         let (y0, y1) = ((py - ey).ceil() as i64, (py + ey).floor() as i64);
         for ty in y0..=y1 {
@@ -1693,7 +1800,7 @@ fn splat_reference(
                 continue;
             }
             for tx in x0..=x1 {
-                let k = s.fp.weight_at(tx as f32 - px, ty as f32 - py);
+                let k = fp.weight_at(tx as f32 - px, ty as f32 - py);
                 if k <= 0.0 {
                     continue;
                 }
@@ -1709,7 +1816,7 @@ fn splat_reference(
                 }
                 sum[t] += value * w;
                 wsum[t] += w;
-                seen[t] += s.count / s.fp.area * k;
+                seen[t] += s.count / fp.area * k;
             }
         }
     }
@@ -2024,12 +2131,13 @@ mod tests {
 
     #[test]
     fn shifted_copies_wrap_and_keep_their_footprints() {
+        // (The copies share their originals' footprint index.)
         let s = |u: f32, v: f32| Sample {
             u,
             v,
             colour: Vec3::new(u, v, 1.0),
             weight: 0.5,
-            fp: Footprint::isotropic(2.0),
+            fp: 7,
             count: 3.0,
         };
         let out = with_shifted_copies(vec![s(0.0, 0.75), s(0.6, 0.999_999_9)], [0.5, 0.25]);
@@ -2039,10 +2147,7 @@ mod tests {
         assert!((out[3].u - 0.1).abs() < 1e-6 && (out[3].v - 0.25).abs() < 1e-6);
         for c in &out[2..] {
             assert!((0.0..1.0).contains(&c.u) && (0.0..1.0).contains(&c.v));
-            assert_eq!(
-                (c.weight, c.fp, c.count),
-                (0.5, Footprint::isotropic(2.0), 3.0)
-            );
+            assert_eq!((c.weight, c.fp, c.count), (0.5, 7, 3.0));
         }
         assert_eq!(out[3].colour, Vec3::new(0.6, 0.999_999_9, 1.0));
         assert!(with_shifted_copies(Vec::new(), [0.5, 0.5]).is_empty());
@@ -2258,11 +2363,17 @@ mod tests {
 
     /// The plain implementation of [`predict`]: every texel of the tent's
     /// bounding box, its weight written out ([`Footprint::weight_at`]).
-    fn predict_reference(s: &Sample, tex: &[Vec3], size: usize, wrap: bool) -> Option<Vec3> {
+    fn predict_reference(
+        s: &Sample,
+        fp: &Footprint,
+        tex: &[Vec3],
+        size: usize,
+        wrap: bool,
+    ) -> Option<Vec3> {
         let n = size as i64;
         let px = s.u * size as f32 - 0.5;
         let py = s.v * size as f32 - 0.5;
-        let [ex, ey] = s.fp.ext;
+        let [ex, ey] = fp.ext;
         let (x0, x1) = ((px - ex).ceil() as i64, (px + ex).floor() as i64);
         let (y0, y1) = ((py - ey).ceil() as i64, (py + ey).floor() as i64);
         let (mut acc, mut wsum) = (Vec3::ZERO, 0.0f32);
@@ -2272,7 +2383,7 @@ mod tests {
                 continue;
             }
             for tx in x0..=x1 {
-                let w = s.fp.weight_at(tx as f32 - px, ty as f32 - py);
+                let w = fp.weight_at(tx as f32 - px, ty as f32 - py);
                 let xx = if wrap { tx.rem_euclid(n) } else { tx };
                 if w <= 0.0 || xx < 0 || xx >= n {
                     continue;
@@ -2298,13 +2409,14 @@ mod tests {
                         v: random_position(&mut rng, size),
                         colour: Vec3::ZERO,
                         weight: 1.0,
-                        fp: random_footprint(&mut rng),
+                        fp: 0,
                         count: 1.0,
                     };
+                    let fp = random_footprint(&mut rng);
                     let bits = |p: Option<Vec3>| p.map(|c| c.to_array().map(f32::to_bits));
                     assert_eq!(
-                        bits(predict(&s, &tex, size, wrap)),
-                        bits(predict_reference(&s, &tex, size, wrap)),
+                        bits(predict(&s, &fp, &tex, size, wrap)),
+                        bits(predict_reference(&s, &fp, &tex, size, wrap)),
                         "size {size} wrap {wrap} sample {k}: {s:?}"
                     );
                 }
@@ -2549,22 +2661,23 @@ mod tests {
         let mut rng = picker_tensor::Rng::new(12);
         for &size in &[1usize, 3, 16, 17, 40] {
             for wrap in [true, false] {
-                let samples: Vec<Sample> = (0..500)
-                    .map(|_| Sample {
+                let samples = Samples::from_inline((0..500).map(|_| {
+                    let s = Sample {
                         u: random_position(&mut rng, size),
                         v: random_position(&mut rng, size),
                         colour: Vec3::new(rng.uniform(0.0, 1.0), rng.uniform(0.0, 1.0), 0.3),
                         weight: rng.uniform(0.01, 1.0),
-                        fp: random_footprint(&mut rng),
+                        fp: 0,
                         count: rng.range(1, 64) as f32,
-                    })
-                    .collect();
+                    };
+                    (s, random_footprint(&mut rng))
+                }));
                 let mean: Vec<Vec3> = (0..size * size)
                     .map(|_| Vec3::splat(rng.uniform(0.0, 1.0)))
                     .collect();
                 for reference in [None, Some(mean.as_slice())] {
                     let members = band_members(&samples, size, wrap);
-                    let values: Vec<Vec3> = (0..samples.len())
+                    let values: Vec<Vec3> = (0..samples.list.len())
                         .map(|_| Vec3::splat(rng.uniform(-1.0, 1.0)))
                         .collect();
                     for vals in [None, Some(values.as_slice())] {
@@ -2652,6 +2765,32 @@ mod tests {
     }
 
     #[test]
+    fn unit_footprint_is_the_one_texel_tent() {
+        assert!(Footprint::isotropic(1.0).is_unit());
+        assert!(Footprint::from_jacobian([0.5, 0.0], [0.0, 0.25]).is_unit());
+        assert!(!Footprint::isotropic(2.0).is_unit());
+        // Bit for bit: a negative zero is another footprint.
+        let mut z = Footprint::UNIT;
+        z.inv[1] = -0.0;
+        assert!(!z.is_unit());
+        // Inline footprints: the unit ones share index 0, the others get
+        // their own entries in order.
+        let s = Sample::default();
+        let two = Footprint::isotropic(2.0);
+        let all = Samples::from_inline([
+            (s, two),
+            (s, Footprint::UNIT),
+            (s, two),
+            (s, Footprint::isotropic(1.0)),
+        ]);
+        assert_eq!(
+            all.list.iter().map(|s| s.fp).collect::<Vec<_>>(),
+            [1, 0, 2, 0]
+        );
+        assert_eq!(all.fps, [Footprint::UNIT, two, two]);
+    }
+
+    #[test]
     fn parallel_samples_match_reference() {
         let mut rng = picker_tensor::Rng::new(13);
         for &(w, h) in &[(1usize, 1usize), (5, 1), (1, 6), (37, 23)] {
@@ -2682,6 +2821,21 @@ mod tests {
                         let a = samples(&src, block);
                         let b = samples_reference(&src, block);
                         assert_eq!(a, b, "{w}x{h} wrap {wrap} size {size} block {block}");
+                        assert!(a.fps[0].is_unit());
+                        if block == 1 {
+                            // Each sample refers to its own pixel's footprint,
+                            // the unit one always by index 0.
+                            let pixels: Vec<usize> = (0..n)
+                                .filter(|&i| kept(&coords, &mask, &colour, &conf, i).is_some())
+                                .collect();
+                            assert_eq!(pixels.len(), a.list.len());
+                            for (s, &i) in a.list.iter().zip(&pixels) {
+                                let (_, fp) =
+                                    splat_sample(&coords, &mask, &conf, size, i, colour.rgb(i));
+                                assert_eq!(a.fp(s), &fp);
+                                assert_eq!(s.fp == 0, fp.is_unit());
+                            }
+                        }
                     }
                 }
             }
@@ -2751,8 +2905,8 @@ mod tests {
             confidence: &conf,
             size,
         };
-        let all = samples(&src, 1);
-        let merged = samples(&src, f);
+        let all = samples(&src, 1).list;
+        let merged = samples(&src, f).list;
         assert!(
             merged.len() * 3 < all.len(),
             "{} of {}",
@@ -2868,7 +3022,7 @@ mod tests {
             confidence: &conf,
             size,
         };
-        let s = samples(&src, 8);
+        let s = samples(&src, 8).list;
         assert_eq!(s.len(), 4, "{s:?}");
         // In quadrant order: top-left, top-right, bottom-left, bottom-right.
         let centres: Vec<(f32, f32)> = s.iter().map(|s| (s.u * 64.0, s.v * 64.0)).collect();
@@ -2883,7 +3037,7 @@ mod tests {
             );
         }
         assert!(s.iter().all(|s| s.count == 16.0));
-        assert_eq!(samples_reference(&src, 8).len(), 4);
+        assert_eq!(samples_reference(&src, 8).list.len(), 4);
         // A quadrant whose pixels are themselves spread (one pixel moved
         // 5 texels) splits again: its other three 2×2 blocks merge, the
         // moved pixel's 2×2 block gives one sample per pixel.
@@ -2897,11 +3051,11 @@ mod tests {
             coords: &spread,
             ..src
         };
-        let s = samples(&src, 8);
+        let s = samples(&src, 8).list;
         assert_eq!(s.len(), 3 + 3 + 4, "{s:?}");
         let count: f32 = s.iter().map(|s| s.count).sum();
         assert_eq!(count, 64.0);
-        assert_eq!(s.len(), samples_reference(&src, 8).len());
+        assert_eq!(s.len(), samples_reference(&src, 8).list.len());
     }
 
     #[test]
