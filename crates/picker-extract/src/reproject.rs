@@ -324,10 +324,7 @@ impl Samples {
         for (s, fp) in items {
             row.push(s, fp);
         }
-        Samples {
-            list: row.list,
-            fps: std::iter::once(Footprint::UNIT).chain(row.fps).collect(),
-        }
+        row.into_samples()
     }
 }
 
@@ -350,6 +347,16 @@ impl RowSamples {
             u32::try_from(self.fps.len()).expect("fewer than 2³² footprints")
         };
         self.list.push(Sample { fp: r, ..s });
+    }
+
+    /// The row as the whole set of samples (its local footprint indices
+    /// are then global: the unit footprint goes first).
+    #[cfg(test)]
+    fn into_samples(self) -> Samples {
+        Samples {
+            list: self.list,
+            fps: std::iter::once(Footprint::UNIT).chain(self.fps).collect(),
+        }
     }
 }
 
@@ -875,10 +882,7 @@ fn samples_reference(src: &Picked<'_>, block: usize) -> Samples {
             all.push(s, fp);
         }
     }
-    Samples {
-        list: all.list,
-        fps: std::iter::once(Footprint::UNIT).chain(all.fps).collect(),
-    }
+    all.into_samples()
 }
 
 /// The rows of texture band `k` (`SPLAT_BAND_ROWS` rows each).
