@@ -716,11 +716,17 @@ fn samples(src: &Picked<'_>, block: usize) -> Samples {
 /// footprints in the same order as the plain filter over the pixels,
 /// `tests::parallel_samples_match_reference`).
 fn samples_with_room(src: &Picked<'_>, block: usize, room: bool) -> Samples {
-    let w = src.coords.width.max(1);
+    let w = src.coords.width;
     // Rows (of blocks, or of pixels) in parallel, each made into its own
     // vectors, then copied into place in order with their footprint
-    // indices made global.
-    let rows: Vec<RowSamples> = (0..src.coords.height.div_ceil(block.max(1)))
+    // indices made global. (No pixels, no rows: a 0-wide image has no
+    // pixels in any of its rows.)
+    let rows_n = if w == 0 {
+        0
+    } else {
+        src.coords.height.div_ceil(block.max(1))
+    };
+    let rows: Vec<RowSamples> = (0..rows_n)
         .into_par_iter()
         .map(|r| {
             let mut out = RowSamples::default();
@@ -2807,12 +2813,15 @@ mod tests {
     #[test]
     fn parallel_samples_match_reference() {
         let mut rng = picker_tensor::Rng::new(13);
-        for &(w, h) in &[(1usize, 1usize), (5, 1), (1, 6), (37, 23)] {
+        // (Empty images too: no rows, or rows of no pixels.)
+        for &(w, h) in &[(1usize, 1usize), (5, 1), (1, 6), (37, 23), (0, 4), (3, 0)] {
             for wrap in [true, false] {
                 let n = w * h;
                 let coords = random_coords(&mut rng, w, h, wrap, 5);
                 let mut colour = Image::new(3, h, w, rng.uniform_vec(3 * n, 0.0, 1.0)).unwrap();
-                colour.data[n / 2] = f32::INFINITY;
+                if n > 0 {
+                    colour.data[n / 2] = f32::INFINITY;
+                }
                 let mask: Vec<bool> = (0..n).map(|_| rng.f64() < 0.7).collect();
                 let conf: Vec<f32> = (0..n)
                     .map(|_| {
