@@ -492,9 +492,8 @@ fn rectified(
                         at = (p.dot(e1), -p.dot(e2));
                     }
                 }
-                let (sv, tv) = at;
-                a.write(sv);
-                b.write(tv);
+                a.write(at.0);
+                b.write(at.1);
             }
         });
     // SAFETY: the first `len` slots of both vectors were split into rows of

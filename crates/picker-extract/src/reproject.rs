@@ -396,14 +396,11 @@ impl Footprint {
     /// Whether this is [`Footprint::UNIT`], bit for bit.
     fn is_unit(&self) -> bool {
         let bits = |f: &Footprint| {
-            let mut b = [0u32; 7];
-            for (o, x) in b
-                .iter_mut()
-                .zip(f.inv.iter().chain(&f.ext).chain([&f.area]))
-            {
-                *o = x.to_bits();
-            }
-            b
+            (
+                f.inv.map(f32::to_bits),
+                f.ext.map(f32::to_bits),
+                f.area.to_bits(),
+            )
         };
         bits(self) == bits(&Footprint::UNIT)
     }
