@@ -262,9 +262,9 @@ pub enum ConvAlgorithm {
     /// [`crate::low_memory`] picks
     /// [`ConvAlgorithm::WinogradLowMemory`]; [`crate::precision`] bf16 the
     /// bf16 variants); on the AVX-512 family, the stride-2 Winograd
-    /// ([`ConvAlgorithm::Winograd5Stride2`] with ≥ 128 input channels, else
-    /// [`ConvAlgorithm::WinogradStride2`]; `PICKER_WINOGRAD_S2_TILE=4|5`
-    /// forces a tile; the weights made per pass with
+    /// ([`ConvAlgorithm::Winograd5Stride2`], or
+    /// [`ConvAlgorithm::WinogradStride2`] with `PICKER_WINOGRAD_S2_TILE=4`;
+    /// the weights made per pass with
     /// `PICKER_WINOGRAD_WEIGHTS=lazy` or [`crate::low_memory`]; in f32 at
     /// either precision) for 3×3 stride-2 layers with ≥ 16 input channels
     /// and at least as many outputs (the encoders' down convs: 13–24% faster
@@ -348,8 +348,7 @@ pub enum ConvAlgorithm {
     /// panels of 48 tiles on the EnvMap's 30×40 and 60×80 outputs (48 and
     /// 192 tiles, against 80 and 300 of 4×4); its transformed weights
     /// packed once (13.4× the memory of the 3×3 weights).
-    /// [`ConvAlgorithm::Auto`] takes it on AVX-512 for layers with at least
-    /// 128 input channels.
+    /// [`ConvAlgorithm::Auto`] takes it on AVX-512.
     Winograd5Stride2,
     /// [`ConvAlgorithm::Winograd5Stride2`] keeping only the 3×3 weights, as
     /// [`ConvAlgorithm::WinogradLowMemory`] does.
@@ -483,11 +482,9 @@ impl ConvAlgorithm {
                 // Small packed weights stay packed even when low on memory: the
                 // encoders' first down conv runs in bands (`reflect_then`),
                 // each of which would make them again.
-                let five = match std::env::var("PICKER_WINOGRAD_S2_TILE").as_deref() {
-                    Ok("4") => false,
-                    Ok("5") => true,
-                    _ => s.c_in >= WINO_S5_MIN_C_IN,
-                };
+                // 5×5 tiles (see `THEN_CONV_S5_BAND`) unless 4×4 ones are
+                // asked for.
+                let five = std::env::var("PICKER_WINOGRAD_S2_TILE").as_deref() != Ok("4");
                 let tile = if five { Tile::S5 } else { Tile::S4 };
                 let packed_bytes = tile.points() * s.c_in * s.c_out * 4;
                 let lazy = crate::low_memory()
@@ -868,14 +865,15 @@ impl Conv2d {
     }
 
     /// `next.forward(&self.forward_reflect(x, pad, None)?)`, the same values
-    /// bit for bit (a stride-2 Winograd `next`: within its rounding, see
-    /// [`Conv2d::reflect_then_bands`]; its bands are 16 rows whatever the
-    /// threads, so its bits do not depend on them either), without ever
+    /// bit for bit (a Winograd `next`: within its rounding, see
+    /// [`Conv2d::reflect_then_bands`]; its bands are 15 or 16 rows whatever
+    /// the threads, so its bits do not depend on them either), without ever
     /// holding this layer's whole output: `next`'s
     /// output is made a band of rows at a time, each from the rows of this
     /// layer's output it reads (computed from the reflection-padded input rows
-    /// they read), `next` run on them with its own zero padding, and the rows
-    /// that padding touches at a band's inner edges dropped. An encoder's first
+    /// they read), `next` run on them with its own zero padding (a Winograd
+    /// `next` with none above a band that starts inside the image), and the
+    /// rows that padding touches at a band's inner edges dropped. An encoder's first
     /// two layers run this way: the first one's output (64 channels at the
     /// input's full size) is the largest activation it makes.
     pub fn reflect_then(&self, x: &Tensor, pad: usize, next: &Conv2d) -> Result<Tensor> {
@@ -885,17 +883,15 @@ impl Conv2d {
         // This layer's rows for one band of `next`'s: about `stride` each.
         let per_band = THEN_CONV_BAND_BYTES / rayon::current_num_threads().max(1);
         let band = match &next.path {
-            // Four rows of its 4×4 tiles: measured fastest (2-core Zen 4, `tune
-            // head` / `envhead`, five interleaved rounds: 20.2–21.0 ms against
-            // 22.3–25.3 with the bytes' 12-row bands for the IRN/MSN's
-            // 240×320 head, 5.5–6.6 against 5.9–8.6 with 20-row bands for
-            // the EnvMap's, whose three bands left one thread idle a third
-            // of the time).
-            // (5×5 tiles, which `Auto` does not take here, get the same
-            // bands: their 16 computed rows are four rows of 5×5 tiles.)
-            ConvPath::Winograd { wino, .. } if matches!(wino.tile(), Some(Tile::S4 | Tile::S5)) => {
-                THEN_CONV_S2_BAND
-            }
+            // Four rows of its 4×4 tiles, or three of its 5×5 ones (a band
+            // computes exactly its rows, see `reflect_then_bands`): measured
+            // fastest (2-core Zen 4, `tune head` / `envhead`, five
+            // interleaved rounds: 20.2–21.0 ms against 22.3–25.3 with the
+            // bytes' 12-row bands for the IRN/MSN's 240×320 head, 5.5–6.6
+            // against 5.9–8.6 with 20-row bands for the EnvMap's, whose
+            // three bands left one thread idle a third of the time).
+            ConvPath::Winograd { wino, .. } if wino.tile() == Some(Tile::S4) => THEN_CONV_S2_BAND,
+            ConvPath::Winograd { wino, .. } if wino.tile() == Some(Tile::S5) => THEN_CONV_S5_BAND,
             _ => (per_band / row_bytes.max(1) / next.spec.stride.max(1)).max(THEN_CONV_MIN_BAND),
         };
         self.reflect_then_bands(x, pad, next, band)
@@ -903,10 +899,13 @@ impl Conv2d {
 
     /// As [`Conv2d::reflect_then`] with bands of `band` rows of `next`'s output
     /// (at least 1; any band size gives the same values, bit for bit unless
-    /// `next` is a stride-2 Winograd layer, whose tiles a band cuts
-    /// differently: then within its rounding, and the same bits for the same
-    /// band size whatever the threads), in one contiguous run of bands per
-    /// thread of the pool, side by side.
+    /// `next` is a Winograd layer, whose tiles a band cuts differently: then
+    /// within its rounding, and the same bits for the same band size whatever
+    /// the threads), in one contiguous run of bands per thread of the pool,
+    /// side by side. A Winograd `next` runs on exactly the rows its band's
+    /// outputs read, with no zero padding above a band that starts inside
+    /// the image; another one starts a row early on its stride grid and drops
+    /// the output row that its padding touched.
     pub fn reflect_then_bands(
         &self,
         x: &Tensor,
@@ -944,9 +943,17 @@ impl Conv2d {
                     // `j` of `next` over them is row `k + j` of the whole.
                     // (Rows that read only `next`'s padding below the image
                     // take `g0` on the image's last grid row.)
+                    // A Winograd `next` starts on the first row its first
+                    // output reads, with only the padding above the image
+                    // (`top`), so it computes exactly the band's rows:
+                    // `g0 = q0·stride − pad`, any phase.
+                    let exact = (q0 * ns.stride)
+                        .checked_sub(ns.pad)
+                        .map_or(Some(0), |g| (g < h1).then_some(g))
+                        .filter(|_| matches!(next.path, ConvPath::Winograd { .. }));
                     let k = ((q0 * ns.stride).saturating_sub(ns.pad) / ns.stride)
                         .min((h1 - 1) / ns.stride);
-                    let g0 = k * ns.stride;
+                    let g0 = exact.unwrap_or(k * ns.stride);
                     // (At least one row: a band whose rows read only `next`'s
                     // zero padding still needs an input to run on.)
                     let g1 = ((q1 - 1) * ns.stride + ns.kh)
@@ -960,19 +967,57 @@ impl Conv2d {
                     let xb = Tensor::new([1, s.c_in, hp, wp], buf)?;
                     let mid = self.forward(&xb)?;
                     drop(xb);
-                    let y = next.forward(&mid)?;
+                    let (y, off) = match exact {
+                        Some(_) => {
+                            let top = ns.pad.saturating_sub(q0 * ns.stride);
+                            (next.forward_top(&mid, top)?, 0)
+                        }
+                        None => (next.forward(&mid)?, q0 - k),
+                    };
                     drop(mid);
-                    emit(BandOut {
-                        q0,
-                        q1,
-                        off: q0 - k,
-                        y,
-                    });
+                    emit(BandOut { q0, q1, off, y });
                 }
                 Ok(())
             };
             let dst = &mut out.data_mut()[b * per_out..(b + 1) * per_out];
             in_bands(oh, ow, band, dst, run)?;
+        }
+        Ok(out)
+    }
+
+    /// The Winograd path's forward pass with `top ≤ pad` zero rows above
+    /// the input instead of the layer's `pad` (the other sides keep it): the
+    /// rows of a band that starts on the row its first output reads.
+    fn forward_top(&self, x: &Tensor, top: usize) -> Result<Tensor> {
+        let s = self.spec;
+        let ConvPath::Winograd { wino, .. } = &self.path else {
+            return Err(invalid(
+                "conv2d band",
+                "a top padding on a non-Winograd layer",
+            ));
+        };
+        if top > s.pad {
+            return Err(invalid(
+                "conv2d band",
+                "a top padding larger than the layer's",
+            ));
+        }
+        check_input("conv2d", x, s.c_in)?;
+        let (_, ow) = s.out_hw(x.h(), x.w())?;
+        let oh = (x.h() + top + s.pad)
+            .checked_sub(s.kh)
+            .map(|v| v / s.stride + 1)
+            .ok_or_else(|| invalid("conv2d band", "fewer rows than the kernel"))?;
+        let mut out = Tensor::for_overwrite([x.n(), s.c_out, oh, ow]);
+        let per_out = s.c_out * oh * ow;
+        let epi = Epilogue {
+            bias: self.bias.as_deref(),
+            act: self.act,
+            residual: None,
+        };
+        for b in 0..x.n() {
+            let c = &mut out.data_mut()[b * per_out..(b + 1) * per_out];
+            wino.forward_image_top(x.image(b), x.h(), x.w(), top, s.pad, Fill::Zero, &epi, c);
         }
         Ok(out)
     }
@@ -1711,27 +1756,24 @@ const THEN_CONV_BAND_BYTES: usize = 4 << 20;
 const THEN_CONV_MIN_BAND: usize = 8;
 /// [`ConvAlgorithm::AutoLowMemory`] keeps a stride-2 Winograd layer's
 /// transformed weights packed up to this size (the encoders' 64→128 down
-/// conv: 2.7 MB; in bands, 2-core Zen 4, `tune head`: 21.9–23.9 ms packed
+/// conv: 4.0 MB with 5×5 tiles, 2.7 MB with 4×4 ones; in bands, 4×4 tiles, 2-core Zen 4, `tune head`: 21.9–23.9 ms packed
 /// against 24.6–25.1 made per band); larger ones are made per pass.
 const WINO_S2_PACKED_MAX_BYTES: usize = 4 << 20;
 
-/// Fewest input channels of a 3×3 stride-2 layer that [`ConvAlgorithm::Auto`]
-/// runs with 5×5 Winograd tiles ([`ConvAlgorithm::Winograd5Stride2`]); fewer
-/// take 4×4 ones. The encoders' second down conv (128 → 256) runs alone,
-/// where 5×5 tiles fill whole panels on the EnvMap's 30×40 and 60×80
-/// outputs (2-core Zen 4, one thread, `picker bench --net envmap --profile`:
-/// `down.1` 4.96–5.09 ms against 5.94–6.04); the first one (64 → 128) runs
-/// in bands of 15 output rows after the input conv (`reflect_then`), each
-/// computing one row more than it keeps, so a band is four rows of 5×5
-/// tiles, 64 tiles in two panels, where 4×4 tiles fit it exactly (the
-/// EnvMap's head, one thread: 13.0–14.3 ms against 12.3–12.5; alone, 5×5
-/// tiles are faster there too: `tune envdown0` 6.3–6.9 against 7.0–8.3).
-/// `PICKER_WINOGRAD_S2_TILE=4` or `=5` takes one tile for every layer.
-const WINO_S5_MIN_C_IN: usize = 128;
-
 /// Rows of `next`'s output per band in [`Conv2d::reflect_then`] when `next`
-/// is a stride-2 Winograd layer (four rows of its tiles).
+/// is a stride-2 Winograd layer with 4×4 tiles (four rows of its tiles).
 const THEN_CONV_S2_BAND: usize = 16;
+
+/// As [`THEN_CONV_S2_BAND`] for 5×5 tiles: three rows of them, which on the
+/// EnvMap's 60-row and the IRN/MSN's 120-row `down.0` outputs are four and
+/// eight bands of one and two whole panels (16 and 32 tiles a row). The
+/// encoders' `down.0` (64 → 128) runs so since a band computes exactly its
+/// rows (stop 64; before, each computed one more, four rows of 5×5 tiles,
+/// and 4×4 tiles were faster there): `tune envhead`, 10 alternating rounds,
+/// 0.911× the 4×4 tiles' time, `tune head` 0.916×; `down.1` (128 → 256)
+/// runs alone, where 5×5 tiles fill whole panels on the EnvMap's 30×40 and
+/// 60×80 outputs (one thread, `down.1` 4.96–5.09 ms against 5.94–6.04).
+const THEN_CONV_S5_BAND: usize = 15;
 
 /// Where [`ConvTranspose2d::rows_into`] writes: channel stride `cs`, row
 /// stride `rs`, first column `col0`.

@@ -41,11 +41,11 @@ fn precision_switch_picks_the_bf16_winograd() {
     // take the f32 stride-2 Winograd.)
     let lazy = std::env::var("PICKER_WINOGRAD_WEIGHTS").as_deref() == Ok("lazy")
         || std::env::var("PICKER_MEMORY").as_deref() == Ok("low");
-    // (32 input channels: 4×4 tiles unless PICKER_WINOGRAD_S2_TILE=5.)
-    let five = std::env::var("PICKER_WINOGRAD_S2_TILE").as_deref() == Ok("5");
+    // (5×5 tiles unless PICKER_WINOGRAD_S2_TILE=4.)
+    let four = std::env::var("PICKER_WINOGRAD_S2_TILE").as_deref() == Ok("4");
     assert_eq!(
         build(strided, &mut rng),
-        match (!five, lazy) {
+        match (four, lazy) {
             (false, true) => ConvAlgorithm::Winograd5Stride2LowMemory,
             (false, false) => ConvAlgorithm::Winograd5Stride2,
             (true, true) => ConvAlgorithm::WinogradStride2LowMemory,

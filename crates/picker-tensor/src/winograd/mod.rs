@@ -250,6 +250,19 @@ impl Geometry<'_> {
     }
 }
 
+/// One image's arguments to `Winograd::forward_tiles`: the input
+/// `[c_in, h, w]`, the top padding, the padding of the other sides, how the
+/// padding is filled, and the epilogue.
+type ImageArgs<'a> = (
+    &'a [f32],
+    usize,
+    usize,
+    usize,
+    usize,
+    Fill,
+    &'a Epilogue<'a>,
+);
+
 /// A run of consecutive tiles in one row of tiles: `(lane0, ty, tx0, len)`.
 fn segments(t0: usize, t1: usize, tw: usize, out: &mut Vec<(usize, usize, usize, usize)>) {
     out.clear();
@@ -1082,16 +1095,39 @@ impl Winograd {
         epi: &Epilogue<'_>,
         out: &mut [f32],
     ) {
+        self.forward_image_top(x, h, w, pad, pad, fill, epi, out);
+    }
+
+    /// [`Winograd::forward_image`] with `top ≤ pad` rows of padding above
+    /// the image instead of `pad` (the other three sides keep `pad`): `out`
+    /// is `[c_out, (h + top + pad − 3) / stride + 1, (w + 2·pad − 3) / stride
+    /// + 1]`. A band of a larger image starts with `top = 0` on the row its
+    /// first output reads, so that it computes no row it then drops
+    /// ([`crate::Conv2d::reflect_then`]).
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn forward_image_top(
+        &self,
+        x: &[f32],
+        h: usize,
+        w: usize,
+        top: usize,
+        pad: usize,
+        fill: Fill,
+        epi: &Epilogue<'_>,
+        out: &mut [f32],
+    ) {
+        debug_assert!(top <= pad);
         let tile = self.tile.unwrap_or_else(|| {
-            let (oh, ow) = (h + 2 * pad - 2, w + 2 * pad - 2);
+            let (oh, ow) = (h + top + pad - 2, w + 2 * pad - 2);
             Tile::for_output(oh, ow)
         });
+        let a = (x, h, w, top, pad, fill, epi);
         match tile {
-            Tile::F4 => self.forward_tiles::<6, 4, F4>(x, h, w, pad, fill, epi, out),
-            Tile::F5 => self.forward_tiles::<7, 5, F5>(x, h, w, pad, fill, epi, out),
-            Tile::F6 => self.forward_tiles::<8, 6, F6>(x, h, w, pad, fill, epi, out),
-            Tile::S4 => self.forward_tiles::<9, 4, S4>(x, h, w, pad, fill, epi, out),
-            Tile::S5 => self.forward_tiles::<11, 5, S5>(x, h, w, pad, fill, epi, out),
+            Tile::F4 => self.forward_tiles::<6, 4, F4>(a, out),
+            Tile::F5 => self.forward_tiles::<7, 5, F5>(a, out),
+            Tile::F6 => self.forward_tiles::<8, 6, F6>(a, out),
+            Tile::S4 => self.forward_tiles::<9, 4, S4>(a, out),
+            Tile::S5 => self.forward_tiles::<11, 5, S5>(a, out),
         }
     }
 
@@ -1099,26 +1135,21 @@ impl Winograd {
     #[allow(clippy::too_many_arguments)]
     fn forward_tiles<const T: usize, const M: usize, W: Points<T, M>>(
         &self,
-        x: &[f32],
-        h: usize,
-        w: usize,
-        pad: usize,
-        fill: Fill,
-        epi: &Epilogue<'_>,
+        (x, h, w, top, pad, fill, epi): ImageArgs<'_>,
         out: &mut [f32],
     ) {
         let points = T * T;
         let (bias, act, residual) = (epi.bias, epi.act, epi.residual);
         let s = W::STRIDE;
-        let (oh, ow) = ((h + 2 * pad - 3) / s + 1, (w + 2 * pad - 3) / s + 1);
+        let (oh, ow) = ((h + top + pad - 3) / s + 1, (w + 2 * pad - 3) / s + 1);
         let (th, tw) = (oh.div_ceil(M), ow.div_ceil(M));
         let tiles = th * tw;
         let (mr, nr) = (self.kernel.mr, self.kernel.nr);
-        let hp = h + 2 * pad;
+        let hp = h + top + pad;
         // Tile row ty reads padded rows step·ty .. step·ty + T.
         let step = M * s;
         let row_map = (0..step * th + T - step)
-            .map(|q| padded_source(q, pad, h, hp, fill))
+            .map(|q| padded_source(q, top, h, hp, fill))
             .collect();
         let g = Geometry {
             x,
