@@ -479,9 +479,10 @@ impl ConvAlgorithm {
                 && s.c_in >= 16
                 && s.c_out >= 16 =>
             {
-                // Small packed weights stay packed even when low on memory: the
-                // encoders' first down conv runs in bands (`reflect_then`),
-                // each of which would make them again.
+                // Small packed weights (`WINO_S2_PACKED_MAX_BYTES`) stay
+                // packed even when low on memory: the encoders' first down
+                // conv runs in bands (`reflect_then`), each of which would
+                // make them again.
                 // 5×5 tiles (see `THEN_CONV_S5_BAND`) unless 4×4 ones are
                 // asked for.
                 let five = std::env::var("PICKER_WINOGRAD_S2_TILE").as_deref() != Ok("4");
@@ -1755,10 +1756,13 @@ const THEN_CONV_BAND_BYTES: usize = 4 << 20;
 /// Fewest output rows a band of [`ConvTranspose2d::then_reflect_conv`] has.
 const THEN_CONV_MIN_BAND: usize = 8;
 /// [`ConvAlgorithm::AutoLowMemory`] keeps a stride-2 Winograd layer's
-/// transformed weights packed up to this size (the encoders' 64→128 down
-/// conv: 4.0 MB with 5×5 tiles, 2.7 MB with 4×4 ones; in bands, 4×4 tiles, 2-core Zen 4, `tune head`: 21.9–23.9 ms packed
-/// against 24.6–25.1 made per band); larger ones are made per pass.
-const WINO_S2_PACKED_MAX_BYTES: usize = 4 << 20;
+/// transformed weights packed up to this size: the encoders' 64→128 down
+/// conv with 4×4 tiles (2.7 MB; in bands, 2-core Zen 4, `tune head`:
+/// 21.9–23.9 ms packed against 24.6–25.1 made per band). With 5×5 tiles
+/// (4.0 MB) they are made per band: `tune envhead`, 8 alternating rounds,
+/// 0.932× and 0.960× the packed ones' time, `tune head` 0.943× (stop 64).
+/// Larger ones are made per pass.
+const WINO_S2_PACKED_MAX_BYTES: usize = 3 << 20;
 
 /// Rows of `next`'s output per band in [`Conv2d::reflect_then`] when `next`
 /// is a stride-2 Winograd layer with 4×4 tiles (four rows of its tiles).

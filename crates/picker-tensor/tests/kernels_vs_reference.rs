@@ -302,13 +302,19 @@ fn auto_algorithm_choice() {
                     (false, false) => ConvAlgorithm::WinogradStride2,
                 }
             };
-            // Small transformed weights (4.0 MB at 64 → 128 with 5×5 tiles)
-            // stay packed unless asked.
+            // Small transformed weights (at most 3 MB: 16 → 16, or 64 → 128
+            // with 4×4 tiles, 2.7 MB; not with 5×5 ones, 4.0 MB) stay packed
+            // unless asked.
             let unasked = std::env::var_os("PICKER_WINOGRAD_WEIGHTS").is_none()
                 && std::env::var_os("PICKER_MEMORY").is_none();
             let small_lazy = lazy && !(unasked && auto == ConvAlgorithm::AutoLowMemory);
+            let four = forced.as_deref() == Ok("4");
             (
-                (tile(lazy), tile(small_lazy), tile(small_lazy)),
+                (
+                    tile(lazy),
+                    tile(if four { small_lazy } else { lazy }),
+                    tile(small_lazy),
+                ),
                 ConvAlgorithm::PixelTiles,
             )
         } else {
