@@ -1714,10 +1714,26 @@ struct BandOut {
     y: Tensor,
 }
 
+/// The output image that [`in_bands`]' bands write, each its own rows.
+struct BandDst(*mut f32);
+// SAFETY: the bands write disjoint rows of it (see `in_bands`).
+unsafe impl Sync for BandDst {}
+
+impl BandDst {
+    /// The address of float `i` (a method, so closures capture the whole
+    /// `Sync` wrapper, not its raw pointer field).
+    fn at(&self, i: usize) -> *mut f32 {
+        self.0.wrapping_add(i)
+    }
+}
+
 /// Fills one output image `dst` (`c` planes of `oh × ow`) band by band:
 /// `run(b0, b1, emit)` computes bands `b0..b1` (band `i`: rows `[i·band,
 /// (i + 1)·band)`) one after another and hands each to `emit`, which copies
-/// it into `dst` at once (so no band outlives its copy). The bands are split
+/// it into `dst` at once (so no band outlives its copy), without a lock: the
+/// bands' rows are disjoint (with a lock the two threads' copies waited for
+/// each other: `tune envhead` 0.929× and 0.941× the locked copy's time over
+/// 16 and 12 alternating rounds, `tune head` 0.961×). The bands are split
 /// into one contiguous run per thread of the pool, the runs side by side: the
 /// kernels inside a band are small, and a band's steps would otherwise wait
 /// for each other on every thread (each run recomputes what it shares with
@@ -1732,13 +1748,18 @@ fn in_bands(
     let n_bands = oh.div_ceil(band.max(1));
     let runs = rayon::current_num_threads().clamp(1, n_bands.max(1));
     let plane = oh * ow;
-    let dst = std::sync::Mutex::new(dst);
+    let (len, dst) = (dst.len(), BandDst(dst.as_mut_ptr()));
     let emit = |BandOut { q0, q1, off, y }: BandOut| {
         let (rows, yplane) = ((q1 - q0) * ow, y.h() * y.w());
-        debug_assert!(y.w() == ow && off + q1 - q0 <= y.h());
-        let mut dst = dst.lock().unwrap_or_else(|e| e.into_inner());
+        assert!(y.w() == ow && off + q1 - q0 <= y.h() && q0 <= q1 && q1 <= oh);
         for (co, yc) in y.data().chunks_exact(yplane).enumerate() {
-            dst[co * plane + q0 * ow..][..rows].copy_from_slice(&yc[off * ow..][..rows]);
+            let at = co * plane + q0 * ow;
+            assert!(at + rows <= len, "band rows past the output");
+            let src = &yc[off * ow..][..rows];
+            // SAFETY: `[at, at + rows)` lies in `dst` (checked) and holds
+            // rows `[q0, q1)` of plane `co`, which only this band writes:
+            // every band index is run once, and bands do not overlap.
+            unsafe { std::ptr::copy_nonoverlapping(src.as_ptr(), dst.at(at), rows) };
         }
     };
     if runs == 1 {
