@@ -51,6 +51,14 @@ pub(crate) struct PixelTiles {
     w: AlignedBuf,
 }
 
+thread_local! {
+    /// Per-thread scratch of [`PixelTiles::forward_image`]'s row tasks: the
+    /// edge tiles' window copies and the row's tile sums, kept rather than
+    /// made (and zero-filled) for every task.
+    static SCRATCH: std::cell::RefCell<(Vec<f32>, Vec<f32>)> =
+        const { std::cell::RefCell::new((Vec::new(), Vec::new())) };
+}
+
 struct SharedPtr(*mut f32);
 // SAFETY: each task writes the outputs of its own (panel, row) only.
 unsafe impl Sync for SharedPtr {}
@@ -138,9 +146,14 @@ impl PixelTiles {
             _ => tile::<4>,
         };
         let kc_block = PIXTILE_KC.max(1);
-        (0..oh).into_par_iter().for_each_init(
-            || (Vec::new(), vec![0.0f32; tiles_x * PX * CO]),
-            |(windows, accs), oy| {
+        (0..oh).into_par_iter().for_each(|oy| {
+            SCRATCH.with(|scratch| {
+                let (windows, accs) = &mut *scratch.borrow_mut();
+                // Every tile's sums are written by its first depth block
+                // before they are read: stale values do not matter.
+                if accs.len() < tiles_x * PX * CO {
+                    accs.resize(tiles_x * PX * CO, 0.0);
+                }
                 // Padded-grid row of the windows' top.
                 let qy = oy * s;
                 let rows_inside = qy >= pad && qy + kh <= pad + h;
@@ -240,8 +253,8 @@ impl PixelTiles {
                         }
                     }
                 }
-            },
-        );
+            })
+        });
     }
 }
 

@@ -469,8 +469,8 @@ pub(super) unsafe fn input<const T: usize, const M: usize, W: Points<T, M>>(
                 }
             }
             // The column pass reads whole groups of 16 tiles, one past the
-            // run: past `nx` it reads what earlier rows left in `z` (zero
-            // when the scratch was made), only ever into lanes of tiles past
+            // run: past `nx` it reads what earlier rows or calls left in `z`
+            // (the scratch is kept per thread), only ever into lanes of tiles past
             // the run, which are not stored (tile `k < len` reads
             // `z[step·k + c] ≤ z[step·(len − 1) + T − 1]`, below `nx`).
             // Zeroing that tail here was 5% of a 60×80 F(6×6) layer (one

@@ -302,6 +302,12 @@ thread_local! {
     static M_BUF: RefCell<AlignedBuf> = RefCell::new(AlignedBuf::default());
     /// Per-thread scratch of the weight transform (lazy `U`).
     static PACK_SCRATCH: RefCell<Vec<f32>> = const { RefCell::new(Vec::new()) };
+    /// Per-thread scratch of the input transform (its rows; what an earlier
+    /// call left in it is only read into lanes that are not stored), kept
+    /// rather than made and zero-filled for every task: with the pixel
+    /// tiles' scratch kept likewise, `tune envhead` 0.918× the time (12
+    /// alternating rounds), the whole EnvMap 0.963× (14).
+    static INPUT_SCRATCH: RefCell<Vec<f32>> = const { RefCell::new(Vec::new()) };
 }
 
 /// Floats between consecutive `U[ξ]` of a chunk's own `U` holding `len`
@@ -1256,8 +1262,19 @@ impl Winograd {
                 (0..self.c_in)
                     .into_par_iter()
                     .with_min_len(8)
-                    .for_each_init(Vec::new, |scratch, ci| {
-                        self.input::<T, M, W>(&g, ci, t0, t1, self.v_rows(ci, tpb), vp.0, scratch);
+                    .for_each(|ci| {
+                        INPUT_SCRATCH.with(|scratch| {
+                            let scratch = &mut scratch.borrow_mut();
+                            self.input::<T, M, W>(
+                                &g,
+                                ci,
+                                t0,
+                                t1,
+                                self.v_rows(ci, tpb),
+                                vp.0,
+                                scratch,
+                            );
+                        })
                     });
             }
 
