@@ -794,6 +794,9 @@ pub fn load_inputs_from(
             drop(p);
             let work = work.expect("resized for the networks");
             let r = models.infer_work(&work, &mut timings)?;
+            // The networks' pooled activations are not needed again before
+            // the extraction's own full-resolution buffers peak.
+            picker_tensor::release_buffers();
             (
                 Inputs {
                     photo: photo_img,

@@ -53,6 +53,14 @@ mod winograd;
 
 pub use activation::Activation;
 
+/// Frees the buffers that the crate keeps for reuse between layers and
+/// passes (the activations a network has dropped, at most 256 MiB in all):
+/// for a caller that is done with the networks for a while, e.g. an
+/// extraction once its inference has run. The next pass allocates afresh.
+pub fn release_buffers() {
+    pool::release();
+}
+
 /// The low-memory mode, `PICKER_MEMORY=low` in the environment (read when
 /// layers are built and when a network runs): 3×3 layers keep only their
 /// 3×3 weights and make the Winograd ones at every pass

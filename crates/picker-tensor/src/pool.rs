@@ -86,6 +86,13 @@ pub(crate) fn take_aligned(len: usize) -> (Vec<f32>, usize) {
     (buf, off)
 }
 
+/// Frees every buffer the pool keeps (see [`crate::release_buffers`]).
+pub(crate) fn release() {
+    let mut pool = POOL.lock().unwrap_or_else(|e| e.into_inner());
+    pool.free = Vec::new();
+    pool.bytes = 0;
+}
+
 /// Hands a buffer back (kept if large and the pool has room, else freed).
 pub(crate) fn give(v: Vec<f32>) {
     if v.capacity() < MIN_POOLED {
@@ -131,5 +138,10 @@ mod tests {
         // Below the pooled size: plain allocations of the exact length.
         assert_eq!(take_at_least(10).len(), 10);
         assert_eq!(take(10).len(), 10);
+        // Released: nothing is kept.
+        give(take(n));
+        release();
+        assert_eq!(POOL.lock().unwrap().bytes, 0);
+        assert!(POOL.lock().unwrap().free.is_empty());
     }
 }
