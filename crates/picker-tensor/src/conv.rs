@@ -1808,3 +1808,101 @@ pub(crate) struct RowsLayout {
     pub(crate) rs: usize,
     pub(crate) col0: usize,
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{Rng, Tolerance};
+
+    /// `Conv2d::forward_top` (the Winograd path with `top ≤ pad` zero rows
+    /// above the input) against the reference convolution of the input
+    /// padded explicitly that way, for every Winograd tile the CPU runs,
+    /// every `top`, and inputs from one row past the kernel up.
+    #[test]
+    fn forward_top_matches_the_reference_with_fewer_rows_above() {
+        let mut rng = Rng::new(64);
+        let algos = [
+            ConvAlgorithm::Winograd,
+            ConvAlgorithm::Winograd5,
+            ConvAlgorithm::Winograd6,
+            ConvAlgorithm::WinogradLowMemoryAutoTile,
+            ConvAlgorithm::WinogradStride2,
+            ConvAlgorithm::Winograd5Stride2LowMemory,
+        ];
+        let mut ran = 0;
+        for isa in Isa::ALL.into_iter().filter(|i| i.is_available()) {
+            for algo in algos.into_iter().filter(|a| a.runs_on(isa)) {
+                let stride = if format!("{algo:?}").contains("Stride2") {
+                    2
+                } else {
+                    1
+                };
+                for pad in 1..=2 {
+                    let s = ConvSpec::square(16, 17, 3, stride, pad);
+                    let wt = rng.normal_vec(s.weight_len(), 0.2);
+                    let bias = rng.normal_vec(s.c_out, 0.1);
+                    let conv =
+                        Conv2d::with_algorithm(isa, algo, s, &wt, Some(&bias), Activation::Relu)
+                            .unwrap();
+                    for _ in 0..3 {
+                        let (h, w) = (rng.range(1, 23), rng.range(1, 23));
+                        let x = rng.tensor([1, s.c_in, h, w]);
+                        for top in 0..=pad {
+                            // The input with `top` zero rows above and `pad`
+                            // below and on either side.
+                            let (hp, wp) = (h + top + pad, w + 2 * pad);
+                            let mut padded = vec![0.0; s.c_in * hp * wp];
+                            for c in 0..s.c_in {
+                                for y in 0..h {
+                                    let dst = &mut padded[(c * hp + y + top) * wp + pad..][..w];
+                                    dst.copy_from_slice(&x.image(0)[(c * h + y) * w..][..w]);
+                                }
+                            }
+                            let xp = Tensor::new([1, s.c_in, hp, wp], padded).unwrap();
+                            let what = format!("{isa} {algo:?} {h}x{w} pad {pad} top {top}");
+                            let got = conv.forward_top(&x, top);
+                            if hp < 3 || wp < 3 {
+                                assert!(got.is_err(), "{what}: no output rows");
+                                continue;
+                            }
+                            let s0 = ConvSpec { pad: 0, ..s };
+                            let want = crate::reference::conv2d(&xp, &wt, Some(&bias), s0).unwrap();
+                            let want = crate::reference::activate(&want, Activation::Relu);
+                            let got = got.unwrap();
+                            assert_eq!(got.shape(), want.shape(), "{what}");
+                            if let Err(e) = Tolerance::WINOGRAD_F32.check(got.data(), want.data()) {
+                                panic!("{what}: {e}");
+                            }
+                            ran += 1;
+                        }
+                    }
+                }
+            }
+        }
+        assert!(ran > 0, "no Winograd layer runs on this CPU");
+        // Refused: a larger top than the layer's padding, a non-Winograd layer.
+        let s = ConvSpec::square(16, 16, 3, 1, 1);
+        let wt = rng.normal_vec(s.weight_len(), 0.2);
+        let x = rng.tensor([1, 16, 6, 6]);
+        let gemm = Conv2d::with_algorithm(
+            Isa::best(),
+            ConvAlgorithm::Gemm,
+            s,
+            &wt,
+            None,
+            Activation::None,
+        )
+        .unwrap();
+        assert!(gemm.forward_top(&x, 0).is_err());
+        if let Ok(w) = Conv2d::with_algorithm(
+            Isa::best(),
+            ConvAlgorithm::Winograd,
+            s,
+            &wt,
+            None,
+            Activation::None,
+        ) {
+            assert!(w.forward_top(&x, 2).is_err());
+        }
+    }
+}
