@@ -250,19 +250,6 @@ impl Geometry<'_> {
     }
 }
 
-/// One image's arguments to `Winograd::forward_tiles`: the input
-/// `[c_in, h, w]`, the top padding, the padding of the other sides, how the
-/// padding is filled, and the epilogue.
-type ImageArgs<'a> = (
-    &'a [f32],
-    usize,
-    usize,
-    usize,
-    usize,
-    Fill,
-    &'a Epilogue<'a>,
-);
-
 /// A run of consecutive tiles in one row of tiles: `(lane0, ty, tx0, len)`.
 fn segments(t0: usize, t1: usize, tw: usize, out: &mut Vec<(usize, usize, usize, usize)>) {
     out.clear();
@@ -1127,13 +1114,12 @@ impl Winograd {
             let (oh, ow) = (h + top + pad - 2, w + 2 * pad - 2);
             Tile::for_output(oh, ow)
         });
-        let a = (x, h, w, top, pad, fill, epi);
         match tile {
-            Tile::F4 => self.forward_tiles::<6, 4, F4>(a, out),
-            Tile::F5 => self.forward_tiles::<7, 5, F5>(a, out),
-            Tile::F6 => self.forward_tiles::<8, 6, F6>(a, out),
-            Tile::S4 => self.forward_tiles::<9, 4, S4>(a, out),
-            Tile::S5 => self.forward_tiles::<11, 5, S5>(a, out),
+            Tile::F4 => self.forward_tiles::<6, 4, F4>(x, h, w, top, pad, fill, epi, out),
+            Tile::F5 => self.forward_tiles::<7, 5, F5>(x, h, w, top, pad, fill, epi, out),
+            Tile::F6 => self.forward_tiles::<8, 6, F6>(x, h, w, top, pad, fill, epi, out),
+            Tile::S4 => self.forward_tiles::<9, 4, S4>(x, h, w, top, pad, fill, epi, out),
+            Tile::S5 => self.forward_tiles::<11, 5, S5>(x, h, w, top, pad, fill, epi, out),
         }
     }
 
@@ -1141,7 +1127,13 @@ impl Winograd {
     #[allow(clippy::too_many_arguments)]
     fn forward_tiles<const T: usize, const M: usize, W: Points<T, M>>(
         &self,
-        (x, h, w, top, pad, fill, epi): ImageArgs<'_>,
+        x: &[f32],
+        h: usize,
+        w: usize,
+        top: usize,
+        pad: usize,
+        fill: Fill,
+        epi: &Epilogue<'_>,
         out: &mut [f32],
     ) {
         let points = T * T;
