@@ -31,10 +31,20 @@ pub const WINO_PANELS_PER_BLOCK: usize = 2;
 /// its part of `U` once per block rather than once per panel.
 pub const WINO_LAZY_V_BYTES: usize = 16 << 20;
 
-/// Winograd in f32: input channels per depth block of the products, so a
-/// block's `WINO_KC × NR` B panel stays in L1 while the chunk's row panels
-/// run over it.
-pub const WINO_KC: usize = 128;
+/// Winograd in f32: input channels per depth block of the products. With
+/// lazy weights (the networks' default) the products of every panel of a
+/// block are kept together (megabytes, past the L2) and accumulated onto
+/// once per depth block after the first; one block for up to 256 channels
+/// writes them once and never reads them back before the output transform,
+/// at the cost of a B panel (48 KiB at 256 channels) that overflows the L1
+/// into the L2, which the kernel's three vector loads per 24 FMAs tolerate.
+/// Measured on the 2-core Zen 4 host, 2 threads, 256 against 128 built in
+/// one process and their passes alternated (`pair_bench`, each order run):
+/// EnvMap 480×640 0.955, MSN 240×320 0.962, MSN 480×640 0.95, IRN 240×320
+/// 0.92, EnvMap 240×320 1.00 (its 30×40 blocks are one panel); with packed
+/// weights within the noise (`tune res`, F(4×4) 0.976, F(5×5) 1.004), and
+/// packed and lazy weights keep giving the same bits with one constant.
+pub const WINO_KC: usize = 256;
 
 /// Winograd in bf16: pair words (two input channels each) per depth block, so
 /// a block's `WINO_BF16_KC × NR` B panel (24 KiB) stays in L1.

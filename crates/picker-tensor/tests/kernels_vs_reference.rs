@@ -155,6 +155,7 @@ fn named_conv_problems() -> Vec<ConvProblem> {
         relu(conv(1, 2, 3, 16, 16, 3, 1, 1)), // Winograd: one partial tile
         res(conv(1, 34, 44, 256, 256, 3, 1, 0)), // the ResBlock convs at full width
         res(conv(1, 50, 70, 40, 136, 3, 1, 0)), // Winograd: 5 panels (3 blocks, a narrow one), uneven chunks
+        res(conv(1, 20, 26, 300, 40, 3, 1, 0)), // Winograd: two depth blocks (256 + 44 channels)
         tanh(conv(1, 11, 150, 6, 3, 7, 1, 0)),  // direct path: full and partial row blocks
         res(conv(2, 5, 70, 4, 4, 3, 1, 0)),     // direct path, 4 outputs, residual
         conv(1, 4, 66, 3, 2, 1, 1, 0),          // direct path, 1x1
@@ -1180,15 +1181,16 @@ fn conv2d_reflect_forward() {
 /// weights packed once, and both match the reference, with either tile size.
 #[test]
 fn winograd_lazy_weights_match_packed_bit_for_bit() {
-    // (h, w, c_in, c_out): one panel; three panels and two depth blocks; five
-    // panels (two blocks, 3 + 2, on AVX-512) with a partial depth block and a
-    // partial row panel; more panels (blocks of 4, 4, 4, 3 for 100×110 in
-    // F(4×4)); a single channel; 1100 input channels, whose `V` allows only
-    // two F(4×4) panels (one F(6×6) panel) per block, in nine depth blocks.
+    // (h, w, c_in, c_out): one panel; three panels and two depth blocks (256
+    // + 44 channels); five panels (two blocks, 3 + 2, on AVX-512) with a
+    // partial depth block and a partial row panel; more panels (blocks of 4,
+    // 4, 4, 3 for 100×110 in F(4×4)); a single channel; 1100 input channels,
+    // whose `V` allows only two F(4×4) panels (one F(6×6) panel) per block,
+    // in five depth blocks.
     // In F(6×6) tiles: one, two, three, four and seven panels (4 + 3).
     let cases = [
         (14, 18, 20, 13),
-        (34, 49, 136, 24),
+        (34, 49, 300, 24),
         (60, 58, 160, 19),
         (90, 70, 24, 72),
         (9, 9, 1, 1),
