@@ -11,6 +11,7 @@
 //! The pieces ([`Models`], [`load_inputs`], [`write_materials`]) are shared
 //! with `picker batch`, which loads the networks once for a folder of photos.
 
+use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -204,6 +205,192 @@ pub struct Flags {
     /// bombs). Extraction holds about 64 bytes per photo pixel at its peak.
     #[arg(long, default_value_t = 100.0)]
     pub max_megapixels: f64,
+    /// Photos with more pixels than this many megapixels are analysed at this
+    /// size: area-downsampled (aspect ratio kept) before the masks, de-lighting,
+    /// coordinates and reprojection, which otherwise run at the photo's full
+    /// resolution. The networks see the same input either way, and --pick,
+    /// --quad, --mask and the outputs (mask.png, material.json's pick) stay in
+    /// the photo's own pixels. Up to ~16 MP a photo has more pixels than the
+    /// default texture (at most 1024 texels a side) can hold for materials
+    /// covering ≥ ~7 % of it; raise this (0: always the full resolution) for
+    /// detail of small materials in very large photos, at ~0.2 s and ~64 bytes
+    /// per extra pixel.
+    #[arg(long, default_value_t = DEFAULT_ANALYSIS_MEGAPIXELS, value_name = "MP", allow_negative_numbers = true)]
+    pub analysis_megapixels: f64,
+}
+
+/// For each of `dn` pixels over `n` (`dn ≤ n`, both > 0), the source
+/// pixels its area overlaps and the share of its area each covers (they sum
+/// to 1).
+fn area_spans(n: usize, dn: usize) -> Vec<Vec<(usize, f32)>> {
+    let scale = n as f64 / dn as f64;
+    (0..dn)
+        .map(|i| {
+            let (a, b) = (i as f64 * scale, (i + 1) as f64 * scale);
+            let (first, last) = (a.floor() as usize, (b.ceil() as usize).min(n));
+            (first..last)
+                .map(|k| {
+                    let cover = (b.min(k as f64 + 1.0) - a.max(k as f64)).max(0.0);
+                    (k, (cover / scale) as f32)
+                })
+                .filter(|&(_, wgt)| wgt > 0.0)
+                .collect()
+        })
+        .collect()
+}
+
+/// Default of `--analysis-megapixels`: above a 12-megapixel phone photo, so
+/// those are analysed at their full resolution.
+pub const DEFAULT_ANALYSIS_MEGAPIXELS: f64 = 16.0;
+
+/// The size a photo is analysed at when it has more pixels than
+/// `--analysis-megapixels` allows, and the mapping between its pixels and
+/// the photo's (pixel centres at integer coordinates, as `--pick` and `--quad`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Analysis {
+    /// The photo's size `(width, height)` as decoded (EXIF orientation applied).
+    pub original: (usize, usize),
+    /// The size `(width, height)` the extraction works at.
+    pub size: (usize, usize),
+}
+
+impl Analysis {
+    /// The analysis size of a `w × h` photo under a cap of `megapixels`
+    /// (`None` when it fits, the cap is 0 or the photo has no pixels): the
+    /// aspect ratio kept, each side rounded and at least 1 (a strip one
+    /// pixel wide keeps that pixel and gets the cap's pixels along its length).
+    pub fn for_photo(w: usize, h: usize, megapixels: f64) -> Option<Self> {
+        let pixels = (w as f64) * (h as f64);
+        let cap = megapixels * 1e6;
+        if megapixels <= 0.0 || pixels <= cap || w == 0 || h == 0 {
+            return None;
+        }
+        let s = (cap / pixels).sqrt();
+        let side = |n: usize| ((n as f64 * s).round() as usize).clamp(1, n);
+        // A side that cannot shrink below 1 pixel (a strip) leaves the
+        // other the rest of the pixels.
+        let size = match (side(w), side(h)) {
+            (1, _) => (1, (cap.round() as usize).clamp(1, h)),
+            (_, 1) => ((cap.round() as usize).clamp(1, w), 1),
+            wh => wh,
+        };
+        (size != (w, h)).then_some(Self {
+            original: (w, h),
+            size,
+        })
+    }
+
+    /// The analysis pixel whose area holds the centre of photo pixel `p`
+    /// (`p` inside the photo).
+    pub fn pick(&self, p: [u32; 2]) -> [u32; 2] {
+        let cell = |v: u32, from: usize, to: usize| {
+            (((2 * u64::from(v) + 1) * to as u64) / (2 * from as u64)).min(to as u64 - 1) as u32
+        };
+        [
+            cell(p[0], self.original.0, self.size.0),
+            cell(p[1], self.original.1, self.size.1),
+        ]
+    }
+
+    /// The photo pixel whose area holds the centre of analysis pixel `p`.
+    pub fn pick_back(&self, p: [u32; 2]) -> [u32; 2] {
+        Analysis {
+            original: self.size,
+            size: self.original,
+        }
+        .pick(p)
+    }
+
+    /// A point in photo pixels (pixel centres at integers, fractions
+    /// allowed) in analysis pixels.
+    pub fn point(&self, p: [f32; 2]) -> [f32; 2] {
+        let map = |v: f32, from: usize, to: usize| {
+            ((f64::from(v) + 0.5) * to as f64 / from as f64 - 0.5) as f32
+        };
+        [
+            map(p[0], self.original.0, self.size.0),
+            map(p[1], self.original.1, self.size.1),
+        ]
+    }
+
+    /// The photo's pixels, interleaved RGB (`[h, w, 3]`, row-major), as
+    /// planar RGB (`[3, h', w']`) at the analysis size: each pixel the mean
+    /// of the photo's pixels under its area, weighted by how much of each it
+    /// covers. Rows in parallel, each value one fixed-order sum (the same
+    /// bits for any thread count).
+    pub fn downsample_rgb(&self, rgb: &[f32]) -> Vec<f32> {
+        let ((w, h), (aw, ah)) = (self.original, self.size);
+        assert_eq!(rgb.len(), 3 * w * h, "interleaved RGB of the photo's size");
+        let (xs, ys) = (area_spans(w, aw), area_spans(h, ah));
+        let n = aw * ah;
+        let mut planes = vec![0.0f32; 3 * n];
+        let (r, rest) = planes.split_at_mut(n);
+        let (g, b) = rest.split_at_mut(n);
+        let row = aw.max(1);
+        r.par_chunks_mut(row)
+            .zip(g.par_chunks_mut(row))
+            .zip(b.par_chunks_mut(row))
+            .zip(ys.par_iter())
+            .for_each(|(((r, g), b), ry)| {
+                let mut acc = vec![[0.0f32; 3]; aw];
+                for &(sy, wy) in ry {
+                    let src = &rgb[3 * sy * w..3 * (sy + 1) * w];
+                    for (a, rx) in acc.iter_mut().zip(&xs) {
+                        let mut s = [0.0f32; 3];
+                        for &(sx, wx) in rx {
+                            let p = &src[3 * sx..3 * sx + 3];
+                            for c in 0..3 {
+                                s[c] += p[c] * wx;
+                            }
+                        }
+                        for c in 0..3 {
+                            a[c] += s[c] * wy;
+                        }
+                    }
+                }
+                for (x, a) in acc.iter().enumerate() {
+                    (r[x], g[x], b[x]) = (a[0], a[1], a[2]);
+                }
+            });
+        planes
+    }
+
+    /// A mask at the photo's size at the analysis size: a pixel is in where
+    /// at least half its area is (area average ≥ ½).
+    pub fn downsample_mask(&self, data: &[bool]) -> Vec<bool> {
+        let ((w, h), (aw, ah)) = (self.original, self.size);
+        let f: Vec<f32> = data.iter().map(|&b| f32::from(u8::from(b))).collect();
+        picker_extract::resample::area_plane(&f, w, h, aw, ah)
+            .into_iter()
+            .map(|v| v >= 0.5)
+            .collect()
+    }
+
+    /// A one-channel mask image at the analysis size back at the photo's
+    /// size: bilinear, then 1 where at least ½, else 0.
+    pub fn upsample_mask(&self, mask: &Image) -> Image {
+        let ((w, h), (aw, ah)) = (self.original, self.size);
+        let data = picker_extract::resample::bilinear_plane(mask.plane(0), aw, ah, w, h)
+            .into_iter()
+            .map(|v| if v >= 0.5 { 1.0 } else { 0.0 })
+            .collect();
+        Image {
+            channels: 1,
+            height: h,
+            width: w,
+            data,
+        }
+    }
+
+    /// `photo.json`'s description of the analysis size.
+    pub fn describe(&self) -> Value {
+        json!({
+            "width": self.size.0,
+            "height": self.size.1,
+            "scale": self.size.0 as f64 / self.original.0 as f64,
+            "rule": "the photo had more pixels than --analysis-megapixels: masks, de-lighting, coordinates and reprojection ran on this area-downsampled copy (sRGB values averaged over each pixel's area); the networks saw the same input as at full resolution; pick, quad and mask.png are in the photo's own pixels, the diagnostics' pixel quantities (focal_px, companion_pick) in the analysis copy's",
+        })
+    }
 }
 
 impl Flags {
@@ -233,6 +420,12 @@ impl Flags {
         }
         if let Some(s) = self.even_out {
             check_even_out(s)?;
+        }
+        if !(self.analysis_megapixels.is_finite() && self.analysis_megapixels >= 0.0) {
+            bail!(
+                "--analysis-megapixels {} must be a finite number, 0 or more (0: the full resolution)",
+                self.analysis_megapixels
+            );
         }
         Ok(())
     }
@@ -325,6 +518,7 @@ impl Flags {
             "sixteen_bit": self.sixteen_bit,
             "seed": self.seed,
             "precision": picker_tensor::precision().name(),
+            "analysis_megapixels": self.analysis_megapixels,
         })
     }
 }
@@ -729,6 +923,9 @@ pub struct Loaded {
     pub source: Value,
     /// Milliseconds per step so far.
     pub timings: serde_json::Map<String, Value>,
+    /// The size the photo is analysed at, when smaller than the photo
+    /// (`--analysis-megapixels`); `None`: its full resolution.
+    pub analysis: Option<Analysis>,
 }
 
 /// Reads the photo (once), runs the networks or reads the elements, and
@@ -758,10 +955,21 @@ pub fn load_inputs_from(
         None => photo::load_with(photo_path, &flags.photo_limits())?,
     };
     let (w, h) = p.rgb.dimensions();
-    // The planar copy (parallel) and the networks' working copy (the `image`
-    // crate's resize, one thread) side by side.
+    // A photo larger than --analysis-megapixels is analysed at a smaller
+    // size (the networks' working copy is made from the full photo either
+    // way). Render elements given with the photo keep its full size.
+    let analysis = match source {
+        Source::Nets(_) => Analysis::for_photo(w as usize, h as usize, flags.analysis_megapixels),
+        Source::Elements(_) => None,
+    };
+    // The planar copy (parallel; at the analysis size, straight from the
+    // decoded pixels) and the networks' working copy (the `image` crate's
+    // resize of the whole photo, one thread) side by side.
     let (planar, work) = rayon::join(
-        || photo::to_planar(&p.rgb),
+        || match &analysis {
+            Some(a) => a.downsample_rgb(p.rgb.as_raw()),
+            None => photo::to_planar(&p.rgb),
+        },
         || match source {
             Source::Nets(_) => {
                 let (ww, wh) = photo::working_size(w, h, flags.work_size);
@@ -770,9 +978,10 @@ pub fn load_inputs_from(
             Source::Elements(_) => None,
         },
     );
-    let photo_img = Image::new(3, h as usize, w as usize, planar)
-        .map_err(|e| anyhow!("{}: {e}", photo_path.display()))?;
-    let photo_info = json!({
+    let (aw, ah) = analysis.map_or((w as usize, h as usize), |a| a.size);
+    let photo_img =
+        Image::new(3, ah, aw, planar).map_err(|e| anyhow!("{}: {e}", photo_path.display()))?;
+    let mut photo_info = json!({
         "path": label,
         "width": w, "height": h,
         "format": p.format.map(|f| format!("{f:?}")),
@@ -785,8 +994,18 @@ pub fn load_inputs_from(
         "transparent_pixels": p.opaque.as_ref().map(|o| o.iter().filter(|&&v| !v).count()),
         "alpha_ignored": p.alpha_ignored,
     });
+    if let Some(a) = &analysis {
+        photo_info["analysis"] = a.describe();
+    }
     let focal_35mm = p.focal_35mm;
-    let opaque = opaque_mask(&p);
+    let opaque = opaque_mask(&p).map(|m| match &analysis {
+        Some(a) => Mask {
+            width: aw,
+            height: ah,
+            data: a.downsample_mask(&m.data),
+        },
+        None => m,
+    });
     timings.insert("read_photo".into(), json!(ms(t)));
     let t = Instant::now();
     let (inputs, source) = match source {
@@ -828,6 +1047,7 @@ pub fn load_inputs_from(
         photo_info,
         source,
         timings,
+        analysis,
     })
 }
 
@@ -1190,18 +1410,63 @@ pub fn write_materials(
         .as_str()
         .unwrap_or("photo")
         .to_string();
+    // Picks and the quad are given in the photo's pixels; the extraction
+    // works at the analysis size when the photo is larger
+    // (`--analysis-megapixels`).
+    let analysis = loaded.analysis;
+    let (ow, oh) = analysis.map_or(prepared.photo_size(), |a| a.original);
     // The quad first: without --pick the pick is its centre.
-    if let Some(q) = &req.quad {
-        if req.picks.len() > 1 || req.all {
-            bail!("--quad gives the plane of one material: use it with at most one --pick and without --all");
+    let quad = match &req.quad {
+        Some(q) => {
+            if req.picks.len() > 1 || req.all {
+                bail!("--quad gives the plane of one material: use it with at most one --pick and without --all");
+            }
+            q.check(ow, oh)
+                .map_err(|e| anyhow!("{label}: --quad: {e}"))?;
+            match &analysis {
+                Some(a) => {
+                    let qa = Quad(q.0.map(|c| a.point(c)));
+                    let (fw, fh) = prepared.photo_size();
+                    qa.check(fw, fh).map_err(|e| {
+                        anyhow!(
+                            "{label}: --quad at the photo's analysis size {fw}x{fh}: {e} (--analysis-megapixels 0 analyses the full {ow}x{oh})"
+                        )
+                    })?;
+                    Some(qa)
+                }
+                None => Some(*q),
+            }
         }
-        let (fw, fh) = prepared.photo_size();
-        q.check(fw, fh)
-            .map_err(|e| anyhow!("{label}: --quad: {e}"))?;
+        None => None,
+    };
+    // (name, the pick as given, the pick at the analysis size).
+    let mut picks = Vec::with_capacity(req.picks.len());
+    for (name, pk) in &req.picks {
+        let at = match &analysis {
+            Some(a) => {
+                let [x, y] = *pk;
+                if x as usize >= ow || y as usize >= oh {
+                    bail!(
+                        "{label}: pick ({x}, {y}) is outside the {ow}x{oh} photo (x must be < {ow}, y < {oh})"
+                    );
+                }
+                let at = a.pick(*pk);
+                prepared.check_pick(at).map_err(|_| {
+                    anyhow!(
+                        "{label}: pick ({x}, {y}) is on a transparent pixel of the photo (alpha below ½): pick a visible one"
+                    )
+                })?;
+                at
+            }
+            None => {
+                prepared.check_pick(*pk).with_context(|| label.clone())?;
+                *pk
+            }
+        };
+        picks.push((name.clone(), *pk, at));
     }
-    for (_, pk) in &req.picks {
-        prepared.check_pick(*pk).with_context(|| label.clone())?;
-    }
+    // A pick at the analysis size in the photo's pixels.
+    let to_photo = |pk: [u32; 2]| analysis.map_or(pk, |a| a.pick_back(pk));
     // A given mask: the one material, its pick inside it.
     let given = match &req.mask {
         None => None,
@@ -1212,9 +1477,7 @@ pub fn write_materials(
             let (fw, fh) = prepared.photo_size();
             let (full, shown) = match arg {
                 MaskArg::Quad => {
-                    let q = req
-                        .quad
-                        .ok_or_else(|| anyhow!("--mask quad needs --quad"))?;
+                    let q = quad.ok_or_else(|| anyhow!("--mask quad needs --quad"))?;
                     // Its sides bent as the photo's lens bends them.
                     let lens = picker_extract::lens::Lens::new(prepared.lens().lambda, fw, fh);
                     (
@@ -1229,11 +1492,11 @@ pub fn write_materials(
                     // painted on a smaller copy): scaled to the photo.
                     let aspect = |w: usize, h: usize| w as f64 / h.max(1) as f64;
                     let (mw, mh) = (m.width, m.height);
-                    if (mw, mh) != (fw, fh)
-                        && (aspect(mw, mh) / aspect(fw, fh) - 1.0).abs() > MASK_ASPECT_TOLERANCE
+                    if (mw, mh) != (ow, oh)
+                        && (aspect(mw, mh) / aspect(ow, oh) - 1.0).abs() > MASK_ASPECT_TOLERANCE
                     {
                         bail!(
-                            "--mask {}: the mask is {mw}x{mh} but the photo {label} is {fw}x{fh} (as a viewer shows it, EXIF orientation applied); a mask of another size needs the photo's aspect ratio",
+                            "--mask {}: the mask is {mw}x{mh} but the photo {label} is {ow}x{oh} (as a viewer shows it, EXIF orientation applied); a mask of another size needs the photo's aspect ratio",
                             f.display(),
                         );
                     }
@@ -1259,13 +1522,17 @@ pub fn write_materials(
                     (full, shown)
                 }
             };
-            let pick = match req.picks.first() {
-                Some((_, pk)) => {
-                    let (x, y) = (pk[0] as usize, pk[1] as usize);
+            let pick = match picks.first() {
+                Some((_, given, at)) => {
+                    let (x, y) = (at[0] as usize, at[1] as usize);
                     if !full.data[y * fw + x] {
-                        bail!("--pick {x},{y} is outside the mask ({shown})");
+                        bail!(
+                            "--pick {},{} is outside the mask ({shown})",
+                            given[0],
+                            given[1]
+                        );
                     }
-                    *pk
+                    *at
                 }
                 None => {
                     let [x, y] = full.central_pixel().expect("a non-empty mask");
@@ -1288,13 +1555,15 @@ pub fn write_materials(
     let mut jobs = Vec::new();
     let mask_shown = given.as_ref().map(|g| g.3.clone());
     if let Some((name, pick, pm, _)) = given {
-        jobs.push((name, Some(pick), pm));
+        // (The mask's central pixel when no pick is given.)
+        let given = picks.first().map_or_else(|| to_photo(pick), |p| p.1);
+        jobs.push((name, Some(pick), pm, given));
     }
-    for (name, pk) in req.picks.iter().filter(|_| req.mask.is_none()) {
+    for (name, given, at) in picks.iter().filter(|_| req.mask.is_none()) {
         let pm = prepared
-            .pick_mask(*pk, &mask_opts)
-            .with_context(|| format!("pick {},{} in {label}", pk[0], pk[1]))?;
-        jobs.push((name.clone(), Some(*pk), pm));
+            .pick_mask(*at, &mask_opts)
+            .with_context(|| format!("pick {},{} in {label}", given[0], given[1]))?;
+        jobs.push((name.clone(), Some(*at), pm, *given));
     }
     let mut palette_ids = None;
     if req.all {
@@ -1314,7 +1583,7 @@ pub fn write_materials(
                     ids.data[i] = (k + 1) as f32 / 65535.0;
                 }
             }
-            jobs.push((format!("material_{}", base + k), Some(pk), pm));
+            jobs.push((format!("material_{}", base + k), Some(pk), pm, to_photo(pk)));
         }
         palette_ids = Some(ids);
     }
@@ -1325,7 +1594,7 @@ pub fn write_materials(
     if let Some(n) = req.normal {
         opts.plane = Some(n);
     }
-    if let Some(q) = req.quad {
+    if let Some(q) = quad {
         opts.plane = Some(UserPlane::Quad(q));
         opts.quad_size_m = req.quad_size_m;
     }
@@ -1346,10 +1615,18 @@ pub fn write_materials(
         sixteen_bit: flags.sixteen_bit,
     };
     let mut summaries = Vec::new();
-    for (name, pick, pm) in &jobs {
+    for (name, pick, pm, given) in &jobs {
         let t = Instant::now();
-        let (m, diag) = pipeline::extract(prepared, name, *pick, pm, &opts)
+        let (m, mut diag) = pipeline::extract(prepared, name, *pick, pm, &opts)
             .with_context(|| format!("extracting {name} from {label}"))?;
+        // What the files say is in the photo's pixels: the pick and the
+        // mask (the report sheet shows the analysed copy).
+        let photo_m = analysis.map(|a| picker_extract::Material {
+            pick: m.pick.map(|_| *given),
+            mask: a.upsample_mask(&m.mask),
+            ..m.clone()
+        });
+        let out_m = photo_m.as_ref().unwrap_or(&m);
         let extract_ms = ms(t);
         let repeats = pipeline::material_preview_repeats(&m, PREVIEW_SIZE);
         let dir = if single {
@@ -1380,9 +1657,14 @@ pub fn write_materials(
                 rio::write_png(&dir.join("report.png"), &sheet)?;
                 Ok((preview_ms, ms(t_sheet), ms(t)))
             },
-            || export::write_material_images(&dir, &m, &export_opts),
+            || export::write_material_images(&dir, out_m, &export_opts),
         );
         let (preview_ms, sheet_ms, report_ms) = timed?;
+        if let (Some(_), Some(q)) = (analysis, req.quad) {
+            if let Some(u) = diag.uv.as_mut().and_then(|u| u.user_plane.as_mut()) {
+                u.quad = Some(q.0);
+            }
+        }
         let mut files = images.with_context(|| format!("writing {name} to {}", dir.display()))?;
         let mut diagnostics = serde_json::to_value(&diag).context("serialising diagnostics")?;
         if !layout.timings {
@@ -1406,10 +1688,10 @@ pub fn write_materials(
             extra["timings_ms"] = json!({"extract": extract_ms, "preview_and_report": report_ms, "preview": preview_ms, "report_sheet": sheet_ms, "steps": diag.timings_ms});
         }
         files.extend(
-            export::write_material_descriptions(&dir, &m, &extra, &export_opts)
+            export::write_material_descriptions(&dir, out_m, &extra, &export_opts)
                 .with_context(|| format!("writing {name} to {}", dir.display()))?,
         );
-        let mut s = export::material_json(&m, &Value::Null, &export_opts)?;
+        let mut s = export::material_json(out_m, &Value::Null, &export_opts)?;
         if let Some(o) = s.as_object_mut() {
             let shown = if let Some(root) = layout.shown_root {
                 if single {
@@ -1453,7 +1735,7 @@ pub fn write_materials(
     if !single {
         let entries: Vec<(String, String)> = jobs
             .iter()
-            .map(|(name, _, _)| (name.clone(), format!("{name}/{}", export::MATERIAL_USDA)))
+            .map(|(name, ..)| (name.clone(), format!("{name}/{}", export::MATERIAL_USDA)))
             .collect();
         let path = out_dir.join(export::MATERIALS_USDA);
         crate::output::write_atomic(&path, export::usda_library_text(&entries).as_bytes())?;
@@ -1737,6 +2019,143 @@ pub fn parse_sigma(s: &str) -> std::result::Result<f32, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn analysis_size_keeps_the_aspect_and_only_shrinks() {
+        // Fits, no cap, no pixels: none.
+        assert_eq!(Analysis::for_photo(4000, 3000, 16.0), None);
+        assert_eq!(Analysis::for_photo(4000, 3000, 12.0), None);
+        assert_eq!(Analysis::for_photo(8000, 6000, 0.0), None);
+        assert_eq!(Analysis::for_photo(0, 6000, 1.0), None);
+        let a = Analysis::for_photo(8000, 6000, 16.0).unwrap();
+        assert_eq!(a.size, (4619, 3464));
+        assert!((a.size.0 * a.size.1) as f64 <= 16.0e6 + 8000.0);
+        // A 1-pixel-wide strip keeps its side of 1.
+        let s = Analysis::for_photo(1, 40_000, 0.001).unwrap();
+        assert_eq!(s.size, (1, 1000));
+    }
+
+    #[test]
+    fn picks_map_to_the_analysis_pixel_under_their_centre_and_back() {
+        for (w, h, mp) in [(8000, 6000, 16.0), (321, 213, 0.03), (7, 1000, 0.002)] {
+            let a = Analysis::for_photo(w, h, mp).unwrap();
+            let (aw, ah) = a.size;
+            for y in 0..h as u32 {
+                for x in [0, 1, w as u32 / 2, w as u32 - 1] {
+                    let [px, py] = a.pick([x, y]);
+                    assert!((px as usize) < aw && (py as usize) < ah);
+                    // The analysis pixel's area holds the photo pixel's centre.
+                    let inside = |v: u32, p: u32, n: usize, an: usize| {
+                        let c = (f64::from(v) + 0.5) * an as f64 / n as f64;
+                        f64::from(p) <= c && c <= f64::from(p) + 1.0
+                    };
+                    assert!(inside(x, px, w, aw) && inside(y, py, h, ah), "{x},{y}");
+                    // The continuous mapping agrees.
+                    let [fx, fy] = a.point([x as f32, y as f32]);
+                    assert!((fx + 0.5 - px as f32) > -1e-3 && (fx + 0.5 - px as f32) < 1.0 + 1e-3);
+                    assert!((fy + 0.5 - py as f32) > -1e-3 && (fy + 0.5 - py as f32) < 1.0 + 1e-3);
+                    // Back: a photo pixel inside the same analysis pixel.
+                    assert_eq!(a.pick(a.pick_back([px, py])), [px, py]);
+                }
+            }
+            assert_eq!(a.pick([0, 0]), [0, 0]);
+            assert_eq!(
+                a.pick([w as u32 - 1, h as u32 - 1]),
+                [aw as u32 - 1, ah as u32 - 1]
+            );
+        }
+    }
+
+    /// The area average written out: each analysis pixel's mean over the
+    /// photo's area it covers, by the overlap of every photo pixel, in f64.
+    fn area_reference(rgb: &[f32], (w, h): (usize, usize), (aw, ah): (usize, usize)) -> Vec<f64> {
+        let overlap = |i: usize, n: usize, an: usize, k: usize| {
+            let s = n as f64 / an as f64;
+            let (a, b) = (i as f64 * s, (i + 1) as f64 * s);
+            ((b.min(k as f64 + 1.0) - a.max(k as f64)).max(0.0)) / s
+        };
+        let mut out = vec![0.0; 3 * aw * ah];
+        for c in 0..3 {
+            for y in 0..ah {
+                for x in 0..aw {
+                    let mut v = 0.0;
+                    for sy in 0..h {
+                        for sx in 0..w {
+                            v += f64::from(rgb[3 * (sy * w + sx) + c])
+                                * overlap(x, w, aw, sx)
+                                * overlap(y, h, ah, sy);
+                        }
+                    }
+                    out[c * aw * ah + y * aw + x] = v;
+                }
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn downsampled_photo_is_the_area_average() {
+        let mut rng = picker_tensor::Rng::new(31);
+        // Integer and odd ratios, one side unchanged, a single column.
+        for (w, h, aw, ah) in [
+            (12, 8, 6, 4),
+            (13, 7, 5, 3),
+            (17, 11, 10, 11),
+            (1, 9, 1, 4),
+            (23, 19, 7, 6),
+        ] {
+            let a = Analysis {
+                original: (w, h),
+                size: (aw, ah),
+            };
+            let rgb: Vec<f32> = rng.uniform_vec(3 * w * h, 0.0, 1.0);
+            let got = a.downsample_rgb(&rgb);
+            let want = area_reference(&rgb, (w, h), (aw, ah));
+            assert_eq!(got.len(), want.len());
+            for (g, r) in got.iter().zip(&want) {
+                assert!(
+                    (f64::from(*g) - r).abs() < 1e-5,
+                    "{w}x{h} -> {aw}x{ah}: {g} vs {r}"
+                );
+            }
+            // A flat photo stays flat.
+            let flat = vec![0.25f32; 3 * w * h];
+            assert!(a
+                .downsample_rgb(&flat)
+                .iter()
+                .all(|v| (v - 0.25).abs() < 1e-6));
+        }
+    }
+
+    #[test]
+    fn masks_go_down_by_majority_and_up_by_their_half_level() {
+        let a = Analysis {
+            original: (8, 6),
+            size: (4, 3),
+        };
+        // The left 3 columns: each analysis pixel of column 1 holds one in
+        // and one out (½: in), column 0 all in.
+        let data: Vec<bool> = (0..48).map(|i| i % 8 < 3).collect();
+        let down = a.downsample_mask(&data);
+        assert_eq!(
+            down,
+            (0..12).map(|i| i % 4 < 2).collect::<Vec<_>>(),
+            "area >= 1/2 is in"
+        );
+        let img = Image {
+            channels: 1,
+            height: 3,
+            width: 4,
+            data: down.iter().map(|&b| f32::from(u8::from(b))).collect(),
+        };
+        let up = a.upsample_mask(&img);
+        assert_eq!((up.width, up.height, up.channels), (8, 6, 1));
+        assert!(up.data.iter().all(|&v| v == 0.0 || v == 1.0));
+        // Columns 0..4 in (the edge falls halfway between analysis columns 1 and 2).
+        for (i, &v) in up.data.iter().enumerate() {
+            assert_eq!(v == 1.0, i % 8 < 4, "pixel {i}");
+        }
+    }
 
     #[test]
     fn transparent_pixels_show_as_a_checkerboard_in_the_report() {

@@ -1956,3 +1956,123 @@ fn the_lens_is_estimated_or_taken_as_given() {
     assert!(e.contains("--lens") && e.contains("outside"), "{e}");
     assert!(!out.exists());
 }
+
+/// `--analysis-megapixels` below the photo's size: the extraction works on an
+/// area-downsampled copy while the picks, the quad, a given mask and the
+/// outputs (mask.png, material.json's pick) stay in the photo's own pixels;
+/// the mask agrees with the full-resolution run's; bad values and picks
+/// outside the photo are refused naming the photo's own size.
+#[test]
+fn large_photos_are_analysed_smaller_in_their_own_pixels() {
+    let tmp = tempfile::tempdir().unwrap();
+    let photo = repo().join("fixtures/examples/coffee.jpg");
+    let w = repo().join("fixtures/weights/tiny");
+    let (photo, w) = (photo.to_str().unwrap(), w.to_str().unwrap());
+    let dir = |n: &str| tmp.path().join(n);
+    let extract = |out: &Path, extra: &[&str]| {
+        let mut args = vec!["extract", photo, "--weights", w, "--max-size", "64"];
+        args.extend_from_slice(extra);
+        args.extend(["--out", out.to_str().unwrap()]);
+        run(&args)
+    };
+    let success =
+        |o: &Output| assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // 320x213 (68 160 pixels) under 0.02 MP: 173x115.
+    let small = ["--analysis-megapixels", "0.02"];
+    for (name, pick) in [("edge", "319,212"), ("middle", "150,120")] {
+        let out = dir(name);
+        let o = extract(&out, &[&["--pick", pick][..], &small[..]].concat());
+        success(&o);
+        let m = json_file(&out.join("material.json"));
+        let want: Vec<u64> = pick.split(',').map(|v| v.parse().unwrap()).collect();
+        assert_eq!(m["pick"], serde_json::json!(want), "{name}");
+        assert_eq!(m["photo"]["width"], 320);
+        assert_eq!(m["photo"]["analysis"]["width"], 173, "{}", m["photo"]);
+        assert_eq!(m["photo"]["analysis"]["height"], 115, "{}", m["photo"]);
+        let s = json_file(&out.join("summary.json"));
+        assert_eq!(s["settings"]["analysis_megapixels"], 0.02);
+        let mask = read_png(&out.join("mask.png")).unwrap();
+        assert_eq!((mask.width, mask.height), (320, 213), "{name}");
+        // The same material as at full resolution (the networks saw the
+        // same input): the masks nearly agree.
+        let full = dir(&format!("{name}-full"));
+        success(&extract(&full, &["--pick", pick]));
+        let mf = read_png(&full.join("mask.png")).unwrap();
+        let (inter, union) =
+            mask.plane(0)
+                .iter()
+                .zip(mf.plane(0))
+                .fold((0, 0), |(i, u), (&a, &b)| {
+                    let (a, b) = (a > 0.5, b > 0.5);
+                    (i + usize::from(a && b), u + usize::from(a || b))
+                });
+        let iou = inter as f64 / union.max(1) as f64;
+        assert!(
+            iou >= 0.9,
+            "{name}: mask IoU {iou} against the full resolution's"
+        );
+        // Its mask given back (--mask, the photo's size) with a pick inside.
+        let again = dir(&format!("{name}-mask"));
+        let mask_path = out.join("mask.png");
+        let o = extract(
+            &again,
+            &[
+                &["--mask", mask_path.to_str().unwrap(), "--pick", pick][..],
+                &small[..],
+            ]
+            .concat(),
+        );
+        success(&o);
+        let m2 = json_file(&again.join("material.json"));
+        assert_eq!(m2["pick"], serde_json::json!(want));
+        let back = read_png(&again.join("mask.png")).unwrap();
+        let differ = back
+            .plane(0)
+            .iter()
+            .zip(mask.plane(0))
+            .filter(|(a, b)| (**a > 0.5) != (**b > 0.5))
+            .count();
+        assert!(
+            differ * 50 <= mask.plane(0).iter().filter(|&&v| v > 0.5).count(),
+            "{name}: a given mask comes back with {differ} pixels changed"
+        );
+    }
+    // A quad in the photo's pixels: reported as given.
+    let quad = "10,20,200,30,190,150,15,140";
+    let out = dir("quad");
+    success(&extract(
+        &out,
+        &[&["--quad", quad][..], &small[..]].concat(),
+    ));
+    let m = json_file(&out.join("material.json"));
+    let given: Vec<f64> = quad.split(',').map(|v| v.parse().unwrap()).collect();
+    let shown: Vec<f64> = m["diagnostics"]["uv"]["user_plane"]["quad"]
+        .as_array()
+        .expect("the quad in the diagnostics")
+        .iter()
+        .flat_map(|c| c.as_array().unwrap().iter().map(|v| v.as_f64().unwrap()))
+        .collect();
+    assert_eq!(shown, given);
+    // Refusals name the photo's own size; nothing is written.
+    for (extra, needle) in [
+        (
+            &["--pick", "320,10", "--analysis-megapixels", "0.02"][..],
+            "outside the 320x213 photo",
+        ),
+        (
+            &["--pick", "10,10", "--analysis-megapixels", "-1"][..],
+            "--analysis-megapixels -1",
+        ),
+        (
+            &["--pick", "10,10", "--analysis-megapixels", "NaN"][..],
+            "--analysis-megapixels NaN",
+        ),
+    ] {
+        let out = dir("refused");
+        let o = extract(&out, extra);
+        assert!(!o.status.success(), "{extra:?}");
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert!(e.contains(needle), "{extra:?}: {e}");
+        assert!(!out.exists(), "{extra:?} wrote {}", out.display());
+    }
+}
