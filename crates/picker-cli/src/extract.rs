@@ -1288,7 +1288,18 @@ fn report_sheet(p: &Prepared, m: &Material, preview: &Image, quad: Option<[[f32;
         .opaque
         .as_ref()
         .map(|o| checkered(&p.inputs.photo, o));
-    let photo = checkered.as_ref().unwrap_or(&p.inputs.photo);
+    let full = checkered.as_ref().unwrap_or(&p.inputs.photo);
+    // A photo larger than REPORT_SOURCE_MAX a side is shown from its area
+    // average (its display values averaged, as resizing them would), and
+    // the mask with it: the two tiles read it once instead of the whole
+    // photo each (~0.2 s at 12 megapixels).
+    let photo = for_report(full);
+    let photo: &Image = &photo;
+    let mask = for_report(&m.mask);
+    let (sx, sy) = (
+        photo.width as f32 / full.width.max(1) as f32,
+        photo.height as f32 / full.height.max(1) as f32,
+    );
     let shown = |label: &str, image: Image| {
         report::LazyTile::from(Tile {
             label: label.into(),
@@ -1297,19 +1308,22 @@ fn report_sheet(p: &Prepared, m: &Material, preview: &Image, quad: Option<[[f32;
     };
     let photo_tile = match m.pick {
         Some([x, y]) => {
-            let r = (photo.width.max(photo.height) as f32 / 40.0).max(4.0);
+            let r = (full.width.max(full.height) as f32 / 40.0).max(4.0);
             report::marked_tile(
                 "photo + pick".into(),
                 photo,
-                x as f32 + 0.5,
-                y as f32 + 0.5,
-                r,
+                (x as f32 + 0.5) * sx,
+                (y as f32 + 0.5) * sy,
+                r * sx,
             )
         }
         None => report::borrowed_tile("photo + pick".into(), photo),
     };
     let photo_tile = match quad {
-        Some(q) => report::outlined(photo_tile, q.map(|[x, y]| [x + 0.5, y + 0.5]).to_vec()),
+        Some(q) => report::outlined(
+            photo_tile,
+            q.map(|[x, y]| [(x + 0.5) * sx, (y + 0.5) * sy]).to_vec(),
+        ),
         None => photo_tile,
     };
     // Linear pictures are shown sRGB-encoded per value, row by row as the
@@ -1339,12 +1353,7 @@ fn report_sheet(p: &Prepared, m: &Material, preview: &Image, quad: Option<[[f32;
         }
         tiles.push(shown("material embedding", shown_embedding));
     }
-    tiles.push(report::dimmed_tile(
-        "mask".into(),
-        photo,
-        &m.mask.data,
-        0.25,
-    ));
+    tiles.push(report::dimmed_tile("mask".into(), photo, &mask.data, 0.25));
     if let Some(e) = &p.inputs.envmap {
         tiles.push(shown("lighting (envmap)", tone_mapped(&e.to_image())));
     }

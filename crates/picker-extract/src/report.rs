@@ -412,32 +412,24 @@ fn draw_marker_in(
     }
 }
 
-/// A [`LazyTile`] of `img` with a pick marker drawn on it ([`draw_marker`]
-/// at `(x, y)`, `radius`): only the rows the marker touches are copied.
+/// A [`LazyTile`] of `img` with a pick marker on it: the image resized to
+/// the tile, then [`draw_marker`] at `(x, y)` and `radius` (image pixels)
+/// mapped into the tile's pixels, so the marker's strokes are as wide on
+/// the sheet whatever the image's size (drawn on a 12-megapixel photo
+/// before resizing, they were thinner than a tile pixel and vanished).
+/// A tile stretched unevenly takes the radius along its width.
 pub fn marked_tile(label: String, img: &Image, x: f32, y: f32, radius: f32) -> LazyTile<'_> {
     let (c, h, w) = (img.channels, img.height, img.width);
-    let (r0, r1) =
-        marker_rows(h, x, y, radius).map_or((0, 0), |(a, b, _)| (a.min(h), b.max(a.min(h))));
-    let mut window = Image::zeros(c, r1 - r0, w);
-    for ch in 0..c {
-        window.data[ch * (r1 - r0) * w..(ch + 1) * (r1 - r0) * w]
-            .copy_from_slice(&img.plane(ch)[r0 * w..r1 * w]);
-    }
-    draw_marker_in(&mut window, h, r0, x, y, radius);
     LazyTile {
         label,
         width: w,
         height: h,
         channels: c,
         render: Box::new(move |th, tw| {
-            resize_rows((c, h, w), th, tw, false, |ch, r, out| {
-                let src = if (r0..r1).contains(&r) {
-                    &window.plane(ch)[(r - r0) * w..(r - r0 + 1) * w]
-                } else {
-                    &img.plane(ch)[r * w..(r + 1) * w]
-                };
-                out.copy_from_slice(src);
-            })
+            let mut tile = resize(img, th, tw, false);
+            let (sx, sy) = (tw as f32 / w.max(1) as f32, th as f32 / h.max(1) as f32);
+            draw_marker(&mut tile, x * sx, y * sy, radius * sx);
+            tile
         }),
     }
 }
@@ -982,17 +974,33 @@ mod tests {
             (80.5, f32::NAN, 4.0),
             (33.25, 71.7, 6.3),
         ] {
-            let mut marked = img.clone();
-            draw_marker(&mut marked, x, y, r);
             let lazy = marked_tile("m".into(), &img, x, y, r);
-            for (th, tw) in [(48, 64), (200, 260)] {
+            // The image resized, then the marker drawn in the tile's pixels.
+            for (th, tw) in [(48, 64), (200, 260), (120, 160)] {
+                let mut want = resize(&img, th, tw, false);
+                let (sx, sy) = (tw as f32 / w as f32, th as f32 / h as f32);
+                draw_marker(&mut want, x * sx, y * sy, r * sx);
                 assert_eq!(
                     bits(&(lazy.render)(th, tw)),
-                    bits(&resize(&marked, th, tw, false)),
+                    bits(&want),
                     "marker at {x},{y} r {r}"
                 );
             }
         }
+        // On a picture far larger than its tile (a 12-megapixel photo) the
+        // marker stays as visible as on a small one: white strokes in the
+        // tile, none of them lost to the resize.
+        let big = Image::new(3, 1200, 1600, vec![0.5; 3 * 1200 * 1600]).unwrap();
+        let small = Image::new(3, 120, 160, vec![0.5; 3 * 120 * 160]).unwrap();
+        let white = |t: &Image| t.data.iter().filter(|&&v| v == 1.0).count();
+        let on_big = white(&(marked_tile("b".into(), &big, 800.0, 600.0, 40.0).render)(
+            96, 128,
+        ));
+        let on_small = white(&(marked_tile("s".into(), &small, 80.0, 60.0, 4.0).render)(
+            96, 128,
+        ));
+        assert!(on_big > 30, "{on_big} white values");
+        assert_eq!(on_big, on_small);
         // Dimmed: outside the mask the pixel's grey (Rec. 709) mixed with 30 %
         // of its colour, a quarter as bright, plus a blue tint; inside as is.
         let mut dimmed = img.clone();
