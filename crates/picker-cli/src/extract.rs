@@ -214,7 +214,8 @@ pub struct Flags {
     /// default texture (at most 1024 texels a side) can hold for materials
     /// covering ≥ ~7 % of it; raise this (0: always the full resolution) for
     /// detail of small materials in very large photos, at ~0.2 s and ~64 bytes
-    /// per extra pixel.
+    /// per extra pixel. Not with --elements (the render elements keep the
+    /// photo's own size).
     #[arg(long, default_value_t = DEFAULT_ANALYSIS_MEGAPIXELS, value_name = "MP", allow_negative_numbers = true)]
     pub analysis_megapixels: f64,
 }
