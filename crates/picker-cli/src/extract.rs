@@ -210,12 +210,13 @@ pub struct Flags {
     /// coordinates and reprojection, which otherwise run at the photo's full
     /// resolution. The networks see the same input either way, and --pick,
     /// --quad, --mask and the outputs (mask.png, material.json's pick) stay in
-    /// the photo's own pixels. Up to ~16 MP a photo has more pixels than the
-    /// default texture (at most 1024 texels a side) can hold for materials
-    /// covering ≥ ~7 % of it; raise this (0: always the full resolution) for
-    /// detail of small materials in very large photos, at ~0.2 s and ~64 bytes
-    /// per extra pixel. Not with --elements (the render elements keep the
-    /// photo's own size).
+    /// the photo's own pixels. The texture's automatic size follows the
+    /// analysed pixels' density: one that reaches --max-size at full
+    /// resolution mostly still does, one sized below it (a far, small or
+    /// grazing surface) comes out up to √(photo MP / this) times smaller a
+    /// side. Raise this (0: always the full resolution) for those, at ~0.2 s
+    /// and ~64 bytes per extra pixel. Not with --elements (the render
+    /// elements keep the photo's own size).
     #[arg(long, default_value_t = DEFAULT_ANALYSIS_MEGAPIXELS, value_name = "MP", allow_negative_numbers = true)]
     pub analysis_megapixels: f64,
 }
@@ -389,7 +390,7 @@ impl Analysis {
             "width": self.size.0,
             "height": self.size.1,
             "scale": self.size.0 as f64 / self.original.0 as f64,
-            "rule": "the photo had more pixels than --analysis-megapixels: masks, de-lighting, coordinates and reprojection ran on this area-downsampled copy (sRGB values averaged over each pixel's area); the networks saw the same input as at full resolution; pick, quad and mask.png are in the photo's own pixels, the diagnostics' pixel quantities (focal_px, companion_pick) in the analysis copy's",
+            "rule": "the photo had more pixels than --analysis-megapixels: masks, de-lighting, coordinates and reprojection ran on this area-downsampled copy (sRGB values averaged over each pixel's area); the networks saw the same input as at full resolution; pick, quad and mask.png are in the photo's own pixels, the diagnostics' pixel quantities (focal_px, companion_pick) in the analysis copy's; the texture's automatic size follows the analysed pixels' density",
         })
     }
 }
