@@ -1254,6 +1254,36 @@ pub fn to_planar(rgb: &Rgb32FImage) -> Vec<f32> {
 mod tests {
     use super::*;
 
+    #[test]
+    fn sixteen_bit_photos_decode_to_sixteen_bit_codes() {
+        // Every value of a 16-bit PNG comes out as `k / 65535` computed in
+        // f32, the codes `pipeline::SrgbDecode8` looks up (else each would
+        // cost a `powf`).
+        let img = image::ImageBuffer::<image::Rgb<u16>, Vec<u16>>::from_fn(256, 256, |x, y| {
+            let k = (y * 256 + x) as u16;
+            image::Rgb([k, k.wrapping_mul(7), u16::MAX - k])
+        });
+        let mut png = Vec::new();
+        image::DynamicImage::ImageRgb16(img)
+            .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+            .unwrap();
+        let p = decode(&png, Path::new("t.png"), &PhotoLimits::default()).unwrap();
+        assert_eq!(p.bit_depth, 16);
+        let lut = crate::pipeline::SrgbDecode8::new();
+        for (i, &v) in p.rgb.as_raw().iter().enumerate() {
+            let k = (v * 65535.0 + 0.5) as u32;
+            assert_eq!(
+                (k as f32 / 65535.0).to_bits(),
+                v.to_bits(),
+                "value {i}: {v}"
+            );
+            assert_eq!(
+                lut.decode(v).to_bits(),
+                picker_render::io::srgb_decode(v).to_bits()
+            );
+        }
+    }
+
     /// A TIFF-structured EXIF block: IFD0 with an orientation entry and the
     /// Exif IFD pointer, the Exif IFD with `FocalLengthIn35mmFilm` of type
     /// `ty` (3 SHORT, 4 LONG) and value `v`, in either byte order.

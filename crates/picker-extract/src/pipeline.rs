@@ -995,12 +995,15 @@ fn linear_and_luma(photo: &Image) -> (Image, Vec<f32>) {
 }
 
 /// [`picker_render::io::srgb_decode`] with the 256 values of 8-bit photos
-/// (`k / 255`, as the `image` crate converts them) looked up in a table of
-/// that function's own results: the same bits, without a `powf` per value.
+/// (`k / 255`, as the `image` crate converts them) and the 65 536 of 16-bit
+/// ones (`k / 65535`) looked up in tables of that function's own results:
+/// the same bits, without a `powf` per value.
 pub struct SrgbDecode8 {
     table: [f32; 256],
     /// The bits of `k / 255`.
     codes: [u32; 256],
+    /// `srgb_decode(k / 65535)`, made once per process.
+    table16: &'static [f32],
 }
 
 impl Default for SrgbDecode8 {
@@ -1009,12 +1012,23 @@ impl Default for SrgbDecode8 {
     }
 }
 
+/// `srgb_decode(k / 65535)` for every 16-bit code `k` (~1 ms, once).
+fn srgb_table16() -> &'static [f32] {
+    static TABLE: std::sync::OnceLock<Vec<f32>> = std::sync::OnceLock::new();
+    TABLE.get_or_init(|| {
+        (0..=u16::MAX)
+            .map(|k| picker_render::io::srgb_decode(f32::from(k) / 65535.0))
+            .collect()
+    })
+}
+
 impl SrgbDecode8 {
-    /// The table.
+    /// The tables.
     pub fn new() -> Self {
         Self {
             table: std::array::from_fn(|k| picker_render::io::srgb_decode(k as f32 / 255.0)),
             codes: std::array::from_fn(|k| (k as f32 / 255.0).to_bits()),
+            table16: srgb_table16(),
         }
     }
 
@@ -1028,6 +1042,11 @@ impl SrgbDecode8 {
             // Bit equality: −0.0 is not 0/255 (it decodes to −0.0).
             if self.codes[k] == v.to_bits() {
                 return self.table[k];
+            }
+            // A 16-bit code: `k / 65535` computed as the table's was.
+            let k = ((v * 65535.0 + 0.5) as usize).min(65535);
+            if (k as f32 / 65535.0).to_bits() == v.to_bits() {
+                return self.table16[k];
             }
         }
         picker_render::io::srgb_decode(v)
@@ -5448,7 +5467,7 @@ mod tests {
         let lut = SrgbDecode8::new();
         let mut rng = picker_tensor::Rng::new(4);
         let mut values: Vec<f32> = (0..=255).map(|k| k as f32 / 255.0).collect();
-        values.extend((0..=65535).step_by(7).map(|k| k as f32 / 65535.0));
+        values.extend((0..=65535).map(|k| k as f32 / 65535.0));
         values.extend(rng.uniform_vec(10_000, -0.5, 1.5));
         values.extend([f32::NAN, f32::INFINITY, -0.0, 1.0 + f32::EPSILON, -1e-30]);
         for v in values {
