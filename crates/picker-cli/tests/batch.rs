@@ -1141,3 +1141,37 @@ fn masks_give_each_photo_its_material() {
     assert_eq!(o.status.code(), Some(2), "{err}");
     assert!(err.contains("--picks has 2 picks"), "{err}");
 }
+
+/// `--analysis-megapixels` in a batch: the CSV's picks are the photos' own
+/// pixels, and so are the outputs (the pick and mask.png), whatever size
+/// the extraction worked at.
+#[test]
+fn picks_stay_in_the_photos_pixels_when_analysed_smaller() {
+    let tmp = tempfile::tempdir().unwrap();
+    let input = tmp.path().join("photos");
+    std::fs::create_dir_all(&input).unwrap();
+    std::fs::copy(
+        repo().join("fixtures/examples/coffee.jpg"),
+        input.join("coffee.jpg"),
+    )
+    .unwrap();
+    let picks = tmp.path().join("picks.csv");
+    std::fs::write(&picks, "file,x,y\ncoffee.jpg,319,212\n").unwrap();
+    let out = tmp.path().join("out");
+    let o = picker()
+        .args(["batch", input.to_str().unwrap(), "--out"])
+        .arg(&out)
+        .args(["--picks", picks.to_str().unwrap()])
+        .args(["--weights", &weights(), "--max-size", "32", "--quiet"])
+        .args(["--analysis-megapixels", "0.02"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let dir = out.join("coffee.jpg.material/material_0");
+    let m: Value =
+        serde_json::from_slice(&std::fs::read(dir.join("material.json")).unwrap()).unwrap();
+    assert_eq!(m["pick"], serde_json::json!([319, 212]), "{}", m["pick"]);
+    assert_eq!(m["photo"]["analysis"]["width"], 173, "{}", m["photo"]);
+    let mask = image::open(dir.join("mask.png")).unwrap();
+    assert_eq!((mask.width(), mask.height()), (320, 213));
+}
