@@ -127,6 +127,53 @@ pub fn area_plane(src: &[f32], w: usize, h: usize, dw: usize, dh: usize) -> Vec<
     out
 }
 
+/// Area (box) downsampling of interleaved RGB (`[h, w, 3]`, row-major, as
+/// a decoded photo holds it) into planar RGB (`[3, dh, dw]`), each value the
+/// coverage-weighted mean of the source values under its area (as
+/// [`area_plane`] per channel), passed through `finish` as it is stored.
+/// Rows in parallel, each value one fixed-order sum (the same bits for any
+/// thread count); the source is read once, without a planar copy of it.
+pub fn area_interleaved_rgb(
+    rgb: &[f32],
+    (w, h): (usize, usize),
+    (dw, dh): (usize, usize),
+    finish: impl Fn(f32) -> f32 + Sync,
+) -> Vec<f32> {
+    assert_eq!(rgb.len(), 3 * w * h, "interleaved RGB length");
+    let (xs, ys) = (area_spans(w, dw), area_spans(h, dh));
+    let n = dw * dh;
+    let mut planes = vec![0.0f32; 3 * n];
+    let (r, rest) = planes.split_at_mut(n);
+    let (g, b) = rest.split_at_mut(n);
+    let row = dw.max(1);
+    r.par_chunks_mut(row)
+        .zip(g.par_chunks_mut(row))
+        .zip(b.par_chunks_mut(row))
+        .zip(ys.par_iter())
+        .for_each(|(((r, g), b), ry)| {
+            let mut acc = vec![[0.0f32; 3]; dw];
+            for &(sy, wy) in ry {
+                let src = &rgb[3 * sy * w..3 * (sy + 1) * w];
+                for (a, rx) in acc.iter_mut().zip(&xs) {
+                    let mut s = [0.0f32; 3];
+                    for &(sx, wx) in rx {
+                        let p = &src[3 * sx..3 * sx + 3];
+                        for c in 0..3 {
+                            s[c] += p[c] * wx;
+                        }
+                    }
+                    for c in 0..3 {
+                        a[c] += s[c] * wy;
+                    }
+                }
+            }
+            for (x, a) in acc.iter().enumerate() {
+                (r[x], g[x], b[x]) = (finish(a[0]), finish(a[1]), finish(a[2]));
+            }
+        });
+    planes
+}
+
 /// Area downsampling of every plane of `img`.
 pub fn area(img: &Image, dw: usize, dh: usize) -> Image {
     per_plane(img, dw, dh, area_plane)
@@ -462,6 +509,69 @@ pub fn upsample_uv_where(uv: &Image, weight: &[f32], dw: usize, dh: usize, keep:
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Each output the mean of the source over its area, by the overlap of
+    /// every source pixel, in f64.
+    fn area_reference(rgb: &[f32], (w, h): (usize, usize), (dw, dh): (usize, usize)) -> Vec<f64> {
+        let overlap = |i: usize, n: usize, dn: usize, k: usize| {
+            let s = n as f64 / dn as f64;
+            let (a, b) = (i as f64 * s, (i + 1) as f64 * s);
+            ((b.min(k as f64 + 1.0) - a.max(k as f64)).max(0.0)) / s
+        };
+        let mut out = vec![0.0; 3 * dw * dh];
+        for c in 0..3 {
+            for y in 0..dh {
+                for x in 0..dw {
+                    let mut v = 0.0;
+                    for sy in 0..h {
+                        for sx in 0..w {
+                            v += f64::from(rgb[3 * (sy * w + sx) + c])
+                                * overlap(x, w, dw, sx)
+                                * overlap(y, h, dh, sy);
+                        }
+                    }
+                    out[c * dw * dh + y * dw + x] = v;
+                }
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn interleaved_area_average_matches_its_definition_and_the_planes() {
+        let mut rng = picker_tensor::Rng::new(31);
+        // Integer and odd ratios, one side unchanged, a single column.
+        for (w, h, dw, dh) in [
+            (12, 8, 6, 4),
+            (13, 7, 5, 3),
+            (17, 11, 10, 11),
+            (1, 9, 1, 4),
+            (23, 19, 7, 6),
+        ] {
+            let rgb = rng.uniform_vec(3 * w * h, 0.0, 1.0);
+            let got = area_interleaved_rgb(&rgb, (w, h), (dw, dh), |v| v);
+            let want = area_reference(&rgb, (w, h), (dw, dh));
+            for (g, r) in got.iter().zip(&want) {
+                assert!(
+                    (f64::from(*g) - r).abs() < 1e-5,
+                    "{w}x{h} -> {dw}x{dh}: {g} vs {r}"
+                );
+            }
+            // The planes' own area average, channel by channel.
+            for c in 0..3 {
+                let plane: Vec<f32> = (0..w * h).map(|i| rgb[3 * i + c]).collect();
+                let p = area_plane(&plane, w, h, dw, dh);
+                for (a, b) in p.iter().zip(&got[c * dw * dh..(c + 1) * dw * dh]) {
+                    assert!((a - b).abs() < 1e-6, "{w}x{h} -> {dw}x{dh} channel {c}");
+                }
+            }
+            // `finish` applies to every value.
+            let shifted = area_interleaved_rgb(&rgb, (w, h), (dw, dh), |v| v + 1.0);
+            for (a, b) in shifted.iter().zip(&got) {
+                assert_eq!(*a, b + 1.0);
+            }
+        }
+    }
     use picker_tensor::Rng;
 
     /// The Catmull-Rom kernel `k(x)` at offset `x` from a tap (support 2).
