@@ -1257,7 +1257,7 @@ mod tests {
     #[test]
     fn sixteen_bit_photos_decode_to_sixteen_bit_codes() {
         // Every value of a 16-bit PNG comes out as `k / 65535` computed in
-        // f32, the codes `pipeline::SrgbDecode8` looks up (else each would
+        // f32, the codes `pipeline::SrgbDecodeTable` looks up (else each would
         // cost a `powf`).
         let img = image::ImageBuffer::<image::Rgb<u16>, Vec<u16>>::from_fn(256, 256, |x, y| {
             let k = (y * 256 + x) as u16;
@@ -1269,7 +1269,7 @@ mod tests {
             .unwrap();
         let p = decode(&png, Path::new("t.png"), &PhotoLimits::default()).unwrap();
         assert_eq!(p.bit_depth, 16);
-        let lut = crate::pipeline::SrgbDecode8::new();
+        let lut = crate::pipeline::SrgbDecodeTable::new();
         for (i, &v) in p.rgb.as_raw().iter().enumerate() {
             let k = (v * 65535.0 + 0.5) as u32;
             assert_eq!(

@@ -956,10 +956,10 @@ fn opaque_area(linear: &Image, weight: &[f32], share: &[f32], w: usize, h: usize
 
 /// `photo.map(srgb_decode)` and [`crate::guided::luma`]`(photo)` of a 3-channel
 /// photo in one pass, rows in parallel: 8-bit values decoded from a table
-/// ([`SrgbDecode8`]), the luma by the same expression (per value: the same
+/// ([`SrgbDecodeTable`]), the luma by the same expression (per value: the same
 /// bits; `tests::fused_linear_and_luma_match`).
 fn linear_and_luma(photo: &Image) -> (Image, Vec<f32>) {
-    let lut = SrgbDecode8::new();
+    let lut = SrgbDecodeTable::new();
     let (w, n) = (photo.width.max(1), photo.plane_len());
     let mut data = vec![0.0f32; 3 * n];
     let mut luma = vec![0.0f32; n];
@@ -998,7 +998,7 @@ fn linear_and_luma(photo: &Image) -> (Image, Vec<f32>) {
 /// (`k / 255`, as the `image` crate converts them) and the 65 536 of 16-bit
 /// ones (`k / 65535`) looked up in tables of that function's own results:
 /// the same bits, without a `powf` per value.
-pub struct SrgbDecode8 {
+pub struct SrgbDecodeTable {
     table: [f32; 256],
     /// The bits of `k / 255`.
     codes: [u32; 256],
@@ -1006,7 +1006,7 @@ pub struct SrgbDecode8 {
     table16: &'static [f32],
 }
 
-impl Default for SrgbDecode8 {
+impl Default for SrgbDecodeTable {
     fn default() -> Self {
         Self::new()
     }
@@ -1022,7 +1022,7 @@ fn srgb_table16() -> &'static [f32] {
     })
 }
 
-impl SrgbDecode8 {
+impl SrgbDecodeTable {
     /// The tables.
     pub fn new() -> Self {
         Self {
@@ -3623,7 +3623,7 @@ mod tests {
         }
         // The working photo averages the opaque pixels only: the half-opaque
         // column is the opaque colour, not a blend with the grey fill.
-        let lin = SrgbDecode8::new().decode(0.8);
+        let lin = SrgbDecodeTable::new().decode(0.8);
         for y in 0..h {
             let v = p.photo_work.at(0, y * w + 10);
             assert!((v - lin).abs() < 1e-6, "row {y}: {v} vs {lin}");
@@ -5464,7 +5464,7 @@ mod tests {
 
     #[test]
     fn srgb_table_matches_the_function() {
-        let lut = SrgbDecode8::new();
+        let lut = SrgbDecodeTable::new();
         let mut rng = picker_tensor::Rng::new(4);
         let mut values: Vec<f32> = (0..=255).map(|k| k as f32 / 255.0).collect();
         values.extend((0..=65535).map(|k| k as f32 / 65535.0));
