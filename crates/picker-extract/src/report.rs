@@ -332,17 +332,6 @@ pub fn compose_lazy_sheet(tiles: &[LazyTile<'_>], columns: usize, tile_height: u
     sheet
 }
 
-/// Draws a pick marker centred on `(x, y)` (pixels, x right, y down, pixel
-/// `(row, col)` centred at `(col + 0.5, row + 0.5)`): a ring of radius
-/// `radius` (at least 3) and four crosshair arms from `0.4·radius` to
-/// `1.6·radius`, white with a black outline, so it is visible on any
-/// background. The centre itself is left untouched so the picked pixel stays
-/// visible. Works on any channel count; clipped to the image.
-pub fn draw_marker(img: &mut Image, x: f32, y: f32, radius: f32) {
-    let h = img.height;
-    draw_marker_in(img, h, 0, x, y, radius);
-}
-
 /// The rows `r0..r1` of an image `h` rows tall that [`draw_marker`] may
 /// change (`None`: none), and the marker's outer radius `r`.
 fn marker_rows(h: usize, x: f32, y: f32, radius: f32) -> Option<(usize, usize, f32)> {
@@ -360,18 +349,14 @@ fn marker_rows(h: usize, x: f32, y: f32, radius: f32) -> Option<(usize, usize, f
     Some((r0, r1, r))
 }
 
-/// [`draw_marker`] on a window of an image `full_height` rows tall: `img`
-/// holds its rows `first_row..first_row + img.height`, and only those are
-/// drawn (the same pixels as drawing on the whole image and cutting the window).
-fn draw_marker_in(
-    img: &mut Image,
-    full_height: usize,
-    first_row: usize,
-    x: f32,
-    y: f32,
-    radius: f32,
-) {
-    let Some((r0, r1, r)) = marker_rows(full_height, x, y, radius) else {
+/// Draws a pick marker centred on `(x, y)` (pixels, x right, y down, pixel
+/// `(row, col)` centred at `(col + 0.5, row + 0.5)`): a ring of radius
+/// `radius` (at least 3) and four crosshair arms from `0.4·radius` to
+/// `1.6·radius`, white with a black outline, so it is visible on any
+/// background. The centre itself is left untouched so the picked pixel stays
+/// visible. Works on any channel count; clipped to the image.
+pub fn draw_marker(img: &mut Image, x: f32, y: f32, radius: f32) {
+    let Some((r0, r1, r)) = marker_rows(img.height, x, y, radius) else {
         return;
     };
     let (w, n) = (img.width, img.plane_len());
@@ -395,7 +380,7 @@ fn draw_marker_in(
         };
         ring.min(along(dx, dy)).min(along(dy, dx))
     };
-    for row in r0.max(first_row)..r1.min(first_row + img.height) {
+    for row in r0..r1 {
         for col in c0..c1 {
             let d = stroke_distance(col as f32 + 0.5 - x, row as f32 + 0.5 - y);
             let value = if d <= inner {
@@ -406,7 +391,7 @@ fn draw_marker_in(
                 continue;
             };
             for ch in 0..img.channels {
-                img.data[ch * n + (row - first_row) * w + col] = value;
+                img.data[ch * n + row * w + col] = value;
             }
         }
     }
