@@ -1405,11 +1405,7 @@ pub fn write_materials(
         let at = match &analysis {
             Some(a) => {
                 let [x, y] = *pk;
-                if x as usize >= ow || y as usize >= oh {
-                    bail!(
-                        "{label}: pick ({x}, {y}) is outside the {ow}x{oh} photo (x must be < {ow}, y < {oh})"
-                    );
-                }
+                pipeline::check_pick_inside(*pk, (ow, oh)).with_context(|| label.clone())?;
                 let at = a.pick(*pk);
                 prepared.check_pick(at).map_err(|_| {
                     anyhow!(

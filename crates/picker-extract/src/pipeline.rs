@@ -542,12 +542,8 @@ impl Prepared {
     /// pixel ([`Inputs::opaque`]).
     pub fn check_pick(&self, pick: [u32; 2]) -> Result<()> {
         let (fw, fh) = self.photo_size();
+        check_pick_inside(pick, (fw, fh))?;
         let [x, y] = pick.map(|v| v as usize);
-        if x >= fw || y >= fh {
-            return Err(Error::Invalid(format!(
-                "pick ({x}, {y}) is outside the {fw}x{fh} photo (x must be < {fw}, y < {fh})"
-            )));
-        }
         if let Some(o) = &self.inputs.opaque {
             if !o.data[y * fw + x] {
                 return Err(Error::Invalid(format!(
@@ -1051,6 +1047,19 @@ impl SrgbDecodeTable {
         }
         picker_render::io::srgb_decode(v)
     }
+}
+
+/// Checks that `pick` (photo pixels) lies inside a photo of `(width,
+/// height)` pixels ([`Prepared::check_pick`]'s first check, for a caller that
+/// knows the photo at another size than the one prepared).
+pub fn check_pick_inside(pick: [u32; 2], (w, h): (usize, usize)) -> Result<()> {
+    let [x, y] = pick.map(|v| v as usize);
+    if x >= w || y >= h {
+        return Err(Error::Invalid(format!(
+            "pick ({x}, {y}) is outside the {w}x{h} photo (x must be < {w}, y < {h})"
+        )));
+    }
+    Ok(())
 }
 
 /// How the UV mode was decided (for material.json).
