@@ -5,9 +5,11 @@
 //! coordinates are those of the photo as a viewer shows it.
 //!
 //! - **Formats.** PNG, JPEG, TIFF, WebP and BMP at any bit depth the `image`
-//!   crate reads (1–16 bit integer, and 32-bit float TIFF), plus OpenEXR and
-//!   Radiance HDR. The format is found from the *content*, never from the file
-//!   name: a PNG named `.jpg` decodes fine and [`Photo::format`] says `"png"`
+//!   crate reads (1–16 bit integer, and 32-bit float TIFF), float TIFFs of
+//!   16, 32 or 64 bits it does not (read with the `tiff` crate), plus
+//!   OpenEXR and Radiance HDR. The format is found from the *content*, never
+//!   from the file name: a PNG named `.jpg` decodes fine and
+//!   [`Photo::format`] says `"png"`
 //!   (compare with [`format_for_extension`] to warn about it). A mislabelled
 //!   file only fails when its content does not decode, and then the message
 //!   says both what it is named and what it contains.
@@ -632,34 +634,16 @@ fn decode_image(bytes: &[u8], label: &Path, limits: &PhotoLimits) -> Result<Deco
     let mut header_limits = image::Limits::no_limits();
     header_limits.max_alloc = Some(limits.max_alloc);
     reader.limits(header_limits);
-    let mut decoder = reader.into_decoder().map_err(fail)?;
+    let mut decoder = match reader.into_decoder() {
+        Ok(d) => d,
+        // Float samples the `image` crate does not read (16 and 64 bits, 32-bit grey).
+        Err(e @ ImageError::Unsupported(_)) if kind.image == ImageFormat::Tiff => {
+            return float_tiff(bytes, label, limits, kind).unwrap_or_else(|| Err(fail(e)));
+        }
+        Err(e) => return Err(fail(e)),
+    };
     let (width, height) = decoder.dimensions();
-    if width == 0 || height == 0 {
-        return Err(PhotoError::NoPixels {
-            path: path(),
-            width,
-            height,
-        });
-    }
-    let pixels = width as u64 * height as u64;
-    if pixels > limits.max_pixels {
-        return Err(PhotoError::TooManyPixels {
-            path: path(),
-            width,
-            height,
-            max_pixels: limits.max_pixels,
-        });
-    }
-    let needed = pixels.saturating_mul(PEAK_BYTES_PER_PIXEL);
-    if needed > limits.max_alloc {
-        return Err(PhotoError::TooMuchMemory {
-            path: path(),
-            width,
-            height,
-            needed,
-            max_alloc: limits.max_alloc,
-        });
-    }
+    check_dimensions(width, height, label, limits)?;
     let mut decode_limits = image::Limits::no_limits();
     let side = u32::try_from(limits.max_pixels).unwrap_or(u32::MAX);
     decode_limits.max_image_width = Some(side);
@@ -727,6 +711,179 @@ fn decode_image(bytes: &[u8], label: &Path, limits: &PhotoLimits) -> Result<Deco
         focal_35mm,
         icc,
     })
+}
+
+/// Refuses a photo of `width × height` pixels that has none, more than
+/// [`PhotoLimits::max_pixels`], or needs more than [`PhotoLimits::max_alloc`]
+/// bytes to decode ([`PEAK_BYTES_PER_PIXEL`] a pixel).
+fn check_dimensions(
+    width: u32,
+    height: u32,
+    label: &Path,
+    limits: &PhotoLimits,
+) -> Result<(), PhotoError> {
+    let path = || label.to_path_buf();
+    if width == 0 || height == 0 {
+        return Err(PhotoError::NoPixels {
+            path: path(),
+            width,
+            height,
+        });
+    }
+    let pixels = width as u64 * height as u64;
+    if pixels > limits.max_pixels {
+        return Err(PhotoError::TooManyPixels {
+            path: path(),
+            width,
+            height,
+            max_pixels: limits.max_pixels,
+        });
+    }
+    let needed = pixels.saturating_mul(PEAK_BYTES_PER_PIXEL);
+    if needed > limits.max_alloc {
+        return Err(PhotoError::TooMuchMemory {
+            path: path(),
+            width,
+            height,
+            needed,
+            max_alloc: limits.max_alloc,
+        });
+    }
+    Ok(())
+}
+
+/// A TIFF of IEEE float samples that the `image` crate does not read (16 or
+/// 64 bits, and 32-bit grey; grey, grey + alpha, RGB or RGBA, as scientific
+/// and HDR tools write them), decoded with the `tiff` crate into 32-bit float
+/// pixels: from there it is a float TIFF like a 32-bit one (values clamped
+/// to `[0, 1]`, NaN 0; its ICC profile, orientation and EXIF focal length
+/// read as for other TIFFs). `None` when the file is not such a TIFF (the
+/// caller then reports the `image` crate's error).
+fn float_tiff(
+    bytes: &[u8],
+    label: &Path,
+    limits: &PhotoLimits,
+    kind: Kind,
+) -> Option<Result<Decoded, PhotoError>> {
+    use tiff::decoder::{Decoder, DecodingResult};
+    use tiff::tags::Tag;
+    use tiff::ColorType;
+    let mut dec = Decoder::new(Cursor::new(bytes)).ok()?;
+    let formats = dec
+        .find_tag_unsigned_vec::<u16>(Tag::SampleFormat)
+        .ok()
+        .flatten()?;
+    // Sample format 3: IEEE floating point.
+    if formats.is_empty() || formats.iter().any(|&f| f != 3) {
+        return None;
+    }
+    let (channels, bits) = match dec.colortype().ok()? {
+        ColorType::Gray(b) => (1u8, b),
+        ColorType::GrayA(b) => (2, b),
+        ColorType::RGB(b) => (3, b),
+        ColorType::RGBA(b) => (4, b),
+        _ => return None,
+    };
+    if !matches!(bits, 16 | 32 | 64) {
+        return None;
+    }
+    let (width, height) = dec.dimensions().ok()?;
+    Some((|| {
+        check_dimensions(width, height, label, limits)?;
+        // The decoded samples and their f32 copy are held together (64-bit
+        // RGBA: 48 B/px, above PEAK_BYTES_PER_PIXEL).
+        let pixels = u64::from(width) * u64::from(height);
+        let needed = pixels.saturating_mul(u64::from(channels) * (u64::from(bits) / 8 + 4));
+        if needed > limits.max_alloc {
+            return Err(PhotoError::TooMuchMemory {
+                path: label.to_path_buf(),
+                width,
+                height,
+                needed,
+                max_alloc: limits.max_alloc,
+            });
+        }
+        let mut tl = tiff::decoder::Limits::default();
+        let max = usize::try_from(limits.max_alloc).unwrap_or(usize::MAX);
+        tl.decoding_buffer_size = max;
+        tl.intermediate_buffer_size = max;
+        let mut dec = dec.with_limits(tl);
+        let failed = |e: tiff::TiffError| PhotoError::Corrupt {
+            path: label.to_path_buf(),
+            format: kind.display,
+            detail: one_line(&e.to_string()),
+        };
+        let values: Vec<f32> = match dec.read_image().map_err(failed)? {
+            DecodingResult::F16(v) => v.iter().map(|x| x.to_f32()).collect(),
+            DecodingResult::F32(v) => v,
+            DecodingResult::F64(v) => v.iter().map(|&x| x as f32).collect(),
+            _ => {
+                return Err(PhotoError::Corrupt {
+                    path: label.to_path_buf(),
+                    format: kind.display,
+                    detail: format!("{bits}-bit float samples decoded as another type"),
+                })
+            }
+        };
+        let n = width as usize * height as usize;
+        let short = || PhotoError::Truncated {
+            path: label.to_path_buf(),
+            format: kind.display,
+            detail: format!(
+                "{} samples for {width}x{height} pixels of {channels} channels",
+                values.len()
+            ),
+        };
+        if values.len() < n * channels as usize {
+            return Err(short());
+        }
+        // Grey is given as RGB (as `image` gives 32-bit grey), alpha kept.
+        let img = match channels {
+            1 => DynamicImage::ImageRgb32F(
+                image::ImageBuffer::from_raw(
+                    width,
+                    height,
+                    values[..n].iter().flat_map(|&g| [g; 3]).collect(),
+                )
+                .ok_or_else(short)?,
+            ),
+            2 => DynamicImage::ImageRgba32F(
+                image::ImageBuffer::from_raw(
+                    width,
+                    height,
+                    values[..2 * n]
+                        .chunks_exact(2)
+                        .flat_map(|ga| [ga[0], ga[0], ga[0], ga[1]])
+                        .collect(),
+                )
+                .ok_or_else(short)?,
+            ),
+            3 => DynamicImage::ImageRgb32F(
+                image::ImageBuffer::from_raw(width, height, values[..3 * n].to_vec())
+                    .ok_or_else(short)?,
+            ),
+            _ => DynamicImage::ImageRgba32F(
+                image::ImageBuffer::from_raw(width, height, values[..4 * n].to_vec())
+                    .ok_or_else(short)?,
+            ),
+        };
+        let orientation = dec
+            .find_tag_unsigned::<u8>(Tag::Orientation)
+            .ok()
+            .flatten()
+            .and_then(Orientation::from_exif)
+            .unwrap_or(Orientation::NoTransforms);
+        let icc = dec.get_tag_u8_vec(Tag::IccProfile).ok();
+        Ok(Decoded {
+            img,
+            kind,
+            orientation,
+            bit_depth: u16::from(bits),
+            channels_in_file: channels,
+            focal_35mm: exif_focal_35mm(bytes),
+            icc,
+        })
+    })())
 }
 
 /// Converts `rgb` (interleaved RGB, sRGB-encoded-looking values in
@@ -1385,6 +1542,156 @@ mod tests {
         assert_eq!(o.len() as u32, pixels_at);
         o.extend((0..w * h * 3).map(|i| (i * 10) as u8));
         o
+    }
+
+    /// A TIFF of `w × h` pixels of `C` samples written by the `tiff` crate.
+    fn encoded<C: tiff::encoder::colortype::ColorType>(w: u32, h: u32, data: &[C::Inner]) -> Vec<u8>
+    where
+        [C::Inner]: tiff::encoder::TiffValue,
+    {
+        let mut buf = Cursor::new(Vec::new());
+        let mut enc = tiff::encoder::TiffEncoder::new(&mut buf).unwrap();
+        enc.write_image::<C>(w, h, data).unwrap();
+        buf.into_inner()
+    }
+
+    /// An uncompressed little-endian RGB TIFF of 16-bit float samples (the
+    /// `tiff` crate writes none).
+    fn f16_tiff(w: u32, h: u32, values: &[half::f16]) -> Vec<u8> {
+        let entries: [(u16, u16, u32, u32); 10] = [
+            (256, 3, 1, w),         // ImageWidth
+            (257, 3, 1, h),         // ImageLength
+            (258, 3, 3, 0),         // BitsPerSample -> the three below
+            (259, 3, 1, 1),         // no compression
+            (262, 3, 1, 2),         // RGB
+            (273, 4, 1, 0),         // StripOffsets -> the pixels
+            (277, 3, 1, 3),         // SamplesPerPixel
+            (278, 3, 1, h),         // RowsPerStrip
+            (279, 4, 1, w * h * 6), // StripByteCounts
+            (339, 3, 3, 0),         // SampleFormat -> the three below
+        ];
+        let ifd_len = 2 + 12 * entries.len() as u32 + 4;
+        let (bits_at, formats_at) = (8 + ifd_len, 8 + ifd_len + 6);
+        let pixels_at = formats_at + 6;
+        let mut o = b"II*\0".to_vec();
+        o.extend(8u32.to_le_bytes());
+        o.extend((entries.len() as u16).to_le_bytes());
+        for (tag, ty, count, v) in entries {
+            let v = match tag {
+                258 => bits_at,
+                273 => pixels_at,
+                339 => formats_at,
+                _ => v,
+            };
+            o.extend(tag.to_le_bytes());
+            o.extend(ty.to_le_bytes());
+            o.extend(count.to_le_bytes());
+            if ty == 3 && count == 1 {
+                o.extend((v as u16).to_le_bytes());
+                o.extend([0, 0]);
+            } else {
+                o.extend(v.to_le_bytes());
+            }
+        }
+        o.extend(0u32.to_le_bytes());
+        for v in [16u16, 16, 16, 3, 3, 3] {
+            o.extend(v.to_le_bytes());
+        }
+        assert_eq!(o.len() as u32, pixels_at);
+        for v in values {
+            o.extend(v.to_bits().to_le_bytes());
+        }
+        o
+    }
+
+    #[test]
+    fn float_tiffs_of_16_and_64_bits_read_as_32_bit_ones() {
+        // Values beyond [0, 1] and a NaN (clamped, 0), alpha partly below ½.
+        let (w, h) = (7u32, 5u32);
+        let n = (w * h) as usize;
+        let mut rng = picker_tensor::Rng::new(67);
+        let mut v: Vec<f32> = (0..4 * n).map(|_| rng.uniform(-0.2, 1.2)).collect();
+        v[5] = f32::NAN;
+        let wide = |x: &[f32]| x.iter().map(|&t| f64::from(t)).collect::<Vec<f64>>();
+        let limits = PhotoLimits::default();
+        let read = |b: &[u8]| decode(b, Path::new("t.tif"), &limits).unwrap();
+        let same = |a: &Photo, b: &Photo, bits: u8| {
+            let raw = |p: &Photo| {
+                p.rgb
+                    .as_raw()
+                    .iter()
+                    .map(|x| x.to_bits())
+                    .collect::<Vec<_>>()
+            };
+            assert_eq!(raw(a), raw(b));
+            assert_eq!(a.opaque, b.opaque);
+            assert_eq!(a.channels_in_file, b.channels_in_file);
+            assert_eq!((a.bit_depth, b.bit_depth), (bits, 32));
+        };
+        use tiff::encoder::colortype as ct;
+        let rgb = &v[..3 * n];
+        same(
+            &read(&encoded::<ct::RGB64Float>(w, h, &wide(rgb))),
+            &read(&encoded::<ct::RGB32Float>(w, h, rgb)),
+            64,
+        );
+        // Grey (32-bit grey too, which `image` does not read) as its RGB.
+        let grey = &v[..n];
+        let as_rgb: Vec<f32> = grey.iter().flat_map(|&g| [g; 3]).collect();
+        let rgb_of_grey = read(&encoded::<ct::RGB32Float>(w, h, &as_rgb));
+        for (bits, g) in [
+            (64, read(&encoded::<ct::Gray64Float>(w, h, &wide(grey)))),
+            (32, read(&encoded::<ct::Gray32Float>(w, h, grey))),
+        ] {
+            assert_eq!(g.channels_in_file, 1);
+            assert_eq!(g.bit_depth, bits);
+            let raw = |p: &Photo| {
+                p.rgb
+                    .as_raw()
+                    .iter()
+                    .map(|x| x.to_bits())
+                    .collect::<Vec<_>>()
+            };
+            assert_eq!(raw(&g), raw(&rgb_of_grey));
+        }
+        let a = read(&encoded::<ct::RGBA64Float>(w, h, &wide(&v)));
+        same(&a, &read(&encoded::<ct::RGBA32Float>(w, h, &v)), 64);
+        assert!(a
+            .opaque
+            .as_ref()
+            .is_some_and(|o| o.contains(&false) && o.contains(&true)));
+        // 16-bit floats: the same values rounded to half precision.
+        let halves: Vec<half::f16> = rgb.iter().map(|&x| half::f16::from_f32(x)).collect();
+        let back: Vec<f32> = halves.iter().map(|x| x.to_f32()).collect();
+        same(
+            &read(&f16_tiff(w, h, &halves)),
+            &read(&encoded::<ct::RGB32Float>(w, h, &back)),
+            16,
+        );
+        // The size limits hold for them too.
+        let small = PhotoLimits {
+            max_pixels: n as u64 - 1,
+            ..PhotoLimits::default()
+        };
+        let e = decode(
+            &encoded::<ct::RGB64Float>(w, h, &wide(rgb)),
+            Path::new("t.tif"),
+            &small,
+        )
+        .unwrap_err();
+        assert!(matches!(e, PhotoError::TooManyPixels { .. }), "{e}");
+        // 64-bit RGBA needs 48 bytes a pixel while it is converted.
+        let tight = PhotoLimits {
+            max_alloc: 40 * n as u64,
+            ..PhotoLimits::default()
+        };
+        let e = decode(
+            &encoded::<ct::RGBA64Float>(w, h, &wide(&v)),
+            Path::new("t.tif"),
+            &tight,
+        )
+        .unwrap_err();
+        assert!(matches!(e, PhotoError::TooMuchMemory { .. }), "{e}");
     }
 
     #[test]
