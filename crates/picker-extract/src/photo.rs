@@ -1485,6 +1485,30 @@ mod tests {
         o
     }
 
+    /// Appends a little-endian IFD of `entries` (tag, type, count, value;
+    /// `at(tag)` replaces the value of the entries that point elsewhere in the
+    /// file) and the zero offset of the next one.
+    fn push_ifd(
+        o: &mut Vec<u8>,
+        entries: &[(u16, u16, u32, u32)],
+        at: impl Fn(u16) -> Option<u32>,
+    ) {
+        o.extend((entries.len() as u16).to_le_bytes());
+        for &(tag, ty, count, v) in entries {
+            let v = at(tag).unwrap_or(v);
+            o.extend(tag.to_le_bytes());
+            o.extend(ty.to_le_bytes());
+            o.extend(count.to_le_bytes());
+            if ty == 3 && count == 1 {
+                o.extend((v as u16).to_le_bytes());
+                o.extend([0, 0]);
+            } else {
+                o.extend(v.to_le_bytes());
+            }
+        }
+        o.extend(0u32.to_le_bytes());
+    }
+
     /// A 4×2 uncompressed 8-bit RGB TIFF file whose IFD0 points to an Exif
     /// IFD stating `FocalLengthIn35mmFilm` = `f35` (little-endian), as a
     /// camera writes it: the file is its own EXIF structure.
@@ -1510,25 +1534,12 @@ mod tests {
         let pixels_at = exif_at + exif_len;
         let mut o = b"II*\0".to_vec();
         o.extend(ifd0.to_le_bytes());
-        o.extend((entries.len() as u16).to_le_bytes());
-        for (tag, ty, count, v) in entries {
-            let v = match tag {
-                258 => bits_at,
-                273 => pixels_at,
-                0x8769 => exif_at,
-                _ => v,
-            };
-            o.extend(tag.to_le_bytes());
-            o.extend(ty.to_le_bytes());
-            o.extend(count.to_le_bytes());
-            if ty == 3 && count == 1 {
-                o.extend((v as u16).to_le_bytes());
-                o.extend([0, 0]);
-            } else {
-                o.extend(v.to_le_bytes());
-            }
-        }
-        o.extend(0u32.to_le_bytes());
+        push_ifd(&mut o, &entries, |tag| match tag {
+            258 => Some(bits_at),
+            273 => Some(pixels_at),
+            0x8769 => Some(exif_at),
+            _ => None,
+        });
         for _ in 0..3 {
             o.extend(8u16.to_le_bytes());
         }
@@ -1575,25 +1586,12 @@ mod tests {
         let pixels_at = formats_at + 6;
         let mut o = b"II*\0".to_vec();
         o.extend(8u32.to_le_bytes());
-        o.extend((entries.len() as u16).to_le_bytes());
-        for (tag, ty, count, v) in entries {
-            let v = match tag {
-                258 => bits_at,
-                273 => pixels_at,
-                339 => formats_at,
-                _ => v,
-            };
-            o.extend(tag.to_le_bytes());
-            o.extend(ty.to_le_bytes());
-            o.extend(count.to_le_bytes());
-            if ty == 3 && count == 1 {
-                o.extend((v as u16).to_le_bytes());
-                o.extend([0, 0]);
-            } else {
-                o.extend(v.to_le_bytes());
-            }
-        }
-        o.extend(0u32.to_le_bytes());
+        push_ifd(&mut o, &entries, |tag| match tag {
+            258 => Some(bits_at),
+            273 => Some(pixels_at),
+            339 => Some(formats_at),
+            _ => None,
+        });
         for v in [16u16, 16, 16, 3, 3, 3] {
             o.extend(v.to_le_bytes());
         }
