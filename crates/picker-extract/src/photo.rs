@@ -753,7 +753,7 @@ fn check_dimensions(
 }
 
 /// A TIFF of IEEE float samples that the `image` crate does not read (16 or
-/// 64 bits, and 32-bit grey; grey, grey + alpha, RGB or RGBA, as scientific
+/// 64 bits, and 32-bit grey; grey, RGB or RGBA, as scientific
 /// and HDR tools write them), decoded with the `tiff` crate into 32-bit float
 /// pixels: from there it is a float TIFF like a 32-bit one (values clamped
 /// to `[0, 1]`, NaN 0; its ICC profile, orientation and EXIF focal length
@@ -779,7 +779,6 @@ fn float_tiff(
     }
     let (channels, bits) = match dec.colortype().ok()? {
         ColorType::Gray(b) => (1u8, b),
-        ColorType::GrayA(b) => (2, b),
         ColorType::RGB(b) => (3, b),
         ColorType::RGBA(b) => (4, b),
         _ => return None,
@@ -813,7 +812,7 @@ fn float_tiff(
             format: kind.display,
             detail: one_line(&e.to_string()),
         };
-        let values: Vec<f32> = match dec.read_image().map_err(failed)? {
+        let mut values: Vec<f32> = match dec.read_image().map_err(failed)? {
             DecodingResult::F16(v) => v.iter().map(|x| x.to_f32()).collect(),
             DecodingResult::F32(v) => v,
             DecodingResult::F64(v) => v.iter().map(|&x| x as f32).collect(),
@@ -826,45 +825,35 @@ fn float_tiff(
             }
         };
         let n = width as usize * height as usize;
-        let short = || PhotoError::Truncated {
-            path: label.to_path_buf(),
-            format: kind.display,
-            detail: format!(
-                "{} samples for {width}x{height} pixels of {channels} channels",
-                values.len()
-            ),
-        };
         if values.len() < n * channels as usize {
-            return Err(short());
+            return Err(PhotoError::Truncated {
+                path: label.to_path_buf(),
+                format: kind.display,
+                detail: format!(
+                    "{} samples for {width}x{height} pixels of {channels} channels",
+                    values.len()
+                ),
+            });
         }
-        // Grey is given as RGB (as `image` gives 32-bit grey), alpha kept.
+        values.truncate(n * channels as usize);
+        // Grey is given as RGB (as `image` gives 32-bit grey), alpha kept. (Grey
+        // with alpha is "multiband" to the `tiff` crate: not read here.) The
+        // lengths were checked above.
+        let sized = "sample count checked";
         let img = match channels {
             1 => DynamicImage::ImageRgb32F(
                 image::ImageBuffer::from_raw(
                     width,
                     height,
-                    values[..n].iter().flat_map(|&g| [g; 3]).collect(),
+                    values.iter().flat_map(|&g| [g; 3]).collect(),
                 )
-                .ok_or_else(short)?,
-            ),
-            2 => DynamicImage::ImageRgba32F(
-                image::ImageBuffer::from_raw(
-                    width,
-                    height,
-                    values[..2 * n]
-                        .chunks_exact(2)
-                        .flat_map(|ga| [ga[0], ga[0], ga[0], ga[1]])
-                        .collect(),
-                )
-                .ok_or_else(short)?,
+                .expect(sized),
             ),
             3 => DynamicImage::ImageRgb32F(
-                image::ImageBuffer::from_raw(width, height, values[..3 * n].to_vec())
-                    .ok_or_else(short)?,
+                image::ImageBuffer::from_raw(width, height, values).expect(sized),
             ),
             _ => DynamicImage::ImageRgba32F(
-                image::ImageBuffer::from_raw(width, height, values[..4 * n].to_vec())
-                    .ok_or_else(short)?,
+                image::ImageBuffer::from_raw(width, height, values).expect(sized),
             ),
         };
         let orientation = dec
@@ -1613,14 +1602,14 @@ mod tests {
         let wide = |x: &[f32]| x.iter().map(|&t| f64::from(t)).collect::<Vec<f64>>();
         let limits = PhotoLimits::default();
         let read = |b: &[u8]| decode(b, Path::new("t.tif"), &limits).unwrap();
+        let raw = |p: &Photo| {
+            p.rgb
+                .as_raw()
+                .iter()
+                .map(|x| x.to_bits())
+                .collect::<Vec<_>>()
+        };
         let same = |a: &Photo, b: &Photo, bits: u8| {
-            let raw = |p: &Photo| {
-                p.rgb
-                    .as_raw()
-                    .iter()
-                    .map(|x| x.to_bits())
-                    .collect::<Vec<_>>()
-            };
             assert_eq!(raw(a), raw(b));
             assert_eq!(a.opaque, b.opaque);
             assert_eq!(a.channels_in_file, b.channels_in_file);
@@ -1643,13 +1632,6 @@ mod tests {
         ] {
             assert_eq!(g.channels_in_file, 1);
             assert_eq!(g.bit_depth, bits);
-            let raw = |p: &Photo| {
-                p.rgb
-                    .as_raw()
-                    .iter()
-                    .map(|x| x.to_bits())
-                    .collect::<Vec<_>>()
-            };
             assert_eq!(raw(&g), raw(&rgb_of_grey));
         }
         let a = read(&encoded::<ct::RGBA64Float>(w, h, &wide(&v)));
